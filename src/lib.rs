@@ -1,0 +1,31 @@
+//! navguard: a navigation integrity-monitoring service. Vehicles stream
+//! navigation measurements over a WebSocket; per session navguard runs Kalman
+//! filters and fault detectors, decides which sensors can be trusted, raises
+//! alarms, and shows statistics on a browser dashboard.
+//!
+//! # Layout
+//!
+//! Data flows one way; the folders follow it. Everything above `service` is a
+//! pure numerical core: no async, no I/O, usable as a library.
+//!
+//! - [`geo`]: WGS84 geodesy (frames, radii, Earth and transport rates).
+//! - [`filter`]: the generic Kalman filter (fixed- and dynamic-size), and the
+//!   INS error model and federated fusion built on it.
+//! - [`detect`]: χ² thresholds and the non-central χ², test statistics, and the
+//!   decision policies (`classic`, `counters`) that turn statistics into health.
+//! - [`learn`]: kernels, LS-SVM and SVM models (for the learned detectors).
+//! - [`features`]: time-domain and wavelet-packet features.
+//! - [`monitor`]: the `Monitor` trait and one monitor per sensor set; each
+//!   wires filters and detectors and yields tests and outputs per epoch.
+//! - [`sim`]: trajectories, sensors, faults and the papers' experiments.
+//! - [`service`]: the async edge: sockets and REST (axum), one actor task per
+//!   session, the SQLite store, auth and limits.
+
+pub mod detect;
+pub mod features;
+pub mod filter;
+pub mod geo;
+pub mod learn;
+pub mod monitor;
+pub mod service;
+pub mod sim;

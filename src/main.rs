@@ -1,0 +1,95 @@
+//! The `navguard` binary: parses flags, opens the store and serves (thin; the
+//! service lives in the library). `anyhow` is used only here and in `cli/`.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::{Args, Parser, Subcommand};
+use navguard::service::{self, Limits, ServiceConfig};
+
+/// navguard: navigation integrity monitoring over WebSocket and REST.
+#[derive(Debug, Parser)]
+#[command(version, about, args_conflicts_with_subcommands = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+    #[command(flatten)]
+    serve: ServeArgs,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Serve the API, sockets and dashboard (the default).
+    Serve(ServeArgs),
+}
+
+#[derive(Debug, Args)]
+struct ServeArgs {
+    /// Address to listen on. A non-loopback address requires a token.
+    #[arg(long, env = "NAVGUARD_BIND", default_value = "127.0.0.1:8080")]
+    bind: SocketAddr,
+    /// SQLite database file (created if missing).
+    #[arg(long, env = "NAVGUARD_DB", default_value = "navguard.db")]
+    db: PathBuf,
+    /// Bearer token required on every /api route and socket.
+    #[arg(long, env = "NAVGUARD_TOKEN", hide_env_values = true)]
+    token: Option<String>,
+    /// Largest ingest frame, bytes.
+    #[arg(long, env = "NAVGUARD_MAX_FRAME_BYTES", default_value_t = Limits::default().max_frame_bytes)]
+    max_frame_bytes: usize,
+    /// Most epochs in one batch frame.
+    #[arg(long, env = "NAVGUARD_MAX_BATCH_EPOCHS", default_value_t = Limits::default().max_batch_epochs)]
+    max_batch_epochs: usize,
+    /// Most sessions.
+    #[arg(long, env = "NAVGUARD_MAX_SESSIONS", default_value_t = Limits::default().max_sessions)]
+    max_sessions: usize,
+    /// Most monitors per session.
+    #[arg(long, env = "NAVGUARD_MAX_MONITORS", default_value_t = Limits::default().max_monitors_per_session)]
+    max_monitors: usize,
+    /// Largest REST request body, bytes.
+    #[arg(long, env = "NAVGUARD_MAX_BODY_BYTES", default_value_t = Limits::default().max_body_bytes)]
+    max_body_bytes: usize,
+}
+
+impl ServeArgs {
+    fn into_config(self) -> ServiceConfig {
+        ServiceConfig {
+            bind: self.bind,
+            db_path: self.db,
+            token: self.token.filter(|t| !t.is_empty()),
+            limits: Limits {
+                max_frame_bytes: self.max_frame_bytes,
+                max_batch_epochs: self.max_batch_epochs,
+                max_sessions: self.max_sessions,
+                max_monitors_per_session: self.max_monitors,
+                max_body_bytes: self.max_body_bytes,
+            },
+        }
+    }
+}
+
+async fn serve(args: ServeArgs) -> anyhow::Result<()> {
+    let config = args.into_config();
+    let db = config.db_path.display().to_string();
+    let server = service::start(config).await.context("starting navguard")?;
+    println!("navguard listening on http://{} (store: {db}); dashboard at http://{}/", server.addr, server.addr);
+    tokio::signal::ctrl_c().await.context("waiting for Ctrl-C")?;
+    println!("shutting down: closing sockets and flushing the store");
+    server.shutdown().await;
+    Ok(())
+}
+
+#[tokio::main]
+async fn main() -> anyhow::Result<()> {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "navguard=info,tower_http=warn".into()),
+        )
+        .init();
+    let cli = Cli::parse();
+    match cli.command {
+        Some(Command::Serve(args)) => serve(args).await,
+        None => serve(cli.serve).await,
+    }
+}

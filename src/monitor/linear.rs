@@ -1,0 +1,370 @@
+//! The `linear` monitor (DESIGN §3.2): a user-supplied linear Gaussian model,
+//! one Kalman filter, and the residual χ² test λ = rᵀS⁻¹r ~ χ²(m) (seed 004 §1.3)
+//! under the session's decision policy. It is also how navguard is checked
+//! against other Kalman filter libraries.
+
+use nalgebra::{DMatrix, DVector};
+use serde::Deserialize;
+
+use super::{ConfigError, Epoch, EpochError, Monitor, MonitorKind, MonitorReport, Outputs, StepError, TestBank};
+use crate::detect::{PolicyConfig, ThresholdError, ThresholdSpec};
+use crate::filter::kalman::{self, LinearObservation, LinearTransition, StateEstimate};
+
+/// The wire form of the model: row-major nested arrays.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LinearConfigWire {
+    f: Vec<Vec<f64>>,
+    h: Vec<Vec<f64>>,
+    q: Vec<Vec<f64>>,
+    r: Vec<Vec<f64>>,
+    x0: Vec<f64>,
+    p0: Vec<Vec<f64>>,
+    #[serde(default)]
+    b: Option<Vec<Vec<f64>>>,
+}
+
+/// A validated linear model: `x = F x (+ B u) + w`, `z = H x + v`,
+/// `w ~ N(0, Q)`, `v ~ N(0, R)`, prior `N(x0, P0)` before the first prediction.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinearConfig {
+    /// State transition F (n × n).
+    pub f: DMatrix<f64>,
+    /// Observation matrix H (m × n).
+    pub h: DMatrix<f64>,
+    /// Process noise Q (n × n, symmetric positive semi-definite).
+    pub q: DMatrix<f64>,
+    /// Measurement noise R (m × m, symmetric positive definite).
+    pub r: DMatrix<f64>,
+    /// Initial state (n).
+    pub x0: DVector<f64>,
+    /// Initial covariance (n × n, symmetric positive semi-definite).
+    pub p0: DMatrix<f64>,
+    /// Control matrix B (n × k), when the model has a control input `u`.
+    pub b: Option<DMatrix<f64>>,
+}
+
+/// Relative tolerance for symmetry and for the smallest eigenvalue of a
+/// semi-definite matrix (round-off in user-typed or computed matrices).
+const SYM_TOL: f64 = 1e-9;
+
+fn matrix(field: &str, rows: &[Vec<f64>], shape: (Option<usize>, Option<usize>)) -> Result<DMatrix<f64>, ConfigError> {
+    let nrows = rows.len();
+    if nrows == 0 {
+        return Err(ConfigError::new(field, "must have at least one row"));
+    }
+    let ncols = rows[0].len();
+    if ncols == 0 {
+        return Err(ConfigError::new(field, "rows must not be empty"));
+    }
+    for (i, row) in rows.iter().enumerate() {
+        if row.len() != ncols {
+            return Err(ConfigError::new(
+                format!("{field}[{i}]"),
+                format!("ragged matrix: row has {} elements, row 0 has {ncols}", row.len()),
+            ));
+        }
+        if let Some(j) = row.iter().position(|v| !v.is_finite()) {
+            return Err(ConfigError::new(format!("{field}[{i}][{j}]"), "must be finite"));
+        }
+    }
+    if let Some(want) = shape.0.filter(|&w| w != nrows) {
+        return Err(ConfigError::new(field, format!("has {nrows} rows, expected {want}")));
+    }
+    if let Some(want) = shape.1.filter(|&w| w != ncols) {
+        return Err(ConfigError::new(field, format!("has {ncols} columns, expected {want}")));
+    }
+    Ok(DMatrix::from_fn(nrows, ncols, |i, j| rows[i][j]))
+}
+
+/// Checks symmetry and (semi-)definiteness; `strict` demands positive definite.
+fn check_covariance(field: &str, m: &DMatrix<f64>, strict: bool) -> Result<(), ConfigError> {
+    let scale = m.amax().max(f64::MIN_POSITIVE);
+    for i in 0..m.nrows() {
+        for j in 0..i {
+            if (m[(i, j)] - m[(j, i)]).abs() > SYM_TOL * scale {
+                return Err(ConfigError::new(
+                    field,
+                    format!("not symmetric: [{i}][{j}] = {} but [{j}][{i}] = {}", m[(i, j)], m[(j, i)]),
+                ));
+            }
+        }
+    }
+    let sym = (m + m.transpose()) * 0.5;
+    let min_eig = sym.symmetric_eigenvalues().min();
+    if strict && min_eig <= SYM_TOL * scale {
+        return Err(ConfigError::new(
+            field,
+            format!("not positive definite: smallest eigenvalue {min_eig:e}"),
+        ));
+    }
+    if !strict && min_eig < -SYM_TOL * scale {
+        return Err(ConfigError::new(
+            field,
+            format!("not positive semi-definite: smallest eigenvalue {min_eig:e}"),
+        ));
+    }
+    Ok(())
+}
+
+impl LinearConfig {
+    /// Parses and validates the `config` JSON of a `linear` monitor.
+    pub fn from_json(value: &serde_json::Value) -> Result<Self, ConfigError> {
+        let wire = LinearConfigWire::deserialize(value).map_err(|e| ConfigError::new("", e.to_string()))?;
+        let f = matrix("f", &wire.f, (None, None))?;
+        let n = f.nrows();
+        if f.ncols() != n {
+            return Err(ConfigError::new("f", format!("must be square, is {}x{}", n, f.ncols())));
+        }
+        let h = matrix("h", &wire.h, (None, Some(n)))?;
+        let m = h.nrows();
+        let q = matrix("q", &wire.q, (Some(n), Some(n)))?;
+        let r = matrix("r", &wire.r, (Some(m), Some(m)))?;
+        let p0 = matrix("p0", &wire.p0, (Some(n), Some(n)))?;
+        if wire.x0.len() != n {
+            return Err(ConfigError::new("x0", format!("has {} elements, expected {n}", wire.x0.len())));
+        }
+        if let Some(j) = wire.x0.iter().position(|v| !v.is_finite()) {
+            return Err(ConfigError::new(format!("x0[{j}]"), "must be finite"));
+        }
+        let b = wire.b.as_deref().map(|b| matrix("b", b, (Some(n), None))).transpose()?;
+        check_covariance("q", &q, false)?;
+        check_covariance("r", &r, true)?;
+        check_covariance("p0", &p0, false)?;
+        Ok(LinearConfig { f, h, q, r, x0: DVector::from_vec(wire.x0), p0, b })
+    }
+
+    /// State dimension n.
+    pub fn states(&self) -> usize {
+        self.f.nrows()
+    }
+
+    /// Measurement dimension m.
+    pub fn measurements(&self) -> usize {
+        self.h.nrows()
+    }
+}
+
+/// The `linear` monitor.
+pub struct LinearMonitor {
+    transition: LinearTransition<nalgebra::Dyn>,
+    observation: LinearObservation<nalgebra::Dyn, nalgebra::Dyn>,
+    b: Option<DMatrix<f64>>,
+    initial: StateEstimate<nalgebra::Dyn>,
+    estimate: StateEstimate<nalgebra::Dyn>,
+    bank: TestBank,
+}
+
+/// Index of the `residual` test in the bank.
+const RESIDUAL: usize = 0;
+
+impl LinearMonitor {
+    /// Builds the monitor; its one test `residual` has dof m.
+    pub fn new(config: LinearConfig, policy: PolicyConfig, spec: ThresholdSpec) -> Result<Self, ThresholdError> {
+        let dof = config.measurements() as u32;
+        let bank = TestBank::new(&[("residual", dof)], spec, policy)?;
+        let initial = StateEstimate { x: config.x0.clone(), p: config.p0.clone() };
+        Ok(LinearMonitor {
+            transition: LinearTransition { f: config.f, q: config.q },
+            observation: LinearObservation { h: config.h, r: config.r },
+            b: config.b,
+            estimate: initial.clone(),
+            initial,
+            bank,
+        })
+    }
+
+    /// The current state estimate.
+    pub fn estimate(&self) -> &StateEstimate<nalgebra::Dyn> {
+        &self.estimate
+    }
+}
+
+impl Monitor for LinearMonitor {
+    fn kind(&self) -> MonitorKind {
+        MonitorKind::Linear
+    }
+
+    fn tests(&self) -> &TestBank {
+        &self.bank
+    }
+
+    fn tests_mut(&mut self) -> &mut TestBank {
+        &mut self.bank
+    }
+
+    fn check_epoch(&self, name: &str, epoch: &Epoch) -> Result<(), EpochError> {
+        if let Some(z) = &epoch.z {
+            let want = self.observation.h.nrows();
+            if z.len() != want {
+                return Err(EpochError::WrongLength { monitor: name.to_owned(), field: "z", got: z.len(), want });
+            }
+        }
+        if let Some(u) = &epoch.u {
+            match &self.b {
+                Some(b) if u.len() != b.ncols() => {
+                    return Err(EpochError::WrongLength {
+                        monitor: name.to_owned(),
+                        field: "u",
+                        got: u.len(),
+                        want: b.ncols(),
+                    });
+                }
+                Some(_) => {}
+                None => {
+                    return Err(EpochError::UnknownInput(format!(
+                        "u given but monitor '{name}' has no control matrix b"
+                    )));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn step(&mut self, epoch: &Epoch) -> Result<MonitorReport, StepError> {
+        // Predict (with control when both B and u are present; a missing u is zero).
+        let prior = match (&self.b, &epoch.u) {
+            (Some(b), Some(u)) => {
+                kalman::predict_with_control(&self.estimate, &self.transition, b, &DVector::from_column_slice(u))?
+            }
+            _ => kalman::predict(&self.estimate, &self.transition)?,
+        };
+        let Some(z) = &epoch.z else {
+            self.estimate = prior;
+            return Ok(MonitorReport {
+                tests: Vec::new(),
+                outputs: Outputs::Linear { innovation: None, x: self.estimate.x.as_slice().to_vec() },
+            });
+        };
+        let z = DVector::from_column_slice(z);
+        let innovation = kalman::innovation(&prior, &self.observation, &z)?;
+        // Compute the posterior before deciding so a numerical failure leaves
+        // the policy counters untouched too.
+        let posterior = kalman::update(&prior, &self.observation, &innovation)?.0;
+        let outcome = self.bank.evaluate(RESIDUAL, innovation.statistic);
+        // seed 004 §2: a suspect or isolated filter predicts without updating.
+        self.estimate = if outcome.decision.update { posterior } else { prior };
+        Ok(MonitorReport {
+            tests: vec![outcome],
+            outputs: Outputs::Linear {
+                innovation: Some(innovation.r.as_slice().to_vec()),
+                x: self.estimate.x.as_slice().to_vec(),
+            },
+        })
+    }
+
+    fn reset(&mut self) {
+        self.estimate = self.initial.clone();
+        self.bank.reset();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::detect::Health;
+    use serde_json::json;
+
+    fn cv_config() -> serde_json::Value {
+        json!({
+            "f": [[1.0, 1.0], [0.0, 1.0]],
+            "h": [[1.0, 0.0]],
+            "q": [[0.25, 0.5], [0.5, 1.0]],
+            "r": [[1.0]],
+            "x0": [0.0, 0.0],
+            "p0": [[10.0, 0.0], [0.0, 10.0]]
+        })
+    }
+
+    fn field_error(mut config: serde_json::Value, key: &str, value: serde_json::Value) -> ConfigError {
+        config[key] = value;
+        LinearConfig::from_json(&config).unwrap_err()
+    }
+
+    #[test]
+    fn valid_model_parses_with_its_dimensions() {
+        let c = LinearConfig::from_json(&cv_config()).unwrap();
+        assert_eq!((c.states(), c.measurements()), (2, 1));
+    }
+
+    #[test]
+    fn bad_models_are_refused_naming_the_field() {
+        let e = field_error(cv_config(), "f", json!([[1.0, 1.0]]));
+        assert_eq!(e.field, "f");
+        assert!(e.reason.contains("square"), "{e}");
+        let e = field_error(cv_config(), "h", json!([[1.0, 0.0, 0.0]]));
+        assert_eq!(e.field, "h");
+        let e = field_error(cv_config(), "q", json!([[1.0, 0.2], [0.0, 1.0]]));
+        assert_eq!(e.field, "q");
+        assert!(e.reason.contains("symmetric"), "{e}");
+        let e = field_error(cv_config(), "q", json!([[1.0, 2.0], [2.0, 1.0]]));
+        assert!(e.reason.contains("semi-definite"), "{e}");
+        let e = field_error(cv_config(), "r", json!([[0.0]]));
+        assert_eq!(e.field, "r");
+        assert!(e.reason.contains("positive definite"), "{e}");
+        let e = field_error(cv_config(), "p0", json!([[1.0, 0.0], [0.0]]));
+        assert_eq!(e.field, "p0[1]");
+        assert!(e.reason.contains("ragged"), "{e}");
+        let e = field_error(cv_config(), "x0", json!([0.0]));
+        assert_eq!(e.field, "x0");
+        let e = field_error(cv_config(), "b", json!([[1.0]]));
+        assert_eq!(e.field, "b");
+        let mut c = cv_config();
+        c["extra"] = json!(1);
+        assert!(LinearConfig::from_json(&c).unwrap_err().reason.contains("unknown field"));
+    }
+
+    #[test]
+    fn wrong_length_z_is_refused_before_stepping() {
+        let c = LinearConfig::from_json(&cv_config()).unwrap();
+        let m = LinearMonitor::new(c, PolicyConfig::Classic, ThresholdSpec::default()).unwrap();
+        let e = Epoch { t: 0.0, z: Some(vec![1.0, 2.0]), ..Default::default() };
+        assert!(matches!(m.check_epoch("lin", &e), Err(EpochError::WrongLength { got: 2, want: 1, .. })));
+        let e = Epoch { t: 0.0, u: Some(vec![1.0]), ..Default::default() };
+        assert!(matches!(m.check_epoch("lin", &e), Err(EpochError::UnknownInput(_))));
+    }
+
+    #[test]
+    fn first_step_matches_hand_computed_filter() {
+        // x⁻ = 0, P⁻ = F P0 Fᵀ + Q = [[20.25, 10.5], [10.5, 11]], S = 21.25, r = z = 2.
+        let c = LinearConfig::from_json(&cv_config()).unwrap();
+        let mut m = LinearMonitor::new(c, PolicyConfig::Classic, ThresholdSpec::default()).unwrap();
+        let report = m.step(&Epoch { t: 0.0, z: Some(vec![2.0]), ..Default::default() }).unwrap();
+        let lambda = 4.0 / 21.25;
+        assert!((report.tests[0].statistic.value - lambda).abs() < 1e-12);
+        let Outputs::Linear { x, innovation } = report.outputs;
+        assert_eq!(innovation, Some(vec![2.0]));
+        assert!((x[0] - 20.25 / 21.25 * 2.0).abs() < 1e-12);
+        assert!((x[1] - 10.5 / 21.25 * 2.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn suspect_filter_predicts_without_updating() {
+        let c = LinearConfig::from_json(&cv_config()).unwrap();
+        let mut m = LinearMonitor::new(c, PolicyConfig::counters_default(), ThresholdSpec::Threshold(5.0)).unwrap();
+        let report = m.step(&Epoch { t: 0.0, z: Some(vec![100.0]), ..Default::default() }).unwrap();
+        assert_eq!(report.tests[0].decision.health, Health::Suspect);
+        let Outputs::Linear { x, .. } = report.outputs;
+        assert_eq!(x, vec![0.0, 0.0], "the prior (F·0) is kept, the outlier is not used");
+        assert!((m.estimate().p[(0, 0)] - 20.25).abs() < 1e-12, "P is the predicted one");
+    }
+
+    #[test]
+    fn epoch_without_z_only_predicts_and_runs_no_test() {
+        let c = LinearConfig::from_json(&cv_config()).unwrap();
+        let mut m = LinearMonitor::new(c, PolicyConfig::Classic, ThresholdSpec::default()).unwrap();
+        let report = m.step(&Epoch { t: 0.0, ..Default::default() }).unwrap();
+        assert!(report.tests.is_empty());
+        assert!((m.estimate().p[(0, 0)] - 20.25).abs() < 1e-12);
+    }
+
+    #[test]
+    fn reset_restores_the_initial_estimate() {
+        let c = LinearConfig::from_json(&cv_config()).unwrap();
+        let mut m = LinearMonitor::new(c, PolicyConfig::Classic, ThresholdSpec::default()).unwrap();
+        m.step(&Epoch { t: 0.0, z: Some(vec![3.0]), ..Default::default() }).unwrap();
+        m.reset();
+        assert_eq!(m.estimate().x, DVector::from_vec(vec![0.0, 0.0]));
+        assert_eq!(m.estimate().p[(0, 0)], 10.0);
+    }
+}

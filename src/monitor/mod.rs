@@ -1,0 +1,180 @@
+//! Monitors: each wires filters and detectors for one sensor set and yields,
+//! per epoch, one `Statistic` and health decision per test plus its outputs.
+//! Pure and synchronous; the session actor in `service/session` drives them.
+
+pub mod epoch;
+pub mod linear;
+pub mod tests_bank;
+
+use serde::Serialize;
+
+pub use epoch::Epoch;
+pub use tests_bank::{TestBank, TestOutcome};
+
+use crate::detect::{PolicyConfig, PolicyError, ThresholdError, ThresholdSpec};
+use crate::filter::kalman::FilterError;
+
+/// The kinds of monitor a session can run (DESIGN §4.1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MonitorKind {
+    /// A user-supplied linear Gaussian model streaming `z` (DESIGN §3.2).
+    Linear,
+    /// Federated INS/GNSS/DVL/CNS filter (DESIGN §3.4).
+    Federated,
+    /// LS-SVM channel prediction with T_a (DESIGN §3.5).
+    Channel,
+    /// Redundant gyros, parity and SVM isolation (DESIGN §3.7).
+    Rimu,
+    /// TACAN range one-class SVM (DESIGN §3.8).
+    Tacan,
+}
+
+impl MonitorKind {
+    /// The wire name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            MonitorKind::Linear => "linear",
+            MonitorKind::Federated => "federated",
+            MonitorKind::Channel => "channel",
+            MonitorKind::Rimu => "rimu",
+            MonitorKind::Tacan => "tacan",
+        }
+    }
+}
+
+/// A monitor configuration that cannot run, naming the offending field.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{field}: {reason}")]
+pub struct ConfigError {
+    /// Dotted path of the field inside the monitor's `config`, e.g. `q` or `h[1]`.
+    pub field: String,
+    /// Why it was refused.
+    pub reason: String,
+}
+
+impl ConfigError {
+    /// Builds an error for `field`.
+    pub fn new(field: impl Into<String>, reason: impl Into<String>) -> Self {
+        ConfigError { field: field.into(), reason: reason.into() }
+    }
+}
+
+/// An epoch a monitor cannot consume; the epoch is refused before any state changes.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EpochError {
+    /// A vector has the wrong number of elements for the monitor's model.
+    #[error("{field} has {got} elements, monitor '{monitor}' expects {want}")]
+    WrongLength {
+        /// The monitor's name.
+        monitor: String,
+        /// The epoch field.
+        field: &'static str,
+        /// Elements received.
+        got: usize,
+        /// Elements expected.
+        want: usize,
+    },
+    /// The epoch carries an input no monitor of the session can use.
+    #[error("{0}")]
+    UnknownInput(String),
+}
+
+/// A step that failed numerically; the monitor's state is left as it was.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum StepError {
+    /// The filter could not proceed (indefinite S, non-finite values).
+    #[error("filter: {0}")]
+    Filter(#[from] FilterError),
+    /// A threshold could not be evaluated.
+    #[error("threshold: {0}")]
+    Threshold(#[from] ThresholdError),
+}
+
+/// Outputs a monitor adds beside its tests in the `result` frame (DESIGN §4.2).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum Outputs {
+    /// `linear`: the innovation (absent on epochs without `z`) and the state.
+    Linear {
+        /// r = z − H x⁻.
+        innovation: Option<Vec<f64>>,
+        /// Posterior state estimate.
+        x: Vec<f64>,
+    },
+}
+
+/// What one monitor yields for one epoch.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MonitorReport {
+    /// The tests that ran this epoch (a test without data does not run).
+    pub tests: Vec<TestOutcome>,
+    /// The monitor's outputs.
+    pub outputs: Outputs,
+}
+
+/// A monitor: a model and its tests, stepped once per epoch.
+pub trait Monitor: Send {
+    /// The monitor kind.
+    fn kind(&self) -> MonitorKind;
+
+    /// The monitor's tests, thresholds and policies.
+    fn tests(&self) -> &TestBank;
+
+    /// Mutable access to the tests, for live threshold and policy changes.
+    fn tests_mut(&mut self) -> &mut TestBank;
+
+    /// Checks that `epoch` fits the monitor (vector lengths and the like)
+    /// without changing any state.
+    fn check_epoch(&self, name: &str, epoch: &Epoch) -> Result<(), EpochError>;
+
+    /// Consumes one epoch. On `Err` the monitor's state is unchanged.
+    fn step(&mut self, epoch: &Epoch) -> Result<MonitorReport, StepError>;
+
+    /// Restarts the filter state from the configured initial conditions
+    /// (a new stream) and the policies from their initial counters.
+    fn reset(&mut self);
+}
+
+/// Everything needed to build a monitor.
+#[derive(Debug, Clone)]
+pub struct MonitorSpec {
+    /// Monitor kind.
+    pub kind: MonitorKind,
+    /// The kind's configuration, as given by the user.
+    pub config: serde_json::Value,
+    /// Decision policy for every test of the monitor.
+    pub policy: PolicyConfig,
+    /// Threshold for every test of the monitor.
+    pub threshold: ThresholdSpec,
+}
+
+/// Why a monitor could not be built.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum BuildError {
+    /// The `config` is invalid.
+    #[error("config.{0}")]
+    Config(#[from] ConfigError),
+    /// The policy is invalid.
+    #[error("policy: {0}")]
+    Policy(#[from] PolicyError),
+    /// The threshold is invalid.
+    #[error("threshold: {0}")]
+    Threshold(#[from] ThresholdError),
+    /// The kind exists in the design but is not available in this build.
+    #[error("monitor type '{0}' is not implemented yet")]
+    Unsupported(&'static str),
+}
+
+/// Builds a monitor from its spec, validating everything first.
+pub fn build(spec: &MonitorSpec) -> Result<Box<dyn Monitor>, BuildError> {
+    spec.policy.check()?;
+    spec.threshold.check()?;
+    match spec.kind {
+        MonitorKind::Linear => {
+            let config = linear::LinearConfig::from_json(&spec.config)?;
+            Ok(Box::new(linear::LinearMonitor::new(config, spec.policy, spec.threshold)?))
+        }
+        other => Err(BuildError::Unsupported(other.as_str())),
+    }
+}

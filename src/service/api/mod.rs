@@ -1,0 +1,8 @@
+//! REST handlers, one file per route group. Handlers validate, call the
+//! session handle or the store, and shape the response; no algorithm lives here.
+
+pub mod alarms;
+pub mod chi2;
+pub mod health;
+pub mod sessions;
+pub mod thresholds;

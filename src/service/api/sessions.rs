@@ -1,0 +1,145 @@
+//! `/api/v1/sessions`: create, list, get, delete, and statistics.
+
+use axum::Json;
+use axum::extract::{Path, State};
+use axum::http::StatusCode;
+use serde::Serialize;
+
+use crate::service::app::AppState;
+use crate::service::error::ApiError;
+use crate::service::extract::ApiJson;
+use crate::service::now_ms;
+use crate::service::session::actor;
+use crate::service::session::{SessionHandle, SessionStats, validate_session};
+use crate::service::store::StoredSession;
+use crate::service::wire::{CreateSession, MonitorSpecWire};
+use crate::detect::Health;
+
+/// A test's effective threshold and current state, in a session view.
+#[derive(Debug, Serialize)]
+pub struct TestView {
+    dof: u32,
+    threshold: f64,
+    state: Health,
+}
+
+/// A monitor in a session view: its spec plus its tests.
+#[derive(Debug, Serialize)]
+pub struct MonitorView {
+    #[serde(flatten)]
+    spec: MonitorSpecWire,
+    tests: std::collections::BTreeMap<&'static str, TestView>,
+}
+
+/// A session as the API shows it.
+#[derive(Debug, Serialize)]
+pub struct SessionView {
+    id: String,
+    echo: bool,
+    created_at_ms: i64,
+    connected: bool,
+    monitors: Vec<MonitorView>,
+}
+
+fn view(handle: &SessionHandle) -> SessionView {
+    let stored = handle.stored();
+    let stats = handle.stats_watch().borrow().clone();
+    let monitors = stored
+        .monitors
+        .into_iter()
+        .map(|spec| {
+            let tests = stats
+                .monitors
+                .get(&spec.name)
+                .map(|m| {
+                    m.tests
+                        .iter()
+                        .map(|(name, t)| (*name, TestView { dof: t.dof, threshold: t.threshold, state: t.state }))
+                        .collect()
+                })
+                .unwrap_or_default();
+            MonitorView { spec, tests }
+        })
+        .collect();
+    SessionView { id: stored.id, echo: stored.echo, created_at_ms: stored.created_at_ms, connected: stats.connected, monitors }
+}
+
+/// A fresh id: time and a process-wide counter, base 36.
+fn new_id() -> String {
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+    let mut v = (now_ms() as u64) << 16 | (n & 0xffff);
+    let mut s = Vec::new();
+    while v > 0 {
+        s.push(b"0123456789abcdefghijklmnopqrstuvwxyz"[(v % 36) as usize]);
+        v /= 36;
+    }
+    s.reverse();
+    format!("s-{}", String::from_utf8_lossy(&s))
+}
+
+/// `POST /api/v1/sessions` → 201 with the session view.
+pub async fn create(
+    State(state): State<AppState>,
+    ApiJson(req): ApiJson<CreateSession>,
+) -> Result<(StatusCode, Json<SessionView>), ApiError> {
+    validate_session(&req, &state.config.limits)?;
+    let stored = StoredSession {
+        id: req.id.clone().unwrap_or_else(new_id),
+        echo: req.echo,
+        monitors: req.monitors,
+        created_at_ms: now_ms(),
+    };
+    // Building the actor validates every monitor (422 naming the field).
+    let handle = actor::spawn(stored.clone(), state.actor_deps())?;
+    if let Err((handle, duplicate)) = state.registry.try_insert(handle, state.config.limits.max_sessions) {
+        handle.shutdown().await;
+        return Err(if duplicate {
+            ApiError::Conflict(format!("session '{}' already exists", stored.id))
+        } else {
+            ApiError::TooLarge(format!("the server holds its limit of {} sessions", state.config.limits.max_sessions))
+        });
+    }
+    if let Err(e) = state.store.put_session(&stored).await {
+        if let Some(h) = state.registry.remove(&stored.id) {
+            h.shutdown().await;
+        }
+        return Err(e.into());
+    }
+    let handle = state.registry.get(&stored.id).ok_or_else(|| ApiError::NotFound(format!("no session '{}'", stored.id)))?;
+    Ok((StatusCode::CREATED, Json(view(&handle))))
+}
+
+/// The list answer.
+#[derive(Debug, Serialize)]
+pub struct SessionList {
+    sessions: Vec<SessionView>,
+}
+
+/// `GET /api/v1/sessions`
+pub async fn list(State(state): State<AppState>) -> Json<SessionList> {
+    Json(SessionList { sessions: state.registry.list().iter().map(view).collect() })
+}
+
+fn lookup(state: &AppState, id: &str) -> Result<SessionHandle, ApiError> {
+    state.registry.get(id).ok_or_else(|| ApiError::NotFound(format!("no session '{id}'")))
+}
+
+/// `GET /api/v1/sessions/{id}`
+pub async fn get(State(state): State<AppState>, Path(id): Path<String>) -> Result<Json<SessionView>, ApiError> {
+    Ok(Json(view(&lookup(&state, &id)?)))
+}
+
+/// `DELETE /api/v1/sessions/{id}` → 204. The session's alarms stay in the log.
+pub async fn delete(State(state): State<AppState>, Path(id): Path<String>) -> Result<StatusCode, ApiError> {
+    let handle = state.registry.remove(&id).ok_or_else(|| ApiError::NotFound(format!("no session '{id}'")))?;
+    handle.shutdown().await;
+    state.store.delete_session(&id).await?;
+    Ok(StatusCode::NO_CONTENT)
+}
+
+/// `GET /api/v1/sessions/{id}/stats`
+pub async fn stats(State(state): State<AppState>, Path(id): Path<String>) -> Result<Json<SessionStats>, ApiError> {
+    Ok(Json(lookup(&state, &id)?.stats().await?))
+}

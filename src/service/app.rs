@@ -1,0 +1,120 @@
+//! The application state and the router. `app(state)` builds every route from
+//! the `ROUTES` table, so tests can list the routes the server really has.
+
+use std::sync::Arc;
+
+use axum::Router;
+use axum::extract::DefaultBodyLimit;
+use axum::middleware;
+use axum::routing::{MethodRouter, get};
+use tokio::sync::watch;
+
+use super::api::{alarms, chi2, health, sessions, thresholds};
+use super::config::ServiceConfig;
+use super::error::ApiError;
+use super::metrics::Metrics;
+use super::session::Registry;
+use super::session::actor::ActorDeps;
+use super::store::Store;
+use super::{auth, events, ingest};
+
+/// Shared state of every handler. Cheap to clone.
+#[derive(Debug, Clone)]
+pub struct AppState {
+    /// The SQLite store.
+    pub store: Store,
+    /// Live sessions.
+    pub registry: Arc<Registry>,
+    /// Process-wide counters for `/metrics`.
+    pub metrics: Arc<Metrics>,
+    /// Listen address, token and limits.
+    pub config: Arc<ServiceConfig>,
+    /// Flips to `true` when the server shuts down; sockets close on it.
+    pub shutdown: watch::Receiver<bool>,
+}
+
+impl AppState {
+    /// What a session actor needs.
+    pub fn actor_deps(&self) -> ActorDeps {
+        ActorDeps { store: self.store.clone(), metrics: self.metrics.clone() }
+    }
+}
+
+/// Every route: path and methods. `app` builds the router from this table and
+/// the OpenAPI test checks the spec against it (and the router against it).
+pub const ROUTES: &[(&str, &[&str])] = &[
+    ("/", &["GET"]),
+    ("/healthz", &["GET"]),
+    ("/metrics", &["GET"]),
+    ("/api/v1/sessions", &["GET", "POST"]),
+    ("/api/v1/sessions/{id}", &["GET", "DELETE"]),
+    ("/api/v1/sessions/{id}/stats", &["GET"]),
+    ("/api/v1/sessions/{id}/monitors/{name}/threshold", &["GET", "PUT"]),
+    ("/api/v1/sessions/{id}/ingest", &["GET"]),
+    ("/api/v1/sessions/{id}/events", &["GET"]),
+    ("/api/v1/chi2/threshold", &["GET"]),
+    ("/api/v1/chi2/missed-detection", &["GET"]),
+    ("/api/v1/alarms", &["GET"]),
+];
+
+fn handlers(path: &str) -> MethodRouter<AppState> {
+    match path {
+        "/" => get(health::index),
+        "/healthz" => get(health::healthz),
+        "/metrics" => get(health::metrics),
+        "/api/v1/sessions" => get(sessions::list).post(sessions::create),
+        "/api/v1/sessions/{id}" => get(sessions::get).delete(sessions::delete),
+        "/api/v1/sessions/{id}/stats" => get(sessions::stats),
+        "/api/v1/sessions/{id}/monitors/{name}/threshold" => get(thresholds::get).put(thresholds::put),
+        "/api/v1/sessions/{id}/ingest" => get(ingest::ingest),
+        "/api/v1/sessions/{id}/events" => get(events::events),
+        "/api/v1/chi2/threshold" => get(chi2::threshold),
+        "/api/v1/chi2/missed-detection" => get(chi2::missed_detection),
+        "/api/v1/alarms" => get(alarms::list),
+        // Unreachable while ROUTES and this match agree; a unit test walks ROUTES.
+        _ => MethodRouter::new(),
+    }
+}
+
+async fn not_found() -> ApiError {
+    ApiError::NotFound("no such route".into())
+}
+
+async fn method_not_allowed() -> ApiError {
+    ApiError::MethodNotAllowed
+}
+
+/// Builds the router.
+pub fn app(state: AppState) -> Router {
+    let mut public = Router::new();
+    let mut api = Router::new();
+    for (path, _) in ROUTES {
+        let methods = handlers(path).fallback(method_not_allowed);
+        if path.starts_with("/api/") {
+            api = api.route(path, methods);
+        } else {
+            public = public.route(path, methods);
+        }
+    }
+    let api = api.route_layer(middleware::from_fn_with_state(state.clone(), auth::require_token));
+    public
+        .merge(api)
+        .fallback(not_found)
+        .layer(DefaultBodyLimit::max(state.config.limits.max_body_bytes))
+        .layer(tower_http::trace::TraceLayer::new_for_http())
+        .with_state(state)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_route_in_the_table_has_handlers() {
+        for (path, methods) in ROUTES {
+            assert!(!methods.is_empty(), "{path}");
+            // An empty MethodRouter would answer every method with 405.
+            assert!(format!("{:?}", handlers(path)).len() > format!("{:?}", MethodRouter::<AppState>::new()).len(), "{path}");
+        }
+    }
+}

@@ -1,0 +1,100 @@
+//! Bearer-token authentication for `/api` (DESIGN §4.5). REST takes
+//! `Authorization: Bearer TOKEN`; sockets may instead offer the subprotocol
+//! `bearer.TOKEN` (beside `navguard`) or a `token` query parameter, since
+//! browsers cannot set headers on a WebSocket.
+
+use axum::extract::{Request, State};
+use axum::http::header::{AUTHORIZATION, SEC_WEBSOCKET_PROTOCOL, UPGRADE};
+use axum::middleware::Next;
+use axum::response::Response;
+
+use super::app::AppState;
+use super::error::ApiError;
+
+/// Compares in time independent of where the strings differ.
+fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+}
+
+fn presented_tokens(req: &Request) -> Vec<String> {
+    let mut tokens = Vec::new();
+    let headers = req.headers();
+    if let Some(value) = headers.get(AUTHORIZATION).and_then(|v| v.to_str().ok())
+        && let Some(token) = value.strip_prefix("Bearer ")
+    {
+        tokens.push(token.trim().to_owned());
+    }
+    let is_upgrade = headers.get(UPGRADE).and_then(|v| v.to_str().ok()).is_some_and(|v| v.eq_ignore_ascii_case("websocket"));
+    if is_upgrade {
+        if let Some(protocols) = headers.get(SEC_WEBSOCKET_PROTOCOL).and_then(|v| v.to_str().ok()) {
+            tokens.extend(protocols.split(',').filter_map(|p| p.trim().strip_prefix("bearer.")).map(str::to_owned));
+        }
+        if let Some(query) = req.uri().query() {
+            tokens.extend(
+                query
+                    .split('&')
+                    .filter_map(|pair| pair.strip_prefix("token="))
+                    .map(|t| percent_decode(t)),
+            );
+        }
+    }
+    tokens
+}
+
+/// Minimal percent-decoding for a token in a query string.
+fn percent_decode(s: &str) -> String {
+    let bytes = s.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        let hex = |b: u8| (b as char).to_digit(16);
+        match bytes[i] {
+            b'%' if i + 2 < bytes.len() => match (hex(bytes[i + 1]), hex(bytes[i + 2])) {
+                (Some(hi), Some(lo)) => {
+                    out.push((hi * 16 + lo) as u8);
+                    i += 3;
+                    continue;
+                }
+                _ => out.push(b'%'),
+            },
+            b'+' => out.push(b' '),
+            b => out.push(b),
+        }
+        i += 1;
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+/// Middleware: passes the request on when no token is configured or a
+/// presented token matches; otherwise 401.
+pub async fn require_token(State(state): State<AppState>, req: Request, next: Next) -> Result<Response, ApiError> {
+    let Some(expected) = state.config.token.as_deref() else {
+        return Ok(next.run(req).await);
+    };
+    if presented_tokens(&req).iter().any(|t| constant_time_eq(t.as_bytes(), expected.as_bytes())) {
+        Ok(next.run(req).await)
+    } else {
+        Err(ApiError::Unauthorized)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percent_decoding_handles_escapes_and_plain_text() {
+        assert_eq!(percent_decode("abc"), "abc");
+        assert_eq!(percent_decode("a%2Fb%3d"), "a/b=");
+        assert_eq!(percent_decode("bad%zz"), "bad%zz");
+        assert_eq!(percent_decode("end%4"), "end%4");
+        assert_eq!(percent_decode("é%é"), "é%é");
+    }
+
+    #[test]
+    fn constant_time_comparison_is_equality() {
+        assert!(constant_time_eq(b"secret", b"secret"));
+        assert!(!constant_time_eq(b"secret", b"secreT"));
+        assert!(!constant_time_eq(b"secret", b"secrets"));
+    }
+}

@@ -1,0 +1,77 @@
+//! The events socket (DESIGN §4.3): `state` and `alarm` messages as they
+//! happen (never dropped: a subscriber too slow to take them is disconnected),
+//! and `stats` at most 20 times a second (a slow subscriber just skips some).
+
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use axum::extract::ws::{CloseFrame, Message, Utf8Bytes, WebSocket, WebSocketUpgrade};
+use axum::extract::{Path, State};
+use axum::response::Response;
+
+use super::app::AppState;
+use super::error::ApiError;
+use super::ingest::SUBPROTOCOL;
+use super::session::SessionHandle;
+use super::wire;
+
+/// Minimum interval between two `stats` messages on one socket (≤ 20/s).
+const STATS_INTERVAL: Duration = Duration::from_millis(50);
+
+/// `GET /api/v1/sessions/{id}/events`
+pub async fn events(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+    ws: WebSocketUpgrade,
+) -> Result<Response, ApiError> {
+    let handle = state.registry.get(&id).ok_or_else(|| ApiError::NotFound(format!("no session '{id}'")))?;
+    Ok(ws.protocols([SUBPROTOCOL]).on_upgrade(move |socket| async move {
+        state.metrics.event_sockets.fetch_add(1, Ordering::Relaxed);
+        run(socket, state.clone(), handle).await;
+        state.metrics.event_sockets.fetch_sub(1, Ordering::Relaxed);
+    }))
+}
+
+async fn run(mut socket: WebSocket, state: AppState, handle: SessionHandle) {
+    let mut events = handle.subscribe();
+    let mut stats = handle.stats_watch();
+    let mut shutdown = state.shutdown.clone();
+    let mut ticker = tokio::time::interval(STATS_INTERVAL);
+    ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    // The first stats message goes out at once so a dashboard has something to draw.
+    stats.mark_changed();
+    loop {
+        tokio::select! {
+            biased;
+            _ = shutdown.changed() => {
+                let _ = socket.send(Message::Close(Some(CloseFrame { code: 1001, reason: Utf8Bytes::from_static("server shutting down") }))).await;
+                break;
+            }
+            event = events.recv() => match event {
+                Some(text) => {
+                    if socket.send(Message::Text(Utf8Bytes::from(&*text))).await.is_err() {
+                        break;
+                    }
+                }
+                None => {
+                    // Dropped by the session: too far behind, or the session was deleted.
+                    let _ = socket.send(Message::Close(Some(CloseFrame { code: 1008, reason: Utf8Bytes::from_static("subscriber too slow or session gone; reconnect and re-read /api/v1/alarms") }))).await;
+                    break;
+                }
+            },
+            _ = ticker.tick() => {
+                if stats.has_changed().unwrap_or(false) {
+                    let snapshot = stats.borrow_and_update().clone();
+                    let text = wire::tagged("stats", &*snapshot);
+                    if socket.send(Message::Text(text.into())).await.is_err() {
+                        break;
+                    }
+                }
+            }
+            incoming = socket.recv() => match incoming {
+                Some(Ok(Message::Close(_))) | None | Some(Err(_)) => break,
+                Some(Ok(_)) => {} // observers have nothing to say; ignore
+            },
+        }
+    }
+}

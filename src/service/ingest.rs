@@ -1,0 +1,135 @@
+//! The ingest socket (DESIGN §4.2): a thin task that parses frames at the edge,
+//! hands epochs to the session actor through its bounded channel, and writes
+//! back what the actor sends (results, state changes, alarms, errors).
+
+use std::sync::atomic::Ordering;
+use std::time::Instant;
+
+use axum::extract::ws::{CloseFrame, Message, Utf8Bytes, WebSocket, WebSocketUpgrade};
+use axum::extract::{Path, State};
+use axum::response::Response;
+use serde_json::json;
+
+use super::app::AppState;
+use super::error::ApiError;
+use super::session::handle::IngestLink;
+use super::session::{FrameCommand, SessionHandle};
+use super::wire::{self, ErrorEvent, FrameError};
+
+/// The subprotocol the server selects when a client offers it (browsers
+/// offering a `bearer.TOKEN` protocol must also offer this one).
+pub const SUBPROTOCOL: &str = "navguard";
+
+/// Hard cap on a WebSocket message, as a multiple of the frame limit. Frames
+/// between the limit and the cap get an `error` event and the socket stays
+/// open; beyond the cap the connection is closed (1009) by the protocol layer.
+const HARD_CAP_FACTOR: usize = 16;
+
+/// `GET /api/v1/sessions/{id}/ingest`
+pub async fn ingest(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+    ws: WebSocketUpgrade,
+) -> Result<Response, ApiError> {
+    let handle = state.registry.get(&id).ok_or_else(|| ApiError::NotFound(format!("no session '{id}'")))?;
+    let link = handle.attach().await?;
+    let cap = state.config.limits.max_frame_bytes.saturating_mul(HARD_CAP_FACTOR);
+    Ok(ws.protocols([SUBPROTOCOL]).max_message_size(cap).max_frame_size(cap).on_upgrade(move |socket| async move {
+        state.metrics.ingest_sockets.fetch_add(1, Ordering::Relaxed);
+        run(socket, state.clone(), handle, link).await;
+        state.metrics.ingest_sockets.fetch_sub(1, Ordering::Relaxed);
+    }))
+}
+
+/// What to do with one text frame.
+enum Next {
+    Forward(FrameCommand),
+    Refuse(FrameError),
+}
+
+fn on_text(text: &str, stream: u64, state: &AppState) -> Next {
+    let limits = &state.config.limits;
+    if text.len() > limits.max_frame_bytes {
+        return Next::Refuse(FrameError::new(
+            "frame_too_large",
+            format!("frame is {} bytes, the limit is {}", text.len(), limits.max_frame_bytes),
+        ));
+    }
+    match wire::parse_frame(text, limits.max_batch_epochs) {
+        Ok(epochs) => Next::Forward(FrameCommand { stream, epochs, received: Instant::now() }),
+        Err(e) => Next::Refuse(e),
+    }
+}
+
+async fn run(mut socket: WebSocket, state: AppState, handle: SessionHandle, link: IngestLink) {
+    let stream = link.stream;
+    let mut outgoing = link.outgoing;
+    let mut shutdown = state.shutdown.clone();
+    let ready = json!({"type": "ready", "session": handle.id(), "stream": stream}).to_string();
+    if socket.send(Message::Text(ready.into())).await.is_err() {
+        handle.detach(stream).await;
+        return;
+    }
+    let mut pending: Option<FrameCommand> = None;
+    loop {
+        tokio::select! {
+            biased;
+            _ = shutdown.changed() => {
+                let _ = socket.send(Message::Close(Some(CloseFrame { code: 1001, reason: Utf8Bytes::from_static("server shutting down") }))).await;
+                break;
+            }
+            message = outgoing.recv() => match message {
+                Some(text) => {
+                    if socket.send(Message::Text(text.into())).await.is_err() {
+                        break;
+                    }
+                }
+                // The actor replaced or dropped this stream.
+                None => {
+                    let _ = socket.send(Message::Close(Some(CloseFrame { code: 1000, reason: Utf8Bytes::from_static("stream detached") }))).await;
+                    break;
+                }
+            },
+            permit = handle.frames().reserve(), if pending.is_some() => match permit {
+                Ok(permit) => {
+                    if let Some(frame) = pending.take() {
+                        permit.send(frame);
+                    }
+                }
+                Err(_) => break,
+            },
+            incoming = socket.recv(), if pending.is_none() => {
+                let text = match incoming {
+                    Some(Ok(Message::Text(text))) => text,
+                    Some(Ok(Message::Binary(bytes))) => match std::str::from_utf8(&bytes) {
+                        Ok(s) => Utf8Bytes::from(s),
+                        Err(_) => {
+                            let e = FrameError::new("malformed_json", "binary frame is not UTF-8 JSON");
+                            if send_error(&mut socket, &state, &e).await.is_err() { break; }
+                            continue;
+                        }
+                    },
+                    Some(Ok(Message::Close(_))) | None => break,
+                    Some(Ok(_)) => continue, // ping/pong are answered by the protocol layer
+                    Some(Err(e)) => {
+                        tracing::debug!(session = %handle.id(), error = %e, "ingest socket error");
+                        break;
+                    }
+                };
+                match on_text(&text, stream, &state) {
+                    Next::Forward(frame) => pending = Some(frame),
+                    Next::Refuse(e) => {
+                        if send_error(&mut socket, &state, &e).await.is_err() { break; }
+                    }
+                }
+            }
+        }
+    }
+    handle.detach(stream).await;
+}
+
+async fn send_error(socket: &mut WebSocket, state: &AppState, e: &FrameError) -> Result<(), axum::Error> {
+    state.metrics.frame_errors.fetch_add(1, Ordering::Relaxed);
+    let text = serde_json::to_string(&ErrorEvent::from(e)).unwrap_or_default();
+    socket.send(Message::Text(text.into())).await
+}

@@ -1,0 +1,124 @@
+//! The async edge: transport (axum), sessions (one actor each), persistence
+//! (sqlx), auth and limits. It calls the pure core; no algorithm lives here.
+
+pub mod api;
+pub mod app;
+pub mod auth;
+pub mod config;
+pub mod error;
+pub mod events;
+pub mod extract;
+pub mod ingest;
+pub mod metrics;
+pub mod session;
+pub mod store;
+pub mod wire;
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+
+use tokio::net::TcpListener;
+use tokio::sync::watch;
+use tokio::task::JoinHandle;
+
+pub use app::{AppState, app};
+pub use config::{Limits, ServiceConfig};
+pub use error::ApiError;
+
+use session::Registry;
+use store::{Store, StoreError};
+
+/// Wall-clock now, Unix milliseconds.
+pub fn now_ms() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_millis() as i64)
+        .unwrap_or(0)
+}
+
+/// Why the server could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum StartError {
+    /// DESIGN §4.5: a non-loopback address needs a token.
+    #[error("refusing to bind {0} without a token: set --token or NAVGUARD_TOKEN, or bind a loopback address")]
+    OpenWithoutToken(SocketAddr),
+    /// The store could not be opened.
+    #[error("store: {0}")]
+    Store(#[from] StoreError),
+    /// A stored session could not be restarted.
+    #[error("stored session '{0}' is invalid: {1}")]
+    StoredSession(String, String),
+    /// The address could not be bound.
+    #[error("bind {0}: {1}")]
+    Bind(SocketAddr, std::io::Error),
+}
+
+/// A running server.
+#[derive(Debug)]
+pub struct Server {
+    /// The bound address (useful with port 0).
+    pub addr: SocketAddr,
+    state: AppState,
+    shutdown: watch::Sender<bool>,
+    task: JoinHandle<std::io::Result<()>>,
+}
+
+/// Opens the store, restarts the stored sessions, binds and serves.
+pub async fn start(config: ServiceConfig) -> Result<Server, StartError> {
+    if !config.bind.ip().is_loopback() && config.token.is_none() {
+        return Err(StartError::OpenWithoutToken(config.bind));
+    }
+    let store = Store::open(&config.db_path).await?;
+    let (shutdown_tx, shutdown_rx) = watch::channel(false);
+    let state = AppState {
+        store: store.clone(),
+        registry: Arc::new(Registry::default()),
+        metrics: Arc::default(),
+        config: Arc::new(config),
+        shutdown: shutdown_rx,
+    };
+    // Sessions, their monitors and thresholds persist; filter state starts afresh.
+    for stored in store.sessions().await? {
+        let id = stored.id.clone();
+        let handle = session::actor::spawn(stored, state.actor_deps())
+            .map_err(|e| StartError::StoredSession(id.clone(), e.to_string()))?;
+        if state.registry.try_insert(handle, usize::MAX).is_err() {
+            return Err(StartError::StoredSession(id, "duplicate id".into()));
+        }
+    }
+    let listener = TcpListener::bind(state.config.bind).await.map_err(|e| StartError::Bind(state.config.bind, e))?;
+    let addr = listener.local_addr().map_err(|e| StartError::Bind(state.config.bind, e))?;
+    let router = app(state.clone());
+    let mut stop = state.shutdown.clone();
+    let task = tokio::spawn(async move {
+        axum::serve(listener, router)
+            .with_graceful_shutdown(async move {
+                let _ = stop.wait_for(|s| *s).await;
+            })
+            .await
+    });
+    tracing::info!(%addr, "navguard listening");
+    Ok(Server { addr, state, shutdown: shutdown_tx, task })
+}
+
+impl Server {
+    /// The server's state (for tests).
+    pub fn state(&self) -> &AppState {
+        &self.state
+    }
+
+    /// Graceful shutdown: closes sockets, stops the session actors, waits for
+    /// the HTTP server, and checkpoints and closes the store.
+    pub async fn shutdown(self) {
+        let _ = self.shutdown.send(true);
+        for handle in self.state.registry.list() {
+            handle.shutdown().await;
+        }
+        match tokio::time::timeout(std::time::Duration::from_secs(10), self.task).await {
+            Ok(Ok(Err(e))) => tracing::error!(error = %e, "server error during shutdown"),
+            Err(_) => tracing::warn!("connections still open after 10 s; closing anyway"),
+            _ => {}
+        }
+        self.state.store.close().await;
+    }
+}

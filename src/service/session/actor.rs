@@ -1,0 +1,447 @@
+//! The session actor: one task per session owning its monitors, counters and
+//! statistics. It validates each frame against the session state, steps every
+//! monitor, commits alarms to the store before announcing them, and answers
+//! control commands (attach, thresholds, stats) ahead of pending frames.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+use serde::Serialize;
+use tokio::sync::{mpsc, watch};
+
+use super::handle::{ControlCommand, FrameCommand, IngestLink, SessionHandle, SessionShared};
+use super::spec::build_monitors;
+use super::stats::{MonitorStats, SessionStats, TestStats};
+use crate::detect::{Health, ThresholdSpec};
+use crate::monitor::{Epoch, Monitor, MonitorReport, TestOutcome};
+use crate::service::error::ApiError;
+use crate::service::metrics::Metrics;
+use crate::service::now_ms;
+use crate::service::store::{Store, StoredSession};
+use crate::service::wire::{
+    self, AlarmRecord, ErrorEvent, FrameError, MonitorResultWire, StateChange, TestThreshold, ThresholdUpdate,
+    ThresholdView,
+};
+
+/// Frames queued per session before the ingest socket stops reading.
+const FRAME_QUEUE: usize = 8;
+/// Control commands queued per session.
+const CONTROL_QUEUE: usize = 64;
+/// Messages queued for the ingest socket before the actor waits for it.
+const INGEST_QUEUE: usize = 1024;
+/// Statistics are published at most this often (the events socket sends ≤ 20/s).
+const STATS_PERIOD: Duration = Duration::from_millis(50);
+
+/// What an actor needs from the service.
+#[derive(Debug, Clone)]
+pub struct ActorDeps {
+    /// The store, for alarms.
+    pub store: Store,
+    /// Process metrics.
+    pub metrics: Arc<Metrics>,
+}
+
+struct NamedMonitor {
+    name: String,
+    monitor: Box<dyn Monitor>,
+}
+
+struct Actor {
+    id: Arc<str>,
+    echo: bool,
+    monitors: Vec<NamedMonitor>,
+    stats: SessionStats,
+    deps: ActorDeps,
+    shared: Arc<SessionShared>,
+    stats_tx: watch::Sender<Arc<SessionStats>>,
+    last_published: Instant,
+    ingest: Option<mpsc::Sender<String>>,
+    stream: u64,
+    last_t: Option<f64>,
+    rate_window: (Instant, u64),
+}
+
+/// Builds the monitors of `stored` and starts its actor.
+pub fn spawn(stored: StoredSession, deps: ActorDeps) -> Result<SessionHandle, ApiError> {
+    let monitors = build_monitors(&stored)?;
+    let id: Arc<str> = Arc::from(stored.id.as_str());
+    let stats = initial_stats(&id, &monitors);
+    let (stats_tx, stats_rx) = watch::channel(Arc::new(stats.clone()));
+    let (frames_tx, frames_rx) = mpsc::channel(FRAME_QUEUE);
+    let (control_tx, control_rx) = mpsc::channel(CONTROL_QUEUE);
+    let shared = Arc::new(SessionShared { stored: std::sync::Mutex::new(stored.clone()), subscribers: Default::default() });
+    let actor = Actor {
+        id: id.clone(),
+        echo: stored.echo,
+        monitors: monitors.into_iter().map(|(name, monitor)| NamedMonitor { name, monitor }).collect(),
+        stats,
+        deps,
+        shared: shared.clone(),
+        stats_tx,
+        last_published: Instant::now(),
+        ingest: None,
+        stream: 0,
+        last_t: None,
+        rate_window: (Instant::now(), 0),
+    };
+    tokio::spawn(actor.run(frames_rx, control_rx));
+    Ok(SessionHandle::new(id, frames_tx, control_tx, stats_rx, shared))
+}
+
+fn initial_stats(id: &str, monitors: &[(String, Box<dyn Monitor>)]) -> SessionStats {
+    SessionStats {
+        session: id.to_owned(),
+        connected: false,
+        frames: 0,
+        epochs: 0,
+        frame_errors: 0,
+        last_t: None,
+        last_frame_at_ms: None,
+        epochs_per_s: 0.0,
+        monitors: monitors
+            .iter()
+            .map(|(name, m)| {
+                let tests = m.tests().slots().iter().map(|s| (s.name, TestStats::new(s.dof, s.threshold))).collect();
+                (name.clone(), MonitorStats { kind: m.kind().as_str(), epochs: 0, worst_test_ratio: None, tests })
+            })
+            .collect(),
+    }
+}
+
+/// The `result` frame of one epoch.
+#[derive(Serialize)]
+struct ResultFrame<'a> {
+    #[serde(rename = "type")]
+    kind: &'static str,
+    t: f64,
+    monitors: BTreeMap<&'a str, MonitorResultWire<'a>>,
+}
+
+impl Actor {
+    async fn run(mut self, mut frames: mpsc::Receiver<FrameCommand>, mut control: mpsc::Receiver<ControlCommand>) {
+        loop {
+            tokio::select! {
+                biased;
+                command = control.recv() => match command {
+                    Some(ControlCommand::Shutdown) | None => break,
+                    Some(command) => self.control(command),
+                },
+                frame = frames.recv() => match frame {
+                    Some(frame) => self.frame(frame).await,
+                    None => break,
+                },
+            }
+        }
+        // Close every event subscriber's queue so their sockets end too.
+        self.shared.subscribers.lock().unwrap_or_else(|p| p.into_inner()).clear();
+        tracing::debug!(session = %self.id, "session actor stopped");
+    }
+
+    fn control(&mut self, command: ControlCommand) {
+        match command {
+            ControlCommand::Attach(reply) => {
+                let _ = reply.send(self.attach());
+            }
+            ControlCommand::Detach(stream) => {
+                if stream == self.stream {
+                    self.ingest = None;
+                    self.stats.connected = false;
+                    self.publish(true);
+                }
+            }
+            ControlCommand::GetThreshold(name, reply) => {
+                let _ = reply.send(self.find(&name).map(|i| self.threshold_view(i)));
+            }
+            ControlCommand::SetThreshold(name, update, reply) => {
+                let _ = reply.send(self.set_threshold(&name, update));
+            }
+            ControlCommand::Stats(reply) => {
+                let _ = reply.send(self.stats.clone());
+            }
+            ControlCommand::Shutdown => {}
+        }
+    }
+
+    fn attach(&mut self) -> Result<IngestLink, ApiError> {
+        if self.ingest.as_ref().is_some_and(|tx| !tx.is_closed()) {
+            return Err(ApiError::Conflict(format!("session '{}' already has an ingest stream attached", self.id)));
+        }
+        // DESIGN §4.1: filter state starts afresh when a session's stream reconnects.
+        for m in &mut self.monitors {
+            m.monitor.reset();
+        }
+        self.last_t = None;
+        self.stream += 1;
+        let (tx, rx) = mpsc::channel(INGEST_QUEUE);
+        self.ingest = Some(tx);
+        self.stats.connected = true;
+        for (m, monitor_stats) in self.monitors.iter().zip(self.stats.monitors.values_mut()) {
+            for (slot, test) in m.monitor.tests().slots().iter().zip(monitor_stats.tests.values_mut()) {
+                test.state = slot.policy.health();
+            }
+        }
+        self.publish(true);
+        Ok(IngestLink { stream: self.stream, outgoing: rx })
+    }
+
+    fn find(&self, name: &str) -> Result<usize, ApiError> {
+        self.monitors
+            .iter()
+            .position(|m| m.name == name)
+            .ok_or_else(|| ApiError::NotFound(format!("session '{}' has no monitor '{name}'", self.id)))
+    }
+
+    fn threshold_view(&self, index: usize) -> ThresholdView {
+        let m = &self.monitors[index];
+        let bank = m.monitor.tests();
+        let spec = bank.spec();
+        ThresholdView {
+            monitor: m.name.clone(),
+            p_fa: spec.p_fa_part(),
+            threshold: spec.threshold_part(),
+            policy: bank.policy(),
+            tests: bank
+                .slots()
+                .iter()
+                .map(|s| {
+                    let p_fa = spec.p_fa(s.dof).unwrap_or(f64::NAN);
+                    (s.name.to_owned(), TestThreshold { dof: s.dof, threshold: s.threshold, p_fa })
+                })
+                .collect(),
+        }
+    }
+
+    fn set_threshold(&mut self, name: &str, update: ThresholdUpdate) -> Result<(ThresholdView, StoredSession), ApiError> {
+        let index = self.find(name)?;
+        if update.p_fa.is_none() && update.threshold.is_none() && update.policy.is_none() {
+            return Err(ApiError::invalid("", "give `p_fa` or `threshold`, and/or `policy`"));
+        }
+        let spec = match (update.p_fa, update.threshold) {
+            (None, None) => None,
+            (p, t) => Some(ThresholdSpec::from_parts(p, t).map_err(|e| ApiError::invalid("p_fa", e.to_string()))?),
+        };
+        if let Some(policy) = update.policy {
+            policy.check().map_err(|e| ApiError::invalid("policy", e.to_string()))?;
+        }
+        let bank = self.monitors[index].monitor.tests_mut();
+        if let Some(spec) = spec {
+            bank.set_spec(spec).map_err(|e| ApiError::invalid("p_fa", e.to_string()))?;
+        }
+        if let Some(policy) = update.policy {
+            bank.set_policy(policy);
+        }
+        let (spec, policy) = (bank.spec(), bank.policy());
+        let thresholds: Vec<f64> = bank.slots().iter().map(|s| s.threshold).collect();
+        if let Some(stats) = self.stats.monitors.get_mut(name) {
+            for (test, threshold) in stats.tests.values_mut().zip(thresholds) {
+                test.threshold = threshold;
+            }
+        }
+        let stored = {
+            let mut stored = self.shared.stored.lock().unwrap_or_else(|p| p.into_inner());
+            let wire = &mut stored.monitors[index];
+            wire.p_fa = spec.p_fa_part();
+            wire.threshold = spec.threshold_part();
+            wire.policy = policy;
+            stored.clone()
+        };
+        self.publish(true);
+        Ok((self.threshold_view(index), stored))
+    }
+
+    /// Checks a whole frame against the session before anything changes.
+    fn validate(&self, epochs: &[Epoch]) -> Result<(), FrameError> {
+        if let (Some(last), Some(first)) = (self.last_t, epochs.first())
+            && first.t < last
+        {
+            return Err(FrameError::new("time_backwards", format!("t = {} goes back from {last}", first.t)).at(0));
+        }
+        for (i, epoch) in epochs.iter().enumerate() {
+            for m in &self.monitors {
+                m.monitor.check_epoch(&m.name, epoch).map_err(|e| {
+                    let code = match e {
+                        crate::monitor::EpochError::WrongLength { .. } => "wrong_length",
+                        crate::monitor::EpochError::UnknownInput(_) => "unknown_input",
+                    };
+                    FrameError::new(code, e.to_string()).at(i)
+                })?;
+            }
+        }
+        Ok(())
+    }
+
+    async fn send_ingest(&mut self, text: String) {
+        if let Some(tx) = &self.ingest
+            && tx.send(text).await.is_err()
+        {
+            self.ingest = None;
+        }
+    }
+
+    /// Sends to every event subscriber; one whose queue is full is dropped
+    /// (its socket closes) rather than silently missing an alarm.
+    fn broadcast(&self, text: &Arc<str>) {
+        let mut subscribers = self.shared.subscribers.lock().unwrap_or_else(|p| p.into_inner());
+        subscribers.retain(|tx| tx.try_send(text.clone()).is_ok());
+    }
+
+    async fn reject(&mut self, error: FrameError) {
+        self.stats.frame_errors += 1;
+        self.deps.metrics.frame_errors.fetch_add(1, Ordering::Relaxed);
+        let text = serde_json::to_string(&ErrorEvent::from(&error)).unwrap_or_default();
+        self.send_ingest(text).await;
+    }
+
+    async fn frame(&mut self, frame: FrameCommand) {
+        if frame.stream != self.stream {
+            return; // from a stream that has since been replaced
+        }
+        if let Err(error) = self.validate(&frame.epochs) {
+            self.reject(error).await;
+            return;
+        }
+        self.stats.frames += 1;
+        self.stats.last_frame_at_ms = Some(now_ms());
+        self.deps.metrics.frames.fetch_add(1, Ordering::Relaxed);
+        let mut changed = false;
+        let mut reports: Vec<MonitorReport> = Vec::with_capacity(self.monitors.len());
+        for (i, epoch) in frame.epochs.iter().enumerate() {
+            reports.clear();
+            let mut failure = None;
+            for m in &mut self.monitors {
+                match m.monitor.step(epoch) {
+                    Ok(report) => reports.push(report),
+                    Err(e) => {
+                        failure = Some(FrameError::new(
+                            "numerical",
+                            format!(
+                                "monitor '{}' could not process t = {}: {e}; this and later epochs of the frame were not used",
+                                m.name, epoch.t
+                            ),
+                        ));
+                        break;
+                    }
+                }
+            }
+            if let Some(error) = failure {
+                self.reject(error.at(i)).await;
+                break;
+            }
+            self.last_t = Some(epoch.t);
+            self.stats.epochs += 1;
+            self.stats.last_t = Some(epoch.t);
+            self.deps.metrics.epochs.fetch_add(1, Ordering::Relaxed);
+            if self.echo {
+                let text = self.result_frame(epoch.t, &reports);
+                self.send_ingest(text).await;
+            }
+            changed |= self.record(epoch.t, &reports).await;
+        }
+        self.finish_frame(&frame, changed);
+    }
+
+    fn finish_frame(&mut self, frame: &FrameCommand, changed: bool) {
+        let now = Instant::now();
+        self.rate_window.1 += frame.epochs.len() as u64;
+        let elapsed = now.duration_since(self.rate_window.0);
+        if elapsed >= Duration::from_secs(1) {
+            self.stats.epochs_per_s = self.rate_window.1 as f64 / elapsed.as_secs_f64();
+            self.rate_window = (now, 0);
+        }
+        self.deps.metrics.observe_frame_latency(now.duration_since(frame.received));
+        self.publish(changed);
+    }
+
+    fn result_frame(&self, t: f64, reports: &[MonitorReport]) -> String {
+        let monitors = self.monitors.iter().zip(reports).map(|(m, r)| (m.name.as_str(), wire::monitor_result(r))).collect();
+        serde_json::to_string(&ResultFrame { kind: "result", t, monitors }).unwrap_or_default()
+    }
+
+    /// Updates statistics; announces state changes and alarms. Returns true if any state changed.
+    async fn record(&mut self, t: f64, reports: &[MonitorReport]) -> bool {
+        let mut transitions: Vec<(usize, TestOutcome, f64)> = Vec::new();
+        for (index, (m, report)) in self.monitors.iter().zip(reports).enumerate() {
+            let Some(monitor_stats) = self.stats.monitors.get_mut(&m.name) else { continue };
+            monitor_stats.epochs += 1;
+            let mut worst: Option<f64> = None;
+            for outcome in &report.tests {
+                let Some(test) = monitor_stats.tests.get_mut(outcome.name) else { continue };
+                let delay_s = test.record(t, outcome);
+                let ratio = outcome.statistic.test_ratio();
+                worst = Some(worst.map_or(ratio, |w| w.max(ratio)));
+                if outcome.previous != outcome.decision.health {
+                    transitions.push((index, *outcome, delay_s));
+                }
+            }
+            if worst.is_some() {
+                monitor_stats.worst_test_ratio = worst;
+            }
+        }
+        let changed = !transitions.is_empty();
+        for (index, outcome, delay_s) in transitions {
+            self.announce(index, t, &outcome, delay_s).await;
+        }
+        changed
+    }
+
+    /// Announces one test's state change: `state` always; an `alarm` (stored
+    /// first) when entering suspect or isolated; clears open alarms on healthy.
+    async fn announce(&mut self, index: usize, t: f64, outcome: &TestOutcome, delay_s: f64) {
+        let monitor = self.monitors[index].name.clone();
+        let (from, to) = (outcome.previous, outcome.decision.health);
+        let change = StateChange { session: self.id.to_string(), monitor: monitor.clone(), test: outcome.name.to_owned(), t, from, to };
+        let state_text: Arc<str> = Arc::from(wire::tagged("state", &change));
+        let alarm_text = if to == Health::Healthy {
+            if let Err(e) = self.deps.store.clear_alarms(&self.id, &monitor, outcome.name, t).await {
+                tracing::error!(session = %self.id, error = %e, "could not mark alarms cleared");
+            }
+            None
+        } else {
+            let alarm = AlarmRecord {
+                id: 0,
+                session: self.id.to_string(),
+                monitor,
+                test: outcome.name.to_owned(),
+                state: to,
+                t,
+                statistic: outcome.statistic.value,
+                threshold: outcome.statistic.threshold,
+                dof: outcome.statistic.dof,
+                test_ratio: outcome.statistic.test_ratio(),
+                delay_s,
+                raised_at_ms: now_ms(),
+                cleared_t: None,
+            };
+            // DESIGN §4.5: committed before it is broadcast. If the store fails
+            // the alarm is still announced (id -1): an operator must not miss an
+            // alarm because the disk did.
+            let alarm = match self.deps.store.insert_alarm(alarm.clone()).await {
+                Ok(stored) => stored,
+                Err(e) => {
+                    tracing::error!(session = %self.id, error = %e, "could not store alarm");
+                    AlarmRecord { id: -1, ..alarm }
+                }
+            };
+            self.deps.metrics.alarms.fetch_add(1, Ordering::Relaxed);
+            Some(Arc::<str>::from(wire::tagged("alarm", &alarm)))
+        };
+        self.broadcast(&state_text);
+        if let Some(text) = &alarm_text {
+            self.broadcast(text);
+        }
+        self.send_ingest(state_text.to_string()).await;
+        if let Some(text) = alarm_text {
+            self.send_ingest(text.to_string()).await;
+        }
+    }
+
+    fn publish(&mut self, force: bool) {
+        let now = Instant::now();
+        if force || now.duration_since(self.last_published) >= STATS_PERIOD {
+            self.last_published = now;
+            self.stats_tx.send_replace(Arc::new(self.stats.clone()));
+        }
+    }
+}

@@ -1,0 +1,164 @@
+//! The handle to a session actor: bounded channels in, `oneshot` replies out,
+//! a `watch` of the latest statistics and the list of event subscribers.
+
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use tokio::sync::{mpsc, oneshot, watch};
+
+use super::stats::SessionStats;
+use crate::monitor::Epoch;
+use crate::service::error::ApiError;
+use crate::service::store::StoredSession;
+use crate::service::wire::{ThresholdUpdate, ThresholdView};
+
+/// How long a REST call waits for a busy session actor before answering 503.
+const CONTROL_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// Capacity of one event subscriber's queue of `alarm` and `state` messages.
+/// A subscriber that falls this far behind is disconnected (never silently
+/// skipped) and must re-read `/api/v1/alarms` after reconnecting.
+pub const SUBSCRIBER_QUEUE: usize = 4096;
+
+/// A batch of epochs from the ingest socket.
+#[derive(Debug)]
+pub struct FrameCommand {
+    /// The stream (attach generation) the frame came from.
+    pub stream: u64,
+    /// Validated epochs, times non-decreasing.
+    pub epochs: Vec<Epoch>,
+    /// When the frame arrived, for the latency metric.
+    pub received: Instant,
+}
+
+/// An attached ingest stream: its generation and the messages for its socket.
+#[derive(Debug)]
+pub struct IngestLink {
+    /// Generation number; frames carry it.
+    pub stream: u64,
+    /// Messages (JSON text) for the ingest socket.
+    pub outgoing: mpsc::Receiver<String>,
+}
+
+/// Commands other than frames; the actor serves them before pending frames.
+#[derive(Debug)]
+pub enum ControlCommand {
+    /// Attach a new ingest stream: filter state starts afresh.
+    Attach(oneshot::Sender<Result<IngestLink, ApiError>>),
+    /// The ingest socket of `stream` closed.
+    Detach(u64),
+    /// Read a monitor's thresholds.
+    GetThreshold(String, oneshot::Sender<Result<ThresholdView, ApiError>>),
+    /// Change a monitor's threshold and/or policy.
+    SetThreshold(String, ThresholdUpdate, oneshot::Sender<Result<(ThresholdView, StoredSession), ApiError>>),
+    /// Current statistics.
+    Stats(oneshot::Sender<SessionStats>),
+    /// Stop the actor.
+    Shutdown,
+}
+
+/// State shared between the actor and the handles.
+#[derive(Debug)]
+pub struct SessionShared {
+    /// The session's spec with its current thresholds and policies.
+    pub stored: Mutex<StoredSession>,
+    /// Subscribers to `alarm` and `state` messages.
+    pub subscribers: Mutex<Vec<mpsc::Sender<Arc<str>>>>,
+}
+
+/// A cheap-to-clone reference to a running session.
+#[derive(Debug, Clone)]
+pub struct SessionHandle {
+    id: Arc<str>,
+    frames: mpsc::Sender<FrameCommand>,
+    control: mpsc::Sender<ControlCommand>,
+    stats: watch::Receiver<Arc<SessionStats>>,
+    shared: Arc<SessionShared>,
+}
+
+impl SessionHandle {
+    /// Assembles a handle (the actor module creates the channels).
+    pub(super) fn new(
+        id: Arc<str>,
+        frames: mpsc::Sender<FrameCommand>,
+        control: mpsc::Sender<ControlCommand>,
+        stats: watch::Receiver<Arc<SessionStats>>,
+        shared: Arc<SessionShared>,
+    ) -> Self {
+        SessionHandle { id, frames, control, stats, shared }
+    }
+
+    /// Session id.
+    pub fn id(&self) -> &str {
+        &self.id
+    }
+
+    /// The frame channel (bounded: a full channel slows the sender's socket).
+    pub fn frames(&self) -> &mpsc::Sender<FrameCommand> {
+        &self.frames
+    }
+
+    /// The latest published statistics (decimated by the actor).
+    pub fn stats_watch(&self) -> watch::Receiver<Arc<SessionStats>> {
+        self.stats.clone()
+    }
+
+    /// A copy of the stored spec.
+    pub fn stored(&self) -> StoredSession {
+        self.shared.stored.lock().unwrap_or_else(|p| p.into_inner()).clone()
+    }
+
+    /// Registers an event subscriber; returns its queue of JSON messages.
+    pub fn subscribe(&self) -> mpsc::Receiver<Arc<str>> {
+        let (tx, rx) = mpsc::channel(SUBSCRIBER_QUEUE);
+        self.shared.subscribers.lock().unwrap_or_else(|p| p.into_inner()).push(tx);
+        rx
+    }
+
+    async fn ask<T>(&self, make: impl FnOnce(oneshot::Sender<T>) -> ControlCommand) -> Result<T, ApiError> {
+        let (tx, rx) = oneshot::channel();
+        let gone = || ApiError::NotFound(format!("session '{}' has stopped", self.id));
+        tokio::time::timeout(CONTROL_TIMEOUT, self.control.send(make(tx)))
+            .await
+            .map_err(|_| ApiError::Unavailable(format!("session '{}' is busy", self.id)))?
+            .map_err(|_| gone())?;
+        tokio::time::timeout(CONTROL_TIMEOUT, rx)
+            .await
+            .map_err(|_| ApiError::Unavailable(format!("session '{}' is busy", self.id)))?
+            .map_err(|_| gone())
+    }
+
+    /// Attaches an ingest stream (409 if one is already attached).
+    pub async fn attach(&self) -> Result<IngestLink, ApiError> {
+        self.ask(ControlCommand::Attach).await?
+    }
+
+    /// Detaches ingest stream `stream` (best effort: the actor may be gone).
+    pub async fn detach(&self, stream: u64) {
+        let _ = self.control.send(ControlCommand::Detach(stream)).await;
+    }
+
+    /// A monitor's thresholds and policy.
+    pub async fn threshold(&self, monitor: &str) -> Result<ThresholdView, ApiError> {
+        self.ask(|tx| ControlCommand::GetThreshold(monitor.to_owned(), tx)).await?
+    }
+
+    /// Applies a threshold/policy change; returns the new view and the spec to persist.
+    pub async fn set_threshold(
+        &self,
+        monitor: &str,
+        update: ThresholdUpdate,
+    ) -> Result<(ThresholdView, StoredSession), ApiError> {
+        self.ask(|tx| ControlCommand::SetThreshold(monitor.to_owned(), update, tx)).await?
+    }
+
+    /// Exact current statistics.
+    pub async fn stats(&self) -> Result<SessionStats, ApiError> {
+        self.ask(ControlCommand::Stats).await
+    }
+
+    /// Asks the actor to stop.
+    pub async fn shutdown(&self) {
+        let _ = self.control.send(ControlCommand::Shutdown).await;
+    }
+}

@@ -1,0 +1,81 @@
+//! Validation of a session spec: ids, monitor names, limits, and each monitor's
+//! configuration (built once here so a bad model is a 422 naming its field).
+
+use crate::detect::ThresholdSpec;
+use crate::monitor::{self, BuildError, Monitor, MonitorSpec};
+use crate::service::config::Limits;
+use crate::service::error::ApiError;
+use crate::service::store::StoredSession;
+use crate::service::wire::{CreateSession, MonitorSpecWire};
+
+/// Ids and names: 1–64 characters of `A–Z a–z 0–9 _ - .`, so they are safe in URLs and logs.
+pub fn valid_name(s: &str) -> bool {
+    !s.is_empty() && s.len() <= 64 && s.bytes().all(|c| c.is_ascii_alphanumeric() || matches!(c, b'_' | b'-' | b'.'))
+}
+
+/// Converts a monitor's wire spec into the domain spec.
+pub fn monitor_spec(wire: &MonitorSpecWire) -> Result<MonitorSpec, BuildError> {
+    Ok(MonitorSpec {
+        kind: wire.kind,
+        config: wire.config.clone(),
+        policy: wire.policy,
+        threshold: ThresholdSpec::from_parts(wire.p_fa, wire.threshold)?,
+    })
+}
+
+/// Builds every monitor of a stored session (used at creation and at restart).
+pub fn build_monitors(session: &StoredSession) -> Result<Vec<(String, Box<dyn Monitor>)>, ApiError> {
+    session
+        .monitors
+        .iter()
+        .enumerate()
+        .map(|(i, wire)| {
+            let built = monitor_spec(wire).and_then(|spec| monitor::build(&spec));
+            match built {
+                Ok(m) => Ok((wire.name.clone(), m)),
+                Err(e) => Err(build_error(i, e)),
+            }
+        })
+        .collect()
+}
+
+fn build_error(index: usize, e: BuildError) -> ApiError {
+    let prefix = format!("monitors[{index}]");
+    match e {
+        BuildError::Config(c) if c.field.is_empty() => ApiError::invalid(format!("{prefix}.config"), c.reason),
+        BuildError::Config(c) => ApiError::invalid(format!("{prefix}.config.{}", c.field), c.reason),
+        BuildError::Policy(p) => ApiError::invalid(format!("{prefix}.policy"), p.to_string()),
+        BuildError::Threshold(t) => ApiError::invalid(prefix, t.to_string()),
+        BuildError::Unsupported(kind) => {
+            ApiError::invalid(format!("{prefix}.type"), format!("monitor type '{kind}' is not implemented yet"))
+        }
+    }
+}
+
+/// Checks a create request against the naming rules and limits.
+pub fn validate_session(req: &CreateSession, limits: &Limits) -> Result<(), ApiError> {
+    if let Some(id) = &req.id
+        && !valid_name(id)
+    {
+        return Err(ApiError::invalid("id", "must be 1-64 characters of A-Z a-z 0-9 _ - ."));
+    }
+    if req.monitors.is_empty() {
+        return Err(ApiError::invalid("monitors", "a session needs at least one monitor"));
+    }
+    if req.monitors.len() > limits.max_monitors_per_session {
+        return Err(ApiError::TooLarge(format!(
+            "{} monitors, the limit per session is {}",
+            req.monitors.len(),
+            limits.max_monitors_per_session
+        )));
+    }
+    for (i, m) in req.monitors.iter().enumerate() {
+        if !valid_name(&m.name) {
+            return Err(ApiError::invalid(format!("monitors[{i}].name"), "must be 1-64 characters of A-Z a-z 0-9 _ - ."));
+        }
+        if req.monitors[..i].iter().any(|other| other.name == m.name) {
+            return Err(ApiError::invalid(format!("monitors[{i}].name"), format!("duplicate monitor name '{}'", m.name)));
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,195 @@
+//! Per-session statistics (`GET /api/v1/sessions/{id}/stats` and the `stats`
+//! event): per monitor and test, counts, statistic summary, time in each state
+//! and the detection delay of the last alarm. Updated by the session actor.
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+
+use crate::detect::Health;
+use crate::monitor::TestOutcome;
+
+/// Seconds spent in each state, by epoch time.
+#[derive(Debug, Clone, Default, Serialize, PartialEq)]
+pub struct TimeInState {
+    /// Healthy, s.
+    pub healthy: f64,
+    /// Suspect, s.
+    pub suspect: f64,
+    /// Isolated, s.
+    pub isolated: f64,
+}
+
+/// Statistics of one test.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct TestStats {
+    /// Current state.
+    pub state: Health,
+    /// Epoch time the current state was entered.
+    pub state_since_t: Option<f64>,
+    /// Degrees of freedom.
+    pub dof: u32,
+    /// Threshold in force.
+    pub threshold: f64,
+    /// Epochs on which the test ran.
+    pub epochs: u64,
+    /// Epochs whose statistic exceeded the threshold.
+    pub exceedances: u64,
+    /// Alarms raised (transitions into suspect or isolated).
+    pub alarms: u64,
+    /// Last statistic.
+    pub last: Option<f64>,
+    /// Last statistic / threshold.
+    pub last_test_ratio: Option<f64>,
+    /// Mean statistic.
+    pub mean: Option<f64>,
+    /// Largest statistic.
+    pub max: Option<f64>,
+    /// Time in each state.
+    pub time_in_state_s: TimeInState,
+    /// Seconds from the first exceedance of the episode to the last alarm.
+    pub last_alarm_delay_s: Option<f64>,
+    #[serde(skip)]
+    sum: f64,
+    #[serde(skip)]
+    last_t: Option<f64>,
+    #[serde(skip)]
+    episode_start_t: Option<f64>,
+}
+
+impl TestStats {
+    /// Empty statistics for a test.
+    pub fn new(dof: u32, threshold: f64) -> Self {
+        TestStats {
+            state: Health::Healthy,
+            state_since_t: None,
+            dof,
+            threshold,
+            epochs: 0,
+            exceedances: 0,
+            alarms: 0,
+            last: None,
+            last_test_ratio: None,
+            mean: None,
+            max: None,
+            time_in_state_s: TimeInState::default(),
+            last_alarm_delay_s: None,
+            sum: 0.0,
+            last_t: None,
+            episode_start_t: None,
+        }
+    }
+
+    /// Records one evaluation at epoch time `t`. Returns the detection delay
+    /// to put on the alarm when this outcome raises one.
+    pub fn record(&mut self, t: f64, outcome: &TestOutcome) -> f64 {
+        let s = outcome.statistic;
+        if let Some(last_t) = self.last_t {
+            let dt = (t - last_t).max(0.0);
+            match self.state {
+                Health::Healthy => self.time_in_state_s.healthy += dt,
+                Health::Suspect => self.time_in_state_s.suspect += dt,
+                Health::Isolated => self.time_in_state_s.isolated += dt,
+            }
+        }
+        self.last_t = Some(t);
+        self.epochs += 1;
+        self.threshold = s.threshold;
+        self.sum += s.value;
+        self.last = Some(s.value);
+        self.last_test_ratio = Some(s.test_ratio());
+        self.mean = Some(self.sum / self.epochs as f64);
+        self.max = Some(self.max.map_or(s.value, |m| m.max(s.value)));
+        if s.exceeds() {
+            self.exceedances += 1;
+            // An episode starts at the first exceedance seen while healthy.
+            if self.episode_start_t.is_none() {
+                self.episode_start_t = Some(t);
+            }
+        }
+        let health = outcome.decision.health;
+        let mut delay = 0.0;
+        if health != self.state {
+            self.state = health;
+            self.state_since_t = Some(t);
+            if health == Health::Healthy {
+                self.episode_start_t = None;
+            } else {
+                self.alarms += 1;
+                delay = t - self.episode_start_t.unwrap_or(t);
+                self.last_alarm_delay_s = Some(delay);
+            }
+        } else if health == Health::Healthy && !s.exceeds() {
+            self.episode_start_t = None;
+        }
+        delay
+    }
+}
+
+/// Statistics of one monitor.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct MonitorStats {
+    /// Monitor kind.
+    #[serde(rename = "type")]
+    pub kind: &'static str,
+    /// Epochs consumed.
+    pub epochs: u64,
+    /// Worst (largest) last test ratio over its tests.
+    pub worst_test_ratio: Option<f64>,
+    /// Per test.
+    pub tests: BTreeMap<&'static str, TestStats>,
+}
+
+/// Statistics of one session.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct SessionStats {
+    /// Session id.
+    pub session: String,
+    /// An ingest stream is attached.
+    pub connected: bool,
+    /// Frames accepted since the session started.
+    pub frames: u64,
+    /// Epochs processed.
+    pub epochs: u64,
+    /// Frames refused.
+    pub frame_errors: u64,
+    /// Time of the last epoch.
+    pub last_t: Option<f64>,
+    /// Wall-clock time of the last frame, Unix ms.
+    pub last_frame_at_ms: Option<i64>,
+    /// Epochs per second over the last second of wall-clock time.
+    pub epochs_per_s: f64,
+    /// Per monitor.
+    pub monitors: BTreeMap<String, MonitorStats>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::detect::{PolicyConfig, ThresholdSpec};
+    use crate::monitor::TestBank;
+
+    #[test]
+    fn stats_track_time_in_state_exceedances_and_alarm_delay() {
+        let policy = PolicyConfig::Counters { n1: 10, n2: 1 };
+        let mut bank = TestBank::new(&[("r", 1)], ThresholdSpec::Threshold(10.0), policy).unwrap();
+        let mut stats = TestStats::new(1, 10.0);
+        let values = [1.0, 20.0, 30.0, 1.0, 1.0];
+        let mut delays = vec![];
+        for (k, v) in values.iter().enumerate() {
+            let o = bank.evaluate(0, *v);
+            delays.push(stats.record(k as f64, &o));
+        }
+        // t=1 suspect (delay 0), t=2 isolated (delay 1 s from the first exceedance).
+        assert_eq!(delays, vec![0.0, 0.0, 1.0, 0.0, 0.0]);
+        assert_eq!(stats.exceedances, 2);
+        assert_eq!(stats.alarms, 2);
+        // t=3 still isolated (t1 = 1), t=4 healthy again (t1 = 0).
+        assert_eq!(stats.state, Health::Healthy);
+        assert_eq!(stats.state_since_t, Some(4.0));
+        assert_eq!(stats.max, Some(30.0));
+        assert!((stats.mean.unwrap() - 53.0 / 5.0).abs() < 1e-12);
+        assert_eq!(stats.time_in_state_s, TimeInState { healthy: 1.0, suspect: 1.0, isolated: 2.0 });
+        assert_eq!(stats.last_alarm_delay_s, Some(1.0));
+    }
+}

@@ -1,0 +1,291 @@
+//! Persistence (DESIGN §4.5): sessions with their monitors and thresholds, and
+//! the alarm log, in SQLite through sqlx (WAL). An alarm is committed here
+//! before anyone is told about it.
+
+use std::path::Path;
+use std::str::FromStr;
+
+use sqlx::Row;
+use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteSynchronous};
+
+use crate::detect::Health;
+use crate::service::wire::{AlarmRecord, MonitorSpecWire};
+
+/// Store failures. These are server faults (HTTP 500), never the user's input.
+#[derive(Debug, thiserror::Error)]
+pub enum StoreError {
+    /// The database refused or failed.
+    #[error("database: {0}")]
+    Db(#[from] sqlx::Error),
+    /// A stored row could not be decoded.
+    #[error("corrupt stored row: {0}")]
+    Corrupt(String),
+}
+
+/// A stored session: its spec as created and as changed since.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct StoredSession {
+    /// Session id.
+    pub id: String,
+    /// Echo results on the ingest socket.
+    pub echo: bool,
+    /// Monitors with their current thresholds and policies.
+    pub monitors: Vec<MonitorSpecWire>,
+    /// Creation time, Unix milliseconds.
+    pub created_at_ms: i64,
+}
+
+/// Filters for the alarm log.
+#[derive(Debug, Clone, Default)]
+pub struct AlarmQuery {
+    /// Only this session.
+    pub session: Option<String>,
+    /// Only this monitor.
+    pub monitor: Option<String>,
+    /// Only alarms raised at or after this wall-clock time, Unix ms.
+    pub since_ms: Option<i64>,
+    /// Only alarms raised before this wall-clock time, Unix ms.
+    pub until_ms: Option<i64>,
+    /// Only alarms with an id below this (pagination cursor).
+    pub before_id: Option<i64>,
+    /// At most this many, newest first.
+    pub limit: i64,
+}
+
+/// The SQLite store. Cheap to clone (a pool).
+#[derive(Debug, Clone)]
+pub struct Store {
+    pool: SqlitePool,
+}
+
+const SCHEMA: &[&str] = &[
+    "CREATE TABLE IF NOT EXISTS sessions (
+        id TEXT PRIMARY KEY,
+        spec TEXT NOT NULL,
+        created_at_ms INTEGER NOT NULL
+    )",
+    "CREATE TABLE IF NOT EXISTS alarms (
+        id INTEGER PRIMARY KEY AUTOINCREMENT,
+        session TEXT NOT NULL,
+        monitor TEXT NOT NULL,
+        test TEXT NOT NULL,
+        state TEXT NOT NULL,
+        t REAL NOT NULL,
+        statistic REAL NOT NULL,
+        threshold REAL NOT NULL,
+        dof INTEGER NOT NULL,
+        delay_s REAL NOT NULL,
+        raised_at_ms INTEGER NOT NULL,
+        cleared_t REAL
+    )",
+    "CREATE INDEX IF NOT EXISTS alarms_by_session ON alarms (session, monitor, id)",
+    "CREATE INDEX IF NOT EXISTS alarms_by_time ON alarms (raised_at_ms)",
+];
+
+impl Store {
+    /// Opens (creating if needed) the database file in WAL mode and applies the schema.
+    pub async fn open(path: &Path) -> Result<Self, StoreError> {
+        let url = format!("sqlite://{}", path.display());
+        let options = SqliteConnectOptions::from_str(&url)?
+            .create_if_missing(true)
+            .journal_mode(SqliteJournalMode::Wal)
+            // WAL + NORMAL: a committed transaction survives a process crash;
+            // only an OS crash or power loss can lose the last commits.
+            .synchronous(SqliteSynchronous::Normal)
+            .busy_timeout(std::time::Duration::from_secs(5));
+        let pool = SqlitePoolOptions::new().max_connections(4).connect_with(options).await?;
+        for statement in SCHEMA {
+            sqlx::query(statement).execute(&pool).await?;
+        }
+        Ok(Store { pool })
+    }
+
+    /// Flushes the WAL into the main file and closes every connection.
+    pub async fn close(&self) {
+        let _ = sqlx::query("PRAGMA wal_checkpoint(TRUNCATE)").execute(&self.pool).await;
+        self.pool.close().await;
+    }
+
+    /// Inserts or replaces a session's spec.
+    pub async fn put_session(&self, session: &StoredSession) -> Result<(), StoreError> {
+        let spec = serde_json::to_string(session).map_err(|e| StoreError::Corrupt(e.to_string()))?;
+        sqlx::query("INSERT INTO sessions (id, spec, created_at_ms) VALUES (?, ?, ?) ON CONFLICT(id) DO UPDATE SET spec = excluded.spec")
+            .bind(&session.id)
+            .bind(spec)
+            .bind(session.created_at_ms)
+            .execute(&self.pool)
+            .await?;
+        Ok(())
+    }
+
+    /// Deletes a session's spec (its alarms stay in the log).
+    pub async fn delete_session(&self, id: &str) -> Result<bool, StoreError> {
+        let done = sqlx::query("DELETE FROM sessions WHERE id = ?").bind(id).execute(&self.pool).await?;
+        Ok(done.rows_affected() > 0)
+    }
+
+    /// Every stored session, oldest first.
+    pub async fn sessions(&self) -> Result<Vec<StoredSession>, StoreError> {
+        let rows = sqlx::query("SELECT spec FROM sessions ORDER BY created_at_ms, id").fetch_all(&self.pool).await?;
+        rows.iter()
+            .map(|row| {
+                let spec: String = row.try_get("spec")?;
+                serde_json::from_str(&spec).map_err(|e| StoreError::Corrupt(e.to_string()))
+            })
+            .collect()
+    }
+
+    /// Commits an alarm and returns it with its id.
+    pub async fn insert_alarm(&self, mut alarm: AlarmRecord) -> Result<AlarmRecord, StoreError> {
+        let done = sqlx::query(
+            "INSERT INTO alarms (session, monitor, test, state, t, statistic, threshold, dof, delay_s, raised_at_ms, cleared_t)
+             VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, NULL)",
+        )
+        .bind(&alarm.session)
+        .bind(&alarm.monitor)
+        .bind(&alarm.test)
+        .bind(alarm.state.as_str())
+        .bind(alarm.t)
+        .bind(alarm.statistic)
+        .bind(alarm.threshold)
+        .bind(alarm.dof)
+        .bind(alarm.delay_s)
+        .bind(alarm.raised_at_ms)
+        .execute(&self.pool)
+        .await?;
+        alarm.id = done.last_insert_rowid();
+        Ok(alarm)
+    }
+
+    /// Marks a test's open alarms as cleared at epoch time `t`.
+    pub async fn clear_alarms(&self, session: &str, monitor: &str, test: &str, t: f64) -> Result<(), StoreError> {
+        sqlx::query("UPDATE alarms SET cleared_t = ? WHERE session = ? AND monitor = ? AND test = ? AND cleared_t IS NULL")
+            .bind(t)
+            .bind(session)
+            .bind(monitor)
+            .bind(test)
+            .execute(&self.pool)
+            .await?;
+        Ok(())
+    }
+
+    /// The alarm log, newest first.
+    pub async fn alarms(&self, q: &AlarmQuery) -> Result<Vec<AlarmRecord>, StoreError> {
+        let mut sql = String::from(
+            "SELECT id, session, monitor, test, state, t, statistic, threshold, dof, delay_s, raised_at_ms, cleared_t FROM alarms WHERE 1 = 1",
+        );
+        if q.session.is_some() {
+            sql.push_str(" AND session = ?");
+        }
+        if q.monitor.is_some() {
+            sql.push_str(" AND monitor = ?");
+        }
+        if q.since_ms.is_some() {
+            sql.push_str(" AND raised_at_ms >= ?");
+        }
+        if q.until_ms.is_some() {
+            sql.push_str(" AND raised_at_ms < ?");
+        }
+        if q.before_id.is_some() {
+            sql.push_str(" AND id < ?");
+        }
+        sql.push_str(" ORDER BY id DESC LIMIT ?");
+        let mut query = sqlx::query(&sql);
+        if let Some(s) = &q.session {
+            query = query.bind(s);
+        }
+        if let Some(m) = &q.monitor {
+            query = query.bind(m);
+        }
+        if let Some(v) = q.since_ms {
+            query = query.bind(v);
+        }
+        if let Some(v) = q.until_ms {
+            query = query.bind(v);
+        }
+        if let Some(v) = q.before_id {
+            query = query.bind(v);
+        }
+        let rows = query.bind(q.limit).fetch_all(&self.pool).await?;
+        rows.iter().map(alarm_from_row).collect()
+    }
+}
+
+fn alarm_from_row(row: &sqlx::sqlite::SqliteRow) -> Result<AlarmRecord, StoreError> {
+    let state: String = row.try_get("state")?;
+    let statistic: f64 = row.try_get("statistic")?;
+    let threshold: f64 = row.try_get("threshold")?;
+    Ok(AlarmRecord {
+        id: row.try_get("id")?,
+        session: row.try_get("session")?,
+        monitor: row.try_get("monitor")?,
+        test: row.try_get("test")?,
+        state: Health::parse(&state).ok_or_else(|| StoreError::Corrupt(format!("alarm state '{state}'")))?,
+        t: row.try_get("t")?,
+        statistic,
+        threshold,
+        dof: row.try_get("dof")?,
+        test_ratio: statistic / threshold,
+        delay_s: row.try_get("delay_s")?,
+        raised_at_ms: row.try_get("raised_at_ms")?,
+        cleared_t: row.try_get("cleared_t")?,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn alarm(session: &str, t: f64) -> AlarmRecord {
+        AlarmRecord {
+            id: 0,
+            session: session.into(),
+            monitor: "m".into(),
+            test: "residual".into(),
+            state: Health::Isolated,
+            t,
+            statistic: 30.0,
+            threshold: 20.0,
+            dof: 2,
+            test_ratio: 1.5,
+            delay_s: 0.0,
+            raised_at_ms: 1000 + t as i64,
+            cleared_t: None,
+        }
+    }
+
+    #[tokio::test]
+    async fn alarms_round_trip_newest_first_with_filters_and_clearing() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = Store::open(&dir.path().join("t.db")).await.unwrap();
+        for (s, t) in [("a", 1.0), ("b", 2.0), ("a", 3.0)] {
+            store.insert_alarm(alarm(s, t)).await.unwrap();
+        }
+        let all = store.alarms(&AlarmQuery { limit: 10, ..Default::default() }).await.unwrap();
+        assert_eq!(all.iter().map(|a| a.t).collect::<Vec<_>>(), vec![3.0, 2.0, 1.0]);
+        let a = store.alarms(&AlarmQuery { session: Some("a".into()), limit: 10, ..Default::default() }).await.unwrap();
+        assert_eq!(a.len(), 2);
+        let page = store.alarms(&AlarmQuery { before_id: Some(all[0].id), limit: 1, ..Default::default() }).await.unwrap();
+        assert_eq!(page[0].t, 2.0);
+        store.clear_alarms("a", "m", "residual", 9.0).await.unwrap();
+        let a = store.alarms(&AlarmQuery { session: Some("a".into()), limit: 10, ..Default::default() }).await.unwrap();
+        assert!(a.iter().all(|x| x.cleared_t == Some(9.0)));
+        assert_eq!(a[0], AlarmRecord { id: a[0].id, cleared_t: Some(9.0), ..alarm("a", 3.0) });
+    }
+
+    #[tokio::test]
+    async fn sessions_survive_reopening() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.db");
+        let s = StoredSession { id: "x".into(), echo: true, monitors: vec![], created_at_ms: 5 };
+        {
+            let store = Store::open(&path).await.unwrap();
+            store.put_session(&s).await.unwrap();
+            store.close().await;
+        }
+        let store = Store::open(&path).await.unwrap();
+        assert_eq!(store.sessions().await.unwrap(), vec![s]);
+        assert!(store.delete_session("x").await.unwrap());
+        assert!(store.sessions().await.unwrap().is_empty());
+    }
+}

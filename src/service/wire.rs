@@ -1,0 +1,597 @@
+//! Wire types: the JSON the service reads and writes, parsed and validated once
+//! here and converted into domain types (`Epoch`, `MonitorSpec`) that cannot hold
+//! a bad value. Units on the wire are degrees; inside they are radians.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use crate::detect::{Health, PolicyConfig, Statistic};
+use crate::monitor::epoch::{AdsBlock, CnsBlock, GnssBlock, InsBlock};
+use crate::monitor::{Epoch, MonitorKind, MonitorReport};
+
+/// `POST /api/v1/sessions` body.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CreateSession {
+    /// Optional id; generated when absent.
+    #[serde(default)]
+    pub id: Option<String>,
+    /// The monitors to run on the stream.
+    pub monitors: Vec<MonitorSpecWire>,
+    /// Send one `result` per epoch back on the ingest socket.
+    #[serde(default)]
+    pub echo: bool,
+}
+
+/// One monitor in a session spec, as the user writes it and as it is stored.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MonitorSpecWire {
+    /// Name, unique within the session.
+    pub name: String,
+    /// Monitor kind.
+    #[serde(rename = "type")]
+    pub kind: MonitorKind,
+    /// Kind-specific configuration.
+    #[serde(default = "empty_object")]
+    pub config: serde_json::Value,
+    /// Decision policy (default classic).
+    #[serde(default)]
+    pub policy: PolicyConfig,
+    /// False-alarm probability (exclusive with `threshold`; default 0.002).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub p_fa: Option<f64>,
+    /// Raw threshold (exclusive with `p_fa`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub threshold: Option<f64>,
+}
+
+fn empty_object() -> serde_json::Value {
+    serde_json::Value::Object(serde_json::Map::new())
+}
+
+/// `PUT /api/v1/sessions/{id}/monitors/{name}/threshold` body.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ThresholdUpdate {
+    /// New false-alarm probability.
+    #[serde(default)]
+    pub p_fa: Option<f64>,
+    /// New raw threshold.
+    #[serde(default)]
+    pub threshold: Option<f64>,
+    /// New policy.
+    #[serde(default)]
+    pub policy: Option<PolicyConfig>,
+}
+
+/// A test's effective threshold, as reported by the threshold routes.
+#[derive(Debug, Clone, Serialize)]
+pub struct TestThreshold {
+    /// Degrees of freedom.
+    pub dof: u32,
+    /// Effective threshold.
+    pub threshold: f64,
+    /// False-alarm probability that threshold gives for the dof.
+    pub p_fa: f64,
+}
+
+/// Threshold and policy of one monitor (`GET`/`PUT …/threshold`).
+#[derive(Debug, Clone, Serialize)]
+pub struct ThresholdView {
+    /// Monitor name.
+    pub monitor: String,
+    /// The stated false-alarm probability, when the spec is a probability.
+    pub p_fa: Option<f64>,
+    /// The stated raw threshold, when the spec is a raw value.
+    pub threshold: Option<f64>,
+    /// Decision policy.
+    pub policy: PolicyConfig,
+    /// Effective threshold per test.
+    pub tests: BTreeMap<String, TestThreshold>,
+}
+
+// ---------------------------------------------------------------- ingest frames
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct WireIns {
+    lat: f64,
+    lon: f64,
+    h: f64,
+    vel: [f64; 3],
+    att: [f64; 3],
+    #[serde(default)]
+    f_b: Option<[f64; 3]>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct WireGnss {
+    lat: f64,
+    lon: f64,
+    h: f64,
+    #[serde(default)]
+    vel: Option<[f64; 3]>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct WireDvl {
+    vel_b: [f64; 3],
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct WireCns {
+    lat: f64,
+    lon: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct WireAds {
+    baro_h: f64,
+    #[serde(default)]
+    tas: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct WireTacan {
+    range_m: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+enum WireChannel {
+    Scalar(f64),
+    Vector(Vec<f64>),
+}
+
+/// One epoch as it arrives on the ingest socket.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct WireEpoch {
+    t: f64,
+    #[serde(default)]
+    ins: Option<WireIns>,
+    #[serde(default)]
+    gnss: Option<WireGnss>,
+    #[serde(default)]
+    dvl: Option<WireDvl>,
+    #[serde(default)]
+    cns: Option<WireCns>,
+    #[serde(default)]
+    ads: Option<WireAds>,
+    #[serde(default)]
+    tacan: Option<WireTacan>,
+    #[serde(default)]
+    gyros: Option<Vec<f64>>,
+    #[serde(default)]
+    channels: Option<BTreeMap<String, WireChannel>>,
+    #[serde(default)]
+    z: Option<Vec<f64>>,
+    #[serde(default)]
+    u: Option<Vec<f64>>,
+}
+
+/// Why an ingest frame was refused. The `code` is stable for clients.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{message}")]
+pub struct FrameError {
+    /// Machine-readable code (`malformed_json`, `non_finite`, `unknown_input`,
+    /// `wrong_length`, `invalid_epoch`, `time_backwards`, `frame_too_large`,
+    /// `batch_too_large`, `empty_batch`, `numerical`, `session_gone`).
+    pub code: &'static str,
+    /// Human-readable reason.
+    pub message: String,
+    /// Index of the offending epoch within a batch, when known.
+    pub index: Option<usize>,
+}
+
+impl FrameError {
+    /// Builds an error without an epoch index.
+    pub fn new(code: &'static str, message: impl Into<String>) -> Self {
+        FrameError { code, message: message.into(), index: None }
+    }
+
+    /// Attaches the epoch index.
+    pub fn at(mut self, index: usize) -> Self {
+        self.index = Some(index);
+        self
+    }
+}
+
+/// True if the text holds a `NaN` or `Infinity` token outside strings (what
+/// Python's `json.dumps` writes for non-finite floats), so the error can say so.
+fn has_non_finite_token(text: &str) -> bool {
+    let mut in_string = false;
+    let mut escaped = false;
+    let bytes = text.as_bytes();
+    for (i, &c) in bytes.iter().enumerate() {
+        if in_string {
+            match (escaped, c) {
+                (true, _) => escaped = false,
+                (false, b'\\') => escaped = true,
+                (false, b'"') => in_string = false,
+                _ => {}
+            }
+        } else if c == b'"' {
+            in_string = true;
+        } else if bytes[i..].starts_with(b"NaN") || bytes[i..].starts_with(b"Infinity") {
+            return true;
+        }
+    }
+    false
+}
+
+fn classify(err: serde_json::Error, text: &str) -> FrameError {
+    let message = err.to_string();
+    if message.contains("number out of range") || (err.is_syntax() && has_non_finite_token(text)) {
+        return FrameError::new("non_finite", format!("non-finite number in frame: {message}"));
+    }
+    if message.contains("unknown field") {
+        return FrameError::new("unknown_input", message);
+    }
+    if message.contains("invalid length") {
+        return FrameError::new("wrong_length", message);
+    }
+    if err.is_data() {
+        return FrameError::new("invalid_epoch", message);
+    }
+    FrameError::new("malformed_json", message)
+}
+
+fn finite(what: &str, values: &[f64]) -> Result<(), FrameError> {
+    if values.iter().all(|v| v.is_finite()) {
+        Ok(())
+    } else {
+        Err(FrameError::new("non_finite", format!("{what} holds a non-finite number")))
+    }
+}
+
+fn latitude(what: &str, lat_deg: f64) -> Result<f64, FrameError> {
+    if (-90.0..=90.0).contains(&lat_deg) {
+        Ok(lat_deg.to_radians())
+    } else {
+        Err(FrameError::new("invalid_epoch", format!("{what} = {lat_deg}° is outside [-90, 90]")))
+    }
+}
+
+fn longitude(what: &str, lon_deg: f64) -> Result<f64, FrameError> {
+    if (-360.0..=360.0).contains(&lon_deg) {
+        Ok(lon_deg.to_radians())
+    } else {
+        Err(FrameError::new("invalid_epoch", format!("{what} = {lon_deg}° is outside [-360, 360]")))
+    }
+}
+
+impl TryFrom<WireEpoch> for Epoch {
+    type Error = FrameError;
+
+    fn try_from(w: WireEpoch) -> Result<Self, FrameError> {
+        finite("t", &[w.t])?;
+        let ins = match w.ins {
+            Some(i) => {
+                finite("ins", &[i.lat, i.lon, i.h])?;
+                finite("ins.vel", &i.vel)?;
+                finite("ins.att", &i.att)?;
+                if let Some(f) = &i.f_b {
+                    finite("ins.f_b", f)?;
+                }
+                Some(InsBlock {
+                    lat: latitude("ins.lat", i.lat)?,
+                    lon: longitude("ins.lon", i.lon)?,
+                    h: i.h,
+                    vel: i.vel,
+                    att: i.att.map(f64::to_radians),
+                    f_b: i.f_b,
+                })
+            }
+            None => None,
+        };
+        let gnss = match w.gnss {
+            Some(g) => {
+                finite("gnss", &[g.lat, g.lon, g.h])?;
+                if let Some(v) = &g.vel {
+                    finite("gnss.vel", v)?;
+                }
+                Some(GnssBlock { lat: latitude("gnss.lat", g.lat)?, lon: longitude("gnss.lon", g.lon)?, h: g.h, vel: g.vel })
+            }
+            None => None,
+        };
+        let dvl_vel_b = match w.dvl {
+            Some(d) => {
+                finite("dvl.vel_b", &d.vel_b)?;
+                Some(d.vel_b)
+            }
+            None => None,
+        };
+        let cns = match w.cns {
+            Some(c) => {
+                finite("cns", &[c.lat, c.lon])?;
+                Some(CnsBlock { lat: latitude("cns.lat", c.lat)?, lon: longitude("cns.lon", c.lon)? })
+            }
+            None => None,
+        };
+        let ads = match w.ads {
+            Some(a) => {
+                finite("ads.baro_h", &[a.baro_h])?;
+                if let Some(tas) = a.tas {
+                    finite("ads.tas", &[tas])?;
+                }
+                Some(AdsBlock { baro_h: a.baro_h, tas: a.tas })
+            }
+            None => None,
+        };
+        let tacan_range_m = match w.tacan {
+            Some(t) => {
+                finite("tacan.range_m", &[t.range_m])?;
+                Some(t.range_m)
+            }
+            None => None,
+        };
+        if let Some(g) = &w.gyros {
+            finite("gyros", g)?;
+        }
+        if let Some(z) = &w.z {
+            finite("z", z)?;
+        }
+        if let Some(u) = &w.u {
+            finite("u", u)?;
+        }
+        let channels = match w.channels {
+            Some(map) => {
+                let mut out = Vec::with_capacity(map.len());
+                for (name, value) in map {
+                    let values = match value {
+                        WireChannel::Scalar(v) => vec![v],
+                        WireChannel::Vector(v) => v,
+                    };
+                    finite(&format!("channels.{name}"), &values)?;
+                    out.push((name, values));
+                }
+                Some(out)
+            }
+            None => None,
+        };
+        Ok(Epoch { t: w.t, ins, gnss, dvl_vel_b, cns, ads, tacan_range_m, gyros: w.gyros, channels, z: w.z, u: w.u })
+    }
+}
+
+/// Parses an ingest frame: one epoch object or an array of them, at most
+/// `max_batch` epochs. Times must not decrease within the frame.
+pub fn parse_frame(text: &str, max_batch: usize) -> Result<Vec<Epoch>, FrameError> {
+    let trimmed = text.trim_start();
+    let wire: Vec<WireEpoch> = if trimmed.starts_with('[') {
+        serde_json::from_str(text).map_err(|e| classify(e, text))?
+    } else {
+        vec![serde_json::from_str(text).map_err(|e| classify(e, text))?]
+    };
+    if wire.is_empty() {
+        return Err(FrameError::new("empty_batch", "a batch must hold at least one epoch"));
+    }
+    if wire.len() > max_batch {
+        return Err(FrameError::new(
+            "batch_too_large",
+            format!("batch holds {} epochs, the limit is {max_batch}", wire.len()),
+        ));
+    }
+    let mut epochs = Vec::with_capacity(wire.len());
+    for (i, w) in wire.into_iter().enumerate() {
+        let epoch = Epoch::try_from(w).map_err(|e| e.at(i))?;
+        if let Some(prev) = epochs.last().map(|e: &Epoch| e.t)
+            && epoch.t < prev
+        {
+            return Err(FrameError::new(
+                "time_backwards",
+                format!("t = {} goes back from {} within the batch", epoch.t, prev),
+            )
+            .at(i));
+        }
+        epochs.push(epoch);
+    }
+    Ok(epochs)
+}
+
+// ------------------------------------------------------------- server messages
+
+/// One test's result in a `result` frame.
+#[derive(Debug, Clone, Serialize)]
+pub struct TestResultWire {
+    /// The statistic.
+    pub statistic: f64,
+    /// Effective threshold.
+    pub threshold: f64,
+    /// Degrees of freedom.
+    pub dof: u32,
+    /// statistic / threshold.
+    pub test_ratio: f64,
+    /// Health after this epoch.
+    pub state: Health,
+}
+
+impl TestResultWire {
+    /// From a statistic and the decided health.
+    pub fn new(s: &Statistic, state: Health) -> Self {
+        TestResultWire { statistic: s.value, threshold: s.threshold, dof: s.dof, test_ratio: s.test_ratio(), state }
+    }
+}
+
+/// One monitor's part of a `result` frame.
+#[derive(Debug, Clone, Serialize)]
+pub struct MonitorResultWire<'a> {
+    /// Tests that ran this epoch.
+    pub tests: BTreeMap<&'static str, TestResultWire>,
+    /// Monitor outputs, flattened beside `tests`.
+    #[serde(flatten)]
+    pub outputs: &'a crate::monitor::Outputs,
+}
+
+/// Builds the wire form of one monitor's report.
+pub fn monitor_result(report: &MonitorReport) -> MonitorResultWire<'_> {
+    MonitorResultWire {
+        tests: report
+            .tests
+            .iter()
+            .map(|o| (o.name, TestResultWire::new(&o.statistic, o.decision.health)))
+            .collect(),
+        outputs: &report.outputs,
+    }
+}
+
+/// An alarm: a test's transition into suspect or isolated, as stored and sent.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct AlarmRecord {
+    /// Store id (increasing).
+    pub id: i64,
+    /// Session id.
+    pub session: String,
+    /// Monitor name.
+    pub monitor: String,
+    /// Test name.
+    pub test: String,
+    /// The state entered: `suspect` or `isolated`.
+    pub state: Health,
+    /// Epoch time of the transition, s.
+    pub t: f64,
+    /// Statistic at the transition.
+    pub statistic: f64,
+    /// Threshold at the transition.
+    pub threshold: f64,
+    /// Degrees of freedom.
+    pub dof: u32,
+    /// statistic / threshold.
+    pub test_ratio: f64,
+    /// Seconds from the first exceedance of this episode to the alarm.
+    pub delay_s: f64,
+    /// Wall-clock time the alarm was raised, Unix milliseconds.
+    pub raised_at_ms: i64,
+    /// Epoch time the test returned to healthy, once it has.
+    pub cleared_t: Option<f64>,
+}
+
+/// A health change of one test.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct StateChange {
+    /// Session id.
+    pub session: String,
+    /// Monitor name.
+    pub monitor: String,
+    /// Test name.
+    pub test: String,
+    /// Epoch time, s.
+    pub t: f64,
+    /// Previous state.
+    pub from: Health,
+    /// New state.
+    pub to: Health,
+}
+
+/// The `error` event.
+#[derive(Debug, Clone, Serialize)]
+pub struct ErrorEvent<'a> {
+    /// Always `error`.
+    #[serde(rename = "type")]
+    pub kind: &'static str,
+    /// Stable code.
+    pub code: &'a str,
+    /// Reason.
+    pub message: &'a str,
+    /// Offending epoch within a batch, when known.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub index: Option<usize>,
+}
+
+impl<'a> From<&'a FrameError> for ErrorEvent<'a> {
+    fn from(e: &'a FrameError) -> Self {
+        ErrorEvent { kind: "error", code: e.code, message: &e.message, index: e.index }
+    }
+}
+
+/// Wraps a serialisable body as `{"type": kind, ...body}`.
+#[derive(Debug, Clone, Serialize)]
+pub struct Tagged<'a, T: Serialize> {
+    /// Message type.
+    #[serde(rename = "type")]
+    pub kind: &'static str,
+    /// The body, flattened.
+    #[serde(flatten)]
+    pub body: &'a T,
+}
+
+/// Serialises `{"type": kind, ...body}` to a string.
+pub fn tagged<T: Serialize>(kind: &'static str, body: &T) -> String {
+    serde_json::to_string(&Tagged { kind, body }).unwrap_or_else(|e| {
+        // Serialising our own plain structs cannot fail; keep the socket alive if it ever does.
+        format!(r#"{{"type":"error","code":"internal","message":"{e}"}}"#)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn one_epoch_and_batches_parse() {
+        let e = parse_frame(r#"{"t": 1.5, "z": [1, 2]}"#, 10).unwrap();
+        assert_eq!(e.len(), 1);
+        assert_eq!(e[0].z, Some(vec![1.0, 2.0]));
+        let e = parse_frame(r#"[{"t": 1}, {"t": 1}, {"t": 2}]"#, 10).unwrap();
+        assert_eq!(e.len(), 3);
+    }
+
+    #[test]
+    fn degrees_become_radians() {
+        let e = parse_frame(
+            r#"{"t":0,"ins":{"lat":30,"lon":114,"h":10,"vel":[1,2,3],"att":[0,0,90]},"gnss":{"lat":-45,"lon":0,"h":0}}"#,
+            1,
+        )
+        .unwrap();
+        let ins = e[0].ins.as_ref().unwrap();
+        assert!((ins.lat - 30f64.to_radians()).abs() < 1e-15);
+        assert!((ins.att[2] - std::f64::consts::FRAC_PI_2).abs() < 1e-15);
+        assert!((e[0].gnss.as_ref().unwrap().lat + std::f64::consts::FRAC_PI_4).abs() < 1e-15);
+    }
+
+    #[test]
+    fn bad_frames_get_their_codes() {
+        let code = |s: &str| parse_frame(s, 3).unwrap_err().code;
+        assert_eq!(code(r#"{"t": 1, "z": [1,"#), "malformed_json");
+        assert_eq!(code(r#"{"t": NaN}"#), "non_finite");
+        assert_eq!(code(r#"{"t": 1, "z": [Infinity]}"#), "non_finite");
+        assert_eq!(code(r#"{"t": 1e999}"#), "non_finite");
+        assert_eq!(code(r#"{"t": 1, "lidar": {}}"#), "unknown_input");
+        assert_eq!(code(r#"{"t": 1, "ins": {"lat":0,"lon":0,"h":0,"vel":[1,2],"att":[0,0,0]}}"#), "wrong_length");
+        assert_eq!(code(r#"{"t": 1, "gnss": {"lat":91,"lon":0,"h":0}}"#), "invalid_epoch");
+        assert_eq!(code(r#"{"z": [1]}"#), "invalid_epoch");
+        assert_eq!(code(r#"[{"t": 2}, {"t": 1}]"#), "time_backwards");
+        assert_eq!(code(r#"[]"#), "empty_batch");
+        assert_eq!(code(r#"[{"t":1},{"t":2},{"t":3},{"t":4}]"#), "batch_too_large");
+        // A NaN inside a string is not a non-finite number.
+        assert_eq!(code(r#"{"t": 1, "note": "NaN"}"#), "unknown_input");
+    }
+
+    #[test]
+    fn batch_errors_name_the_epoch() {
+        let e = parse_frame(r#"[{"t": 0}, {"t": 1, "gnss": {"lat":95,"lon":0,"h":0}}]"#, 5).unwrap_err();
+        assert_eq!(e.index, Some(1));
+    }
+
+    #[test]
+    fn tagged_messages_carry_their_type() {
+        let change = StateChange {
+            session: "s".into(),
+            monitor: "m".into(),
+            test: "residual".into(),
+            t: 1.0,
+            from: Health::Healthy,
+            to: Health::Suspect,
+        };
+        let v: serde_json::Value = serde_json::from_str(&tagged("state", &change)).unwrap();
+        assert_eq!(v["type"], "state");
+        assert_eq!(v["to"], "suspect");
+    }
+}
