@@ -1,1 +1,112 @@
-fn main(){}
+//! Criterion bench: WebSocket ingest end to end for one session running the
+//! `linear` monitor (4 states, 2 measurements), batches of 100 epochs per frame,
+//! `echo: true`; an iteration is one batch sent and its 100 results received.
+//! Frames are pipelined: the client keeps sending while a reader counts results.
+//!
+//! Run: `cargo bench --bench ingest`
+
+use std::time::{Duration, Instant};
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use futures_util::{SinkExt, StreamExt};
+use navguard::service::{self, ServiceConfig};
+use serde_json::json;
+use tokio_tungstenite::tungstenite::Message;
+
+const BATCH: usize = 100;
+
+fn bench(c: &mut Criterion) {
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .expect("runtime");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let server = runtime
+        .block_on(service::start(ServiceConfig::new(
+            "127.0.0.1:0".parse().unwrap(),
+            dir.path().join("bench.db"),
+        )))
+        .expect("server");
+    let addr = server.addr;
+    let q = 0.05;
+    let (a, b) = (q / 3.0, q / 2.0);
+    let body = json!({"id": "bench", "echo": true, "monitors": [{"name": "track", "type": "linear", "config": {
+        "f": [[1, 1, 0, 0], [0, 1, 0, 0], [0, 0, 1, 1], [0, 0, 0, 1]],
+        "h": [[1, 0, 0, 0], [0, 0, 1, 0]],
+        "q": [[a, b, 0, 0], [b, q, 0, 0], [0, 0, a, b], [0, 0, b, q]],
+        "r": [[1.0, 0.3], [0.3, 2.0]],
+        "x0": [0, 1, 0, -1],
+        "p0": [[5, 0, 0, 0], [0, 5, 0, 0], [0, 0, 5, 0], [0, 0, 0, 5]]
+    }}]});
+    runtime.block_on(async {
+        let resp = reqwest::Client::new()
+            .post(format!("http://{addr}/api/v1/sessions"))
+            .json(&body)
+            .send()
+            .await
+            .expect("create session");
+        assert_eq!(resp.status(), 201);
+    });
+    let (socket, _) = runtime
+        .block_on(tokio_tungstenite::connect_async(format!(
+            "ws://{addr}/api/v1/sessions/bench/ingest"
+        )))
+        .expect("connect");
+    let (mut sink, mut stream) = socket.split();
+    runtime
+        .block_on(stream.next())
+        .expect("ready")
+        .expect("ready message");
+    let mut t = 0u64;
+
+    let mut group = c.benchmark_group("ingest");
+    group.throughput(Throughput::Elements(BATCH as u64));
+    group.measurement_time(Duration::from_secs(10));
+    group.bench_function("one_session_linear_batches_of_100", |bencher| {
+        bencher.iter_custom(|iters| {
+            let frames: Vec<String> = (0..iters)
+                .map(|_| {
+                    let epochs: Vec<_> = (0..BATCH)
+                        .map(|_| {
+                            t += 1;
+                            let k = t as f64;
+                            json!({"t": k, "z": [k + 0.3, -k - 0.2]})
+                        })
+                        .collect();
+                    serde_json::Value::Array(epochs).to_string()
+                })
+                .collect();
+            runtime.block_on(async {
+                let start = Instant::now();
+                let expected = iters as usize * BATCH;
+                let reader = async {
+                    let mut results = 0;
+                    while results < expected {
+                        match stream.next().await {
+                            Some(Ok(Message::Text(text)))
+                                if text.starts_with(r#"{"type":"result""#) =>
+                            {
+                                results += 1
+                            }
+                            Some(Ok(_)) => {}
+                            other => panic!("socket ended: {other:?}"),
+                        }
+                    }
+                };
+                let writer = async {
+                    for frame in frames {
+                        sink.send(Message::Text(frame.into())).await.expect("send");
+                    }
+                };
+                tokio::join!(reader, writer);
+                start.elapsed()
+            })
+        })
+    });
+    group.finish();
+    runtime.block_on(server.shutdown());
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

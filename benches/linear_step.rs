@@ -1,1 +1,46 @@
-fn main(){}
+//! Criterion bench: one step of the `linear` monitor (4 states, 2 measurements,
+//! classic policy): predict, innovation, χ² test, Joseph update.
+//!
+//! Run: `cargo bench --bench linear_step`
+
+use std::hint::black_box;
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use navguard::detect::{PolicyConfig, ThresholdSpec};
+use navguard::monitor::linear::{LinearConfig, LinearMonitor};
+use navguard::monitor::{Epoch, Monitor};
+use serde_json::json;
+
+fn bench(c: &mut Criterion) {
+    let q = 0.05;
+    let (a, b) = (q / 3.0, q / 2.0);
+    let config = LinearConfig::from_json(&json!({
+        "f": [[1, 1, 0, 0], [0, 1, 0, 0], [0, 0, 1, 1], [0, 0, 0, 1]],
+        "h": [[1, 0, 0, 0], [0, 0, 1, 0]],
+        "q": [[a, b, 0, 0], [b, q, 0, 0], [0, 0, a, b], [0, 0, b, q]],
+        "r": [[1.0, 0.3], [0.3, 2.0]],
+        "x0": [0, 1, 0, -1],
+        "p0": [[5, 0, 0, 0], [0, 5, 0, 0], [0, 0, 5, 0], [0, 0, 0, 5]]
+    }))
+    .expect("valid model");
+    let mut monitor = LinearMonitor::new(config, PolicyConfig::Classic, ThresholdSpec::PFa(0.002))
+        .expect("monitor");
+    let mut k = 0.0;
+    let mut group = c.benchmark_group("linear_monitor");
+    group.throughput(Throughput::Elements(1));
+    group.bench_function("step_4_states_2_measurements", |bench| {
+        bench.iter(|| {
+            k += 1.0;
+            let epoch = Epoch {
+                t: k,
+                z: Some(vec![k + 0.3, -k - 0.2]),
+                ..Default::default()
+            };
+            black_box(monitor.step(black_box(&epoch)).expect("step"))
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

@@ -73,8 +73,13 @@ async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     let config = args.into_config();
     let db = config.db_path.display().to_string();
     let server = service::start(config).await.context("starting navguard")?;
-    println!("navguard listening on http://{} (store: {db}); dashboard at http://{}/", server.addr, server.addr);
-    tokio::signal::ctrl_c().await.context("waiting for Ctrl-C")?;
+    println!(
+        "navguard listening on http://{} (store: {db}); dashboard at http://{}/",
+        server.addr, server.addr
+    );
+    tokio::signal::ctrl_c()
+        .await
+        .context("waiting for Ctrl-C")?;
     println!("shutting down: closing sockets and flushing the store");
     server.shutdown().await;
     Ok(())
@@ -84,7 +89,8 @@ async fn serve(args: ServeArgs) -> anyhow::Result<()> {
 async fn main() -> anyhow::Result<()> {
     tracing_subscriber::fmt()
         .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "navguard=info,tower_http=warn".into()),
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| "navguard=info,tower_http=warn".into()),
         )
         .init();
     let cli = Cli::parse();

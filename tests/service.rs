@@ -23,7 +23,8 @@ async fn get_json(url: &str) -> (u16, Value) {
 /// Polls the session's stats until it has processed `epochs` epochs.
 async fn wait_for_epochs(server: &service::Server, session: &str, epochs: u64) -> Value {
     for _ in 0..500 {
-        let (status, stats) = get_json(&format!("{}/api/v1/sessions/{session}/stats", http(server))).await;
+        let (status, stats) =
+            get_json(&format!("{}/api/v1/sessions/{session}/stats", http(server))).await;
         assert_eq!(status, 200, "{stats}");
         if stats["epochs"].as_u64() == Some(epochs) {
             return stats;
@@ -39,7 +40,11 @@ async fn stream(socket: &mut Socket, frames: &[Value], batch: usize) {
     }
 }
 
-const MODEL: CvModel = CvModel { q: 0.01, sigma: 1.0, p0: 10.0 };
+const MODEL: CvModel = CvModel {
+    q: 0.01,
+    sigma: 1.0,
+    p0: 10.0,
+};
 
 /// 10σ on measurements 1000..1010.
 fn step_fault(k: usize) -> f64 {
@@ -51,7 +56,13 @@ async fn a_measurement_step_alarms_on_both_sockets_is_logged_and_survives_a_rest
     let dir = tempfile::tempdir().unwrap();
     let db = dir.path().join("navguard.db");
     let server = start(&db, None, Limits::default()).await;
-    let body = cv_session("veh1", &MODEL, json!({"kind": "classic"}), json!({"p_fa": 1e-5}), false);
+    let body = cv_session(
+        "veh1",
+        &MODEL,
+        json!({"kind": "classic"}),
+        json!({"p_fa": 1e-5}),
+        false,
+    );
     create_session(&client(), &server, &body).await;
     let mut events = connect(&format!("{}/api/v1/sessions/veh1/events", ws(&server))).await;
     let mut ingest_socket = ingest(&server, "veh1").await;
@@ -62,14 +73,31 @@ async fn a_measurement_step_alarms_on_both_sockets_is_logged_and_survives_a_rest
     let (alarm, _) = recv_until(&mut ingest_socket, |v| v["type"] == "alarm").await;
     assert_eq!(alarm["t"], 1000.0, "{alarm}");
     assert_eq!(alarm["state"], "isolated");
-    assert_eq!((alarm["session"].as_str(), alarm["monitor"].as_str(), alarm["test"].as_str()), (Some("veh1"), Some("cv"), Some("residual")));
+    assert_eq!(
+        (
+            alarm["session"].as_str(),
+            alarm["monitor"].as_str(),
+            alarm["test"].as_str()
+        ),
+        (Some("veh1"), Some("cv"), Some("residual"))
+    );
     assert!(alarm["statistic"].as_f64().unwrap() > alarm["threshold"].as_f64().unwrap());
-    assert!((alarm["threshold"].as_f64().unwrap() - 19.5114).abs() < 1e-4, "χ²(1) at p_fa 1e-5");
-    assert!(alarm["id"].as_i64().unwrap() > 0, "committed before broadcast");
+    assert!(
+        (alarm["threshold"].as_f64().unwrap() - 19.5114).abs() < 1e-4,
+        "χ²(1) at p_fa 1e-5"
+    );
+    assert!(
+        alarm["id"].as_i64().unwrap() > 0,
+        "committed before broadcast"
+    );
 
     let (event_alarm, before) = recv_until(&mut events, |v| v["type"] == "alarm").await;
     assert_eq!(event_alarm, alarm);
-    assert!(before.iter().any(|v| v["type"] == "state" && v["to"] == "isolated" && v["t"] == 1000.0));
+    assert!(
+        before
+            .iter()
+            .any(|v| v["type"] == "state" && v["to"] == "isolated" && v["t"] == 1000.0)
+    );
 
     let stats = wait_for_epochs(&server, "veh1", 2000).await;
     let residual = &stats["monitors"]["cv"]["tests"]["residual"];
@@ -78,7 +106,11 @@ async fn a_measurement_step_alarms_on_both_sockets_is_logged_and_survives_a_rest
     let (status, log) = get_json(&format!("{}/api/v1/alarms?session=veh1", http(&server))).await;
     assert_eq!(status, 200);
     let logged = log["alarms"].as_array().unwrap();
-    assert_eq!(logged.len() as u64, residual["alarms"].as_u64().unwrap(), "every alarm is logged: {log}");
+    assert_eq!(
+        logged.len() as u64,
+        residual["alarms"].as_u64().unwrap(),
+        "every alarm is logged: {log}"
+    );
     // Newest first; the oldest is the step's onset. At p_fa 1e-5 this seed has
     // no false alarm: every alarm belongs to the fault or its classic-policy
     // aftermath (the filter absorbs the step's tail once P has grown, and is
@@ -87,8 +119,13 @@ async fn a_measurement_step_alarms_on_both_sockets_is_logged_and_survives_a_rest
     assert_eq!(oldest["id"], alarm["id"]);
     for a in logged {
         let t = a["t"].as_f64().unwrap();
-        assert!((1000.0..1050.0).contains(&t), "alarm outside the fault's reach: {a}");
-        let cleared = a["cleared_t"].as_f64().expect("every alarm is cleared by the end");
+        assert!(
+            (1000.0..1050.0).contains(&t),
+            "alarm outside the fault's reach: {a}"
+        );
+        let cleared = a["cleared_t"]
+            .as_f64()
+            .expect("every alarm is cleared by the end");
         assert!(cleared > t && cleared < 1100.0, "{a}");
     }
 
@@ -97,8 +134,16 @@ async fn a_measurement_step_alarms_on_both_sockets_is_logged_and_survives_a_rest
     server.shutdown().await;
 
     let server = start(&db, None, Limits::default()).await;
-    let (_, log) = get_json(&format!("{}/api/v1/alarms?session=veh1&monitor=cv", http(&server))).await;
-    assert_eq!(log["alarms"].as_array().unwrap().len(), logged.len(), "the whole log survives");
+    let (_, log) = get_json(&format!(
+        "{}/api/v1/alarms?session=veh1&monitor=cv",
+        http(&server)
+    ))
+    .await;
+    assert_eq!(
+        log["alarms"].as_array().unwrap().len(),
+        logged.len(),
+        "the whole log survives"
+    );
     assert_eq!(log["alarms"].as_array().unwrap().last().unwrap(), oldest);
     let (status, session) = get_json(&format!("{}/api/v1/sessions/veh1", http(&server))).await;
     assert_eq!(status, 200, "the session is restored");
@@ -111,7 +156,12 @@ async fn counters_policy_goes_suspect_then_isolated_and_recovers_after_the_step(
     let dir = tempfile::tempdir().unwrap();
     let server = start(&dir.path().join("n.db"), None, Limits::default()).await;
     let policy = json!({"kind": "counters", "n1": 10, "n2": 3});
-    create_session(&client(), &server, &cv_session("veh2", &MODEL, policy, json!({"p_fa": 1e-5}), false)).await;
+    create_session(
+        &client(),
+        &server,
+        &cv_session("veh2", &MODEL, policy, json!({"p_fa": 1e-5}), false),
+    )
+    .await;
     let mut socket = ingest(&server, "veh2").await;
     // 30σ on measurements 1000..1010: large enough to exceed through the whole step
     // although P grows while the suspect filter only predicts.
@@ -120,17 +170,36 @@ async fn counters_policy_goes_suspect_then_isolated_and_recovers_after_the_step(
     let mut changes = Vec::new();
     while changes.len() < 3 {
         let (v, _) = recv_until(&mut socket, |v| v["type"] == "state").await;
-        changes.push((v["from"].as_str().unwrap().to_owned(), v["to"].as_str().unwrap().to_owned(), v["t"].as_f64().unwrap()));
+        changes.push((
+            v["from"].as_str().unwrap().to_owned(),
+            v["to"].as_str().unwrap().to_owned(),
+            v["t"].as_f64().unwrap(),
+        ));
     }
-    assert_eq!((changes[0].0.as_str(), changes[0].1.as_str(), changes[0].2), ("healthy", "suspect", 1000.0));
+    assert_eq!(
+        (changes[0].0.as_str(), changes[0].1.as_str(), changes[0].2),
+        ("healthy", "suspect", 1000.0)
+    );
     // seed 004 §2: isolated once t3 > N2, i.e. at the fourth consecutive exceedance.
-    assert_eq!((changes[1].0.as_str(), changes[1].1.as_str(), changes[1].2), ("suspect", "isolated", 1003.0));
-    assert_eq!((changes[2].0.as_str(), changes[2].1.as_str()), ("isolated", "healthy"));
-    assert!((1010.0..=1030.0).contains(&changes[2].2), "healthy again after the step ends: {changes:?}");
+    assert_eq!(
+        (changes[1].0.as_str(), changes[1].1.as_str(), changes[1].2),
+        ("suspect", "isolated", 1003.0)
+    );
+    assert_eq!(
+        (changes[2].0.as_str(), changes[2].1.as_str()),
+        ("isolated", "healthy")
+    );
+    assert!(
+        (1010.0..=1030.0).contains(&changes[2].2),
+        "healthy again after the step ends: {changes:?}"
+    );
     let stats = wait_for_epochs(&server, "veh2", 2000).await;
     let residual = &stats["monitors"]["cv"]["tests"]["residual"];
     assert_eq!(residual["alarms"], 2, "suspect and isolated: {residual}");
-    assert_eq!(residual["last_alarm_delay_s"], 3.0, "isolated 3 s after the first exceedance");
+    assert_eq!(
+        residual["last_alarm_delay_s"], 3.0,
+        "isolated 3 s after the first exceedance"
+    );
     assert_eq!(residual["state"], "healthy");
     server.shutdown().await;
 }
@@ -141,7 +210,18 @@ async fn fault_free_exceedances_are_consistent_with_p_fa() {
     let server = start(&dir.path().join("p.db"), None, Limits::default()).await;
     let p_fa = 0.002;
     let n = 20_000u64;
-    create_session(&client(), &server, &cv_session("calm", &MODEL, json!({"kind": "classic"}), json!({"p_fa": p_fa}), false)).await;
+    create_session(
+        &client(),
+        &server,
+        &cv_session(
+            "calm",
+            &MODEL,
+            json!({"kind": "classic"}),
+            json!({"p_fa": p_fa}),
+            false,
+        ),
+    )
+    .await;
     let mut socket = ingest(&server, "calm").await;
     let z = MODEL.measurements(n as usize, 2024, |_| 0.0);
     let frames = epochs(&z, 0);
@@ -152,12 +232,17 @@ async fn fault_free_exceedances_are_consistent_with_p_fa() {
     });
     let stats = wait_for_epochs(&server, "calm", n).await;
     drop(drain.await.unwrap());
-    let exceedances = stats["monitors"]["cv"]["tests"]["residual"]["exceedances"].as_u64().unwrap();
+    let exceedances = stats["monitors"]["cv"]["tests"]["residual"]["exceedances"]
+        .as_u64()
+        .unwrap();
     // Two-sided binomial interval with total tail probability 1e-6.
     let binomial = Binomial::new(p_fa, n).unwrap();
     let lo = (0..n).find(|&k| binomial.cdf(k) > 0.5e-6).unwrap();
     let hi = (0..n).find(|&k| binomial.cdf(k) >= 1.0 - 0.5e-6).unwrap();
-    assert!((lo..=hi).contains(&exceedances), "{exceedances} exceedances outside [{lo}, {hi}] for p_fa {p_fa} over {n} epochs");
+    assert!(
+        (lo..=hi).contains(&exceedances),
+        "{exceedances} exceedances outside [{lo}, {hi}] for p_fa {p_fa} over {n} epochs"
+    );
     server.shutdown().await;
 }
 
@@ -166,20 +251,34 @@ async fn fault_free_exceedances_are_consistent_with_p_fa() {
 type M = Vec<Vec<f64>>;
 
 fn mul(a: &M, b: &M) -> M {
-    (0..a.len()).map(|i| (0..b[0].len()).map(|j| (0..b.len()).map(|k| a[i][k] * b[k][j]).sum()).collect()).collect()
+    (0..a.len())
+        .map(|i| {
+            (0..b[0].len())
+                .map(|j| (0..b.len()).map(|k| a[i][k] * b[k][j]).sum())
+                .collect()
+        })
+        .collect()
 }
 
 fn tr(a: &M) -> M {
-    (0..a[0].len()).map(|j| (0..a.len()).map(|i| a[i][j]).collect()).collect()
+    (0..a[0].len())
+        .map(|j| (0..a.len()).map(|i| a[i][j]).collect())
+        .collect()
 }
 
 fn add(a: &M, b: &M) -> M {
-    a.iter().zip(b).map(|(r, s)| r.iter().zip(s).map(|(x, y)| x + y).collect()).collect()
+    a.iter()
+        .zip(b)
+        .map(|(r, s)| r.iter().zip(s).map(|(x, y)| x + y).collect())
+        .collect()
 }
 
 fn inv2(s: &M) -> M {
     let det = s[0][0] * s[1][1] - s[0][1] * s[1][0];
-    vec![vec![s[1][1] / det, -s[0][1] / det], vec![-s[1][0] / det, s[0][0] / det]]
+    vec![
+        vec![s[1][1] / det, -s[0][1] / det],
+        vec![-s[1][0] / det, s[0][0] / det],
+    ]
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -189,7 +288,12 @@ async fn echoed_lambda_equals_r_s_inverse_r_from_an_independent_filter() {
     // 2-D constant velocity, positions measured with correlated noise.
     let q = 0.05;
     let qb = [[q / 3.0, q / 2.0], [q / 2.0, q]];
-    let f: M = vec![vec![1.0, 1.0, 0.0, 0.0], vec![0.0, 1.0, 0.0, 0.0], vec![0.0, 0.0, 1.0, 1.0], vec![0.0, 0.0, 0.0, 1.0]];
+    let f: M = vec![
+        vec![1.0, 1.0, 0.0, 0.0],
+        vec![0.0, 1.0, 0.0, 0.0],
+        vec![0.0, 0.0, 1.0, 1.0],
+        vec![0.0, 0.0, 0.0, 1.0],
+    ];
     let qm: M = vec![
         vec![qb[0][0], qb[0][1], 0.0, 0.0],
         vec![qb[1][0], qb[1][1], 0.0, 0.0],
@@ -198,7 +302,9 @@ async fn echoed_lambda_equals_r_s_inverse_r_from_an_independent_filter() {
     ];
     let h: M = vec![vec![1.0, 0.0, 0.0, 0.0], vec![0.0, 0.0, 1.0, 0.0]];
     let r: M = vec![vec![1.0, 0.3], vec![0.3, 2.0]];
-    let p0: M = (0..4).map(|i| (0..4).map(|j| if i == j { 5.0 } else { 0.0 }).collect()).collect();
+    let p0: M = (0..4)
+        .map(|i| (0..4).map(|j| if i == j { 5.0 } else { 0.0 }).collect())
+        .collect();
     let threshold = 9.0;
     let body = json!({"id": "echo", "echo": true, "monitors": [{
         "name": "track", "type": "linear", "threshold": threshold, "policy": {"kind": "classic"},
@@ -232,15 +338,29 @@ async fn echoed_lambda_equals_r_s_inverse_r_from_an_independent_filter() {
         p = add(&mul(&mul(&f, &p), &tr(&f)), &qm);
         let out = &result["monitors"]["track"];
         let Some(z) = frame["z"].as_array() else {
-            assert!(out["tests"].as_object().unwrap().is_empty(), "no test without z");
+            assert!(
+                out["tests"].as_object().unwrap().is_empty(),
+                "no test without z"
+            );
             assert!(out["innovation"].is_null());
             continue;
         };
         let hx = mul(&h, &x);
-        let innov = [z[0].as_f64().unwrap() - hx[0][0], z[1].as_f64().unwrap() - hx[1][0]];
-        let returned: Vec<f64> = out["innovation"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+        let innov = [
+            z[0].as_f64().unwrap() - hx[0][0],
+            z[1].as_f64().unwrap() - hx[1][0],
+        ];
+        let returned: Vec<f64> = out["innovation"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
         for i in 0..2 {
-            assert!((returned[i] - innov[i]).abs() <= 1e-9 * (1.0 + innov[i].abs()), "innovation {returned:?} vs {innov:?}");
+            assert!(
+                (returned[i] - innov[i]).abs() <= 1e-9 * (1.0 + innov[i].abs()),
+                "innovation {returned:?} vs {innov:?}"
+            );
         }
         let s = add(&mul(&mul(&h, &p), &tr(&h)), &r);
         let si = inv2(&s);
@@ -248,7 +368,11 @@ async fn echoed_lambda_equals_r_s_inverse_r_from_an_independent_filter() {
         let lambda = mul(&mul(&tr(&rv), &si), &rv)[0][0];
         let test = &out["tests"]["residual"];
         let server_lambda = test["statistic"].as_f64().unwrap();
-        assert!((server_lambda - lambda).abs() <= 1e-9 * lambda.max(1e-12), "λ {server_lambda} vs {lambda} at {}", frame["t"]);
+        assert!(
+            (server_lambda - lambda).abs() <= 1e-9 * lambda.max(1e-12),
+            "λ {server_lambda} vs {lambda} at {}",
+            frame["t"]
+        );
         assert_eq!(test["threshold"], threshold);
         assert_eq!(test["dof"], 2);
         assert!((test["test_ratio"].as_f64().unwrap() - server_lambda / threshold).abs() < 1e-12);
@@ -262,14 +386,31 @@ async fn echoed_lambda_equals_r_s_inverse_r_from_an_independent_filter() {
         let inn: M = vec![vec![innov[0]], vec![innov[1]]];
         x = add(&x, &mul(&k, &inn));
         let kh = mul(&k, &h);
-        let i_kh: M = (0..4).map(|i| (0..4).map(|j| if i == j { 1.0 } else { 0.0 } - kh[i][j]).collect()).collect();
+        let i_kh: M = (0..4)
+            .map(|i| {
+                (0..4)
+                    .map(|j| if i == j { 1.0 } else { 0.0 } - kh[i][j])
+                    .collect()
+            })
+            .collect();
         p = mul(&i_kh, &p);
-        let state: Vec<f64> = out["x"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+        let state: Vec<f64> = out["x"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
         for i in 0..4 {
-            assert!((state[i] - x[i][0]).abs() < 1e-8 * (1.0 + x[i][0].abs()), "x {state:?} vs {x:?}");
+            assert!(
+                (state[i] - x[i][0]).abs() < 1e-8 * (1.0 + x[i][0].abs()),
+                "x {state:?} vs {x:?}"
+            );
         }
     }
-    assert!(rejected >= 5, "the 8σ bias must be rejected at least at its start: {rejected}");
+    assert!(
+        rejected >= 5,
+        "the 8σ bias must be rejected at least at its start: {rejected}"
+    );
     server.shutdown().await;
 }
 
@@ -278,10 +419,25 @@ async fn echoed_lambda_equals_r_s_inverse_r_from_an_independent_filter() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn every_bad_frame_gets_an_error_event_and_leaves_the_session_untouched() {
     let dir = tempfile::tempdir().unwrap();
-    let limits = Limits { max_frame_bytes: 4096, max_batch_epochs: 50, ..Limits::default() };
+    let limits = Limits {
+        max_frame_bytes: 4096,
+        max_batch_epochs: 50,
+        ..Limits::default()
+    };
     let server = start(&dir.path().join("b.db"), None, limits).await;
     for id in ["bad", "ref"] {
-        create_session(&client(), &server, &cv_session(id, &MODEL, json!({"kind": "counters"}), json!({"p_fa": 0.01}), true)).await;
+        create_session(
+            &client(),
+            &server,
+            &cv_session(
+                id,
+                &MODEL,
+                json!({"kind": "counters"}),
+                json!({"p_fa": 0.01}),
+                true,
+            ),
+        )
+        .await;
     }
     let mut bad = ingest(&server, "bad").await;
     let mut reference = ingest(&server, "ref").await;
@@ -297,18 +453,36 @@ async fn every_bad_frame_gets_an_error_event_and_leaves_the_session_untouched() 
             assert_eq!(result["t"], k as f64);
         }
     }
-    let oversize = Value::Array((0..200).map(|k| json!({"t": 500.0 + k as f64, "z": [0.123456789]})).collect()).to_string();
-    let too_many = Value::Array((0..60).map(|k| json!({"t": 500.0 + k as f64})).collect()).to_string();
+    let oversize = Value::Array(
+        (0..200)
+            .map(|k| json!({"t": 500.0 + k as f64, "z": [0.123456789]}))
+            .collect(),
+    )
+    .to_string();
+    let too_many =
+        Value::Array((0..60).map(|k| json!({"t": 500.0 + k as f64})).collect()).to_string();
     let cases: Vec<(&str, String)> = vec![
         ("malformed_json", r#"{"t": 500, "z": [1.0,"#.to_owned()),
         ("non_finite", r#"{"t": 500, "z": [NaN]}"#.to_owned()),
         ("non_finite", r#"{"t": 500, "z": [1e999]}"#.to_owned()),
         ("time_backwards", r#"{"t": 3, "z": [1.0]}"#.to_owned()),
-        ("time_backwards", r#"[{"t": 500, "z": [1.0]}, {"t": 499.5, "z": [1.0]}]"#.to_owned()),
+        (
+            "time_backwards",
+            r#"[{"t": 500, "z": [1.0]}, {"t": 499.5, "z": [1.0]}]"#.to_owned(),
+        ),
         ("wrong_length", r#"{"t": 500, "z": [1.0, 2.0]}"#.to_owned()),
-        ("wrong_length", r#"[{"t": 500, "z": [1.0]}, {"t": 501, "z": []}]"#.to_owned()),
-        ("unknown_input", r#"{"t": 500, "z": [1.0], "lidar": [3]}"#.to_owned()),
-        ("unknown_input", r#"{"t": 500, "z": [1.0], "u": [1.0]}"#.to_owned()),
+        (
+            "wrong_length",
+            r#"[{"t": 500, "z": [1.0]}, {"t": 501, "z": []}]"#.to_owned(),
+        ),
+        (
+            "unknown_input",
+            r#"{"t": 500, "z": [1.0], "lidar": [3]}"#.to_owned(),
+        ),
+        (
+            "unknown_input",
+            r#"{"t": 500, "z": [1.0], "u": [1.0]}"#.to_owned(),
+        ),
         ("frame_too_large", oversize),
         ("batch_too_large", too_many),
         ("invalid_epoch", r#"{"z": [1.0]}"#.to_owned()),
@@ -316,7 +490,10 @@ async fn every_bad_frame_gets_an_error_event_and_leaves_the_session_untouched() 
     for (i, (code, text)) in cases.iter().enumerate() {
         send_text(&mut bad, text).await;
         let (error, before) = recv_until(&mut bad, |v| v["type"] == "error").await;
-        assert!(before.iter().all(|v| v["type"] != "result"), "case {i} produced a result");
+        assert!(
+            before.iter().all(|v| v["type"] != "result"),
+            "case {i} produced a result"
+        );
         assert_eq!(error["code"], *code, "case {i}: {text:.80} -> {error}");
         assert!(!error["message"].as_str().unwrap().is_empty());
         // The next good frame is processed normally on the same socket, with
@@ -332,14 +509,21 @@ async fn every_bad_frame_gets_an_error_event_and_leaves_the_session_untouched() 
     // Binary frames that are not UTF-8 are refused too.
     {
         use futures_util::SinkExt;
-        bad.send(tokio_tungstenite::tungstenite::Message::Binary(vec![0xff, 0xfe].into())).await.unwrap();
+        bad.send(tokio_tungstenite::tungstenite::Message::Binary(
+            vec![0xff, 0xfe].into(),
+        ))
+        .await
+        .unwrap();
         let (error, _) = recv_until(&mut bad, |v| v["type"] == "error").await;
         assert_eq!(error["code"], "malformed_json");
     }
     let n = (10 + cases.len()) as u64;
     let stats_bad = wait_for_epochs(&server, "bad", n).await;
     let stats_ref = wait_for_epochs(&server, "ref", n).await;
-    assert_eq!(stats_bad["monitors"], stats_ref["monitors"], "identical statistics");
+    assert_eq!(
+        stats_bad["monitors"], stats_ref["monitors"],
+        "identical statistics"
+    );
     // Frames that parse but do not fit the session are counted by it; the rest
     // are refused at the edge before reaching it.
     assert_eq!(stats_bad["frame_errors"], 4);
@@ -352,22 +536,53 @@ async fn every_bad_frame_gets_an_error_event_and_leaves_the_session_untouched() 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn token_is_required_on_api_routes_and_sockets_and_bodies_are_limited() {
     let dir = tempfile::tempdir().unwrap();
-    let limits = Limits { max_body_bytes: 2048, ..Limits::default() };
+    let limits = Limits {
+        max_body_bytes: 2048,
+        ..Limits::default()
+    };
     let server = start(&dir.path().join("a.db"), Some("s3cret"), limits).await;
     let base = http(&server);
     let c = client();
-    let resp = c.get(format!("{base}/api/v1/sessions")).send().await.unwrap();
+    let resp = c
+        .get(format!("{base}/api/v1/sessions"))
+        .send()
+        .await
+        .unwrap();
     assert_eq!(resp.status(), 401);
     let body: Value = resp.json().await.unwrap();
     assert_eq!(body["error"]["code"], "unauthorized");
-    let resp = c.get(format!("{base}/api/v1/sessions")).bearer_auth("wrong").send().await.unwrap();
+    let resp = c
+        .get(format!("{base}/api/v1/sessions"))
+        .bearer_auth("wrong")
+        .send()
+        .await
+        .unwrap();
     assert_eq!(resp.status(), 401);
-    let resp = c.get(format!("{base}/api/v1/sessions")).bearer_auth("s3cret").send().await.unwrap();
+    let resp = c
+        .get(format!("{base}/api/v1/sessions"))
+        .bearer_auth("s3cret")
+        .send()
+        .await
+        .unwrap();
     assert_eq!(resp.status(), 200);
-    assert_eq!(c.get(format!("{base}/healthz")).send().await.unwrap().status(), 200, "health is public");
+    assert_eq!(
+        c.get(format!("{base}/healthz"))
+            .send()
+            .await
+            .unwrap()
+            .status(),
+        200,
+        "health is public"
+    );
 
     let body = cv_session("tok", &MODEL, json!({"kind": "classic"}), json!({}), false);
-    let resp = c.post(format!("{base}/api/v1/sessions")).bearer_auth("s3cret").json(&body).send().await.unwrap();
+    let resp = c
+        .post(format!("{base}/api/v1/sessions"))
+        .bearer_auth("s3cret")
+        .json(&body)
+        .send()
+        .await
+        .unwrap();
     assert_eq!(resp.status(), 201);
 
     // Sockets: refused without the token, accepted with `?token=` or the subprotocol.
@@ -377,14 +592,23 @@ async fn token_is_required_on_api_routes_and_sockets_and_bodies_are_limited() {
     assert_eq!(recv(&mut socket).await["type"], "stats");
     use tokio_tungstenite::tungstenite::client::IntoClientRequest;
     let mut request = url.as_str().into_client_request().unwrap();
-    request.headers_mut().insert("Sec-WebSocket-Protocol", "navguard, bearer.s3cret".parse().unwrap());
+    request.headers_mut().insert(
+        "Sec-WebSocket-Protocol",
+        "navguard, bearer.s3cret".parse().unwrap(),
+    );
     let (mut socket, response) = tokio_tungstenite::connect_async(request).await.unwrap();
     assert_eq!(response.headers()["sec-websocket-protocol"], "navguard");
     assert_eq!(recv(&mut socket).await["type"], "stats");
 
     // Bodies over the limit: 413 with a JSON error.
     let big = json!({"id": "big", "monitors": [{"name": "x".repeat(4000), "type": "linear"}]});
-    let resp = c.post(format!("{base}/api/v1/sessions")).bearer_auth("s3cret").json(&big).send().await.unwrap();
+    let resp = c
+        .post(format!("{base}/api/v1/sessions"))
+        .bearer_auth("s3cret")
+        .json(&big)
+        .send()
+        .await
+        .unwrap();
     assert_eq!(resp.status(), 413);
     let body: Value = resp.json().await.unwrap();
     assert_eq!(body["error"]["code"], "too_large");
@@ -396,7 +620,10 @@ async fn open_address_without_a_token_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     let config = ServiceConfig::new("0.0.0.0:0".parse().unwrap(), dir.path().join("o.db"));
     let err = service::start(config).await.unwrap_err();
-    assert!(matches!(err, service::StartError::OpenWithoutToken(_)), "{err}");
+    assert!(
+        matches!(err, service::StartError::OpenWithoutToken(_)),
+        "{err}"
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -406,7 +633,18 @@ async fn threshold_and_policy_changes_apply_live_and_persist() {
     let server = start(&db, None, Limits::default()).await;
     let base = http(&server);
     let c = client();
-    create_session(&c, &server, &cv_session("live", &MODEL, json!({"kind": "classic"}), json!({"p_fa": 0.002}), true)).await;
+    create_session(
+        &c,
+        &server,
+        &cv_session(
+            "live",
+            &MODEL,
+            json!({"kind": "classic"}),
+            json!({"p_fa": 0.002}),
+            true,
+        ),
+    )
+    .await;
     let url = format!("{base}/api/v1/sessions/live/monitors/cv/threshold");
     let (status, view) = get_json(&url).await;
     assert_eq!(status, 200);
@@ -416,7 +654,14 @@ async fn threshold_and_policy_changes_apply_live_and_persist() {
     let mut socket = ingest(&server, "live").await;
     send(&mut socket, &json!({"t": 0, "z": [0.5]})).await;
     let (r, _) = recv_until(&mut socket, |v| v["type"] == "result").await;
-    assert!((r["monitors"]["cv"]["tests"]["residual"]["threshold"].as_f64().unwrap() - 9.5495).abs() < 1e-4);
+    assert!(
+        (r["monitors"]["cv"]["tests"]["residual"]["threshold"]
+            .as_f64()
+            .unwrap()
+            - 9.5495)
+            .abs()
+            < 1e-4
+    );
 
     let put = json!({"threshold": 13.0, "policy": {"kind": "counters", "n1": 4, "n2": 2}});
     let resp = c.put(&url).json(&put).send().await.unwrap();
@@ -424,7 +669,10 @@ async fn threshold_and_policy_changes_apply_live_and_persist() {
     let view: Value = resp.json().await.unwrap();
     assert_eq!(view["threshold"], 13.0);
     assert!(view["p_fa"].is_null());
-    assert_eq!(view["policy"], json!({"kind": "counters", "n1": 4, "n2": 2}));
+    assert_eq!(
+        view["policy"],
+        json!({"kind": "counters", "n1": 4, "n2": 2})
+    );
     assert_eq!(view["tests"]["residual"]["threshold"], 13.0);
     // χ²(1) survival at 13.
     assert!((view["tests"]["residual"]["p_fa"].as_f64().unwrap() - 3.1153e-4).abs() < 1e-7);
@@ -451,11 +699,29 @@ async fn threshold_and_policy_changes_apply_live_and_persist() {
         let err: Value = resp.json().await.unwrap();
         assert!(err["error"]["message"].as_str().is_some());
     }
-    let resp = c.put(&url).header("content-type", "application/json").body("{").send().await.unwrap();
+    let resp = c
+        .put(&url)
+        .header("content-type", "application/json")
+        .body("{")
+        .send()
+        .await
+        .unwrap();
     assert_eq!(resp.status(), 400);
-    let resp = c.put(format!("{base}/api/v1/sessions/live/monitors/nope/threshold")).json(&put).send().await.unwrap();
+    let resp = c
+        .put(format!(
+            "{base}/api/v1/sessions/live/monitors/nope/threshold"
+        ))
+        .json(&put)
+        .send()
+        .await
+        .unwrap();
     assert_eq!(resp.status(), 404);
-    let resp = c.put(format!("{base}/api/v1/sessions/nope/monitors/cv/threshold")).json(&put).send().await.unwrap();
+    let resp = c
+        .put(format!("{base}/api/v1/sessions/nope/monitors/cv/threshold"))
+        .json(&put)
+        .send()
+        .await
+        .unwrap();
     assert_eq!(resp.status(), 404);
     let (_, view) = get_json(&url).await;
     assert_eq!(view["threshold"], 13.0);
@@ -463,7 +729,11 @@ async fn threshold_and_policy_changes_apply_live_and_persist() {
     drop(socket);
     server.shutdown().await;
     let server = start(&db, None, Limits::default()).await;
-    let (_, view) = get_json(&format!("{}/api/v1/sessions/live/monitors/cv/threshold", http(&server))).await;
+    let (_, view) = get_json(&format!(
+        "{}/api/v1/sessions/live/monitors/cv/threshold",
+        http(&server)
+    ))
+    .await;
     assert_eq!(view["threshold"], 13.0, "persisted across a restart");
     assert_eq!(view["policy"]["kind"], "counters");
     server.shutdown().await;
@@ -472,32 +742,60 @@ async fn threshold_and_policy_changes_apply_live_and_persist() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn sessions_are_validated_listed_and_deleted() {
     let dir = tempfile::tempdir().unwrap();
-    let server = start(&dir.path().join("s.db"), None, Limits { max_monitors_per_session: 2, ..Limits::default() }).await;
+    let server = start(
+        &dir.path().join("s.db"),
+        None,
+        Limits {
+            max_monitors_per_session: 2,
+            ..Limits::default()
+        },
+    )
+    .await;
     let base = http(&server);
     let c = client();
     let post = async |body: Value| {
-        let resp = c.post(format!("{base}/api/v1/sessions")).json(&body).send().await.unwrap();
+        let resp = c
+            .post(format!("{base}/api/v1/sessions"))
+            .json(&body)
+            .send()
+            .await
+            .unwrap();
         (resp.status().as_u16(), resp.json::<Value>().await.unwrap())
     };
     let mut bad_q = MODEL.config();
     bad_q["q"] = json!([[1.0, 0.5], [0.4, 1.0]]);
-    let (status, err) = post(json!({"monitors": [{"name": "cv", "type": "linear", "config": bad_q}]})).await;
+    let (status, err) =
+        post(json!({"monitors": [{"name": "cv", "type": "linear", "config": bad_q}]})).await;
     assert_eq!(status, 422);
     assert_eq!(err["error"]["field"], "monitors[0].config.q");
-    assert!(err["error"]["message"].as_str().unwrap().contains("symmetric"));
+    assert!(
+        err["error"]["message"]
+            .as_str()
+            .unwrap()
+            .contains("symmetric")
+    );
     let (status, err) = post(json!({"monitors": [{"name": "f", "type": "federated"}]})).await;
-    assert_eq!((status, err["error"]["field"].as_str()), (422, Some("monitors[0].type")));
+    assert_eq!(
+        (status, err["error"]["field"].as_str()),
+        (422, Some("monitors[0].type"))
+    );
     let (status, _) = post(json!({"monitors": [{"name": "cv", "type": "kalman"}]})).await;
     assert_eq!(status, 422);
     let (status, _) = post(json!({"id": "has space", "monitors": [{"name": "cv", "type": "linear", "config": MODEL.config()}]})).await;
     assert_eq!(status, 422);
     let (status, err) = post(json!({"monitors": []})).await;
-    assert_eq!((status, err["error"]["field"].as_str()), (422, Some("monitors")));
+    assert_eq!(
+        (status, err["error"]["field"].as_str()),
+        (422, Some("monitors"))
+    );
     let m = json!({"name": "cv", "type": "linear", "config": MODEL.config()});
     let (status, _) = post(json!({"monitors": [m, m, m]})).await;
     assert_eq!(status, 413);
     let (status, err) = post(json!({"monitors": [m, m]})).await;
-    assert_eq!((status, err["error"]["field"].as_str()), (422, Some("monitors[1].name")));
+    assert_eq!(
+        (status, err["error"]["field"].as_str()),
+        (422, Some("monitors[1].name"))
+    );
     let (status, _) = post(json!({"monitors": [m], "policy": "x"})).await;
     assert_eq!(status, 422, "unknown fields are refused");
 
@@ -509,11 +807,22 @@ async fn sessions_are_validated_listed_and_deleted() {
     assert_eq!(status, 409);
     let (_, list) = get_json(&format!("{base}/api/v1/sessions")).await;
     assert_eq!(list["sessions"].as_array().unwrap().len(), 1);
-    let resp = c.delete(format!("{base}/api/v1/sessions/{id}")).send().await.unwrap();
+    let resp = c
+        .delete(format!("{base}/api/v1/sessions/{id}"))
+        .send()
+        .await
+        .unwrap();
     assert_eq!(resp.status(), 204);
     let (status, err) = get_json(&format!("{base}/api/v1/sessions/{id}")).await;
-    assert_eq!((status, err["error"]["code"].as_str()), (404, Some("not_found")));
-    let resp = c.delete(format!("{base}/api/v1/sessions/{id}")).send().await.unwrap();
+    assert_eq!(
+        (status, err["error"]["code"].as_str()),
+        (404, Some("not_found"))
+    );
+    let resp = c
+        .delete(format!("{base}/api/v1/sessions/{id}"))
+        .send()
+        .await
+        .unwrap();
     assert_eq!(resp.status(), 404);
     server.shutdown().await;
 }
@@ -526,33 +835,75 @@ async fn chi2_health_metrics_and_unknown_routes_answer_in_json() {
     let (status, v) = get_json(&format!("{base}/api/v1/chi2/threshold?dof=6&p_fa=0.00001")).await;
     assert_eq!(status, 200);
     assert!((v["threshold"].as_f64().unwrap() - 33.1071).abs() < 1e-4);
-    let (status, v) = get_json(&format!("{base}/api/v1/chi2/missed-detection?dof=2&p_fa=0.002&p_md=0.001")).await;
+    let (status, v) = get_json(&format!(
+        "{base}/api/v1/chi2/missed-detection?dof=2&p_fa=0.002&p_md=0.001"
+    ))
+    .await;
     assert_eq!(status, 200, "{v}");
     let lambda = v["noncentrality"].as_f64().unwrap();
-    let (_, back) = get_json(&format!("{base}/api/v1/chi2/missed-detection?dof=2&p_fa=0.002&noncentrality={lambda}")).await;
-    assert!((back["p_md"].as_f64().unwrap() - 0.001).abs() < 1e-9, "{back}");
+    let (_, back) = get_json(&format!(
+        "{base}/api/v1/chi2/missed-detection?dof=2&p_fa=0.002&noncentrality={lambda}"
+    ))
+    .await;
+    assert!(
+        (back["p_md"].as_f64().unwrap() - 0.001).abs() < 1e-9,
+        "{back}"
+    );
     for bad in ["dof=0&p_fa=0.1", "dof=2&p_fa=1.5", "dof=2&p_fa=0"] {
         let (status, v) = get_json(&format!("{base}/api/v1/chi2/threshold?{bad}")).await;
         assert_eq!(status, 422, "{bad}: {v}");
     }
     let (status, v) = get_json(&format!("{base}/api/v1/chi2/threshold?dof=two&p_fa=0.1")).await;
-    assert_eq!((status, v["error"]["code"].as_str()), (400, Some("bad_request")));
-    let (status, _) = get_json(&format!("{base}/api/v1/chi2/missed-detection?dof=2&threshold=10")).await;
+    assert_eq!(
+        (status, v["error"]["code"].as_str()),
+        (400, Some("bad_request"))
+    );
+    let (status, _) = get_json(&format!(
+        "{base}/api/v1/chi2/missed-detection?dof=2&threshold=10"
+    ))
+    .await;
     assert_eq!(status, 422);
     let (status, v) = get_json(&format!("{base}/api/v1/alarms?limit=0")).await;
     assert_eq!((status, v["error"]["field"].as_str()), (422, Some("limit")));
 
     let (status, v) = get_json(&format!("{base}/healthz")).await;
     assert_eq!((status, v["status"].as_str()), (200, Some("ok")));
-    let text = client().get(format!("{base}/metrics")).send().await.unwrap().text().await.unwrap();
-    for metric in ["navguard_frames_total", "navguard_epochs_total", "navguard_alarms_total", "navguard_sessions", "navguard_frame_latency_seconds_bucket"] {
+    let text = client()
+        .get(format!("{base}/metrics"))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    for metric in [
+        "navguard_frames_total",
+        "navguard_epochs_total",
+        "navguard_alarms_total",
+        "navguard_sessions",
+        "navguard_frame_latency_seconds_bucket",
+    ] {
         assert!(text.contains(metric), "{metric} missing from /metrics");
     }
     let (status, v) = get_json(&format!("{base}/api/v1/nothing")).await;
-    assert_eq!((status, v["error"]["code"].as_str()), (404, Some("not_found")));
-    let resp = client().patch(format!("{base}/api/v1/sessions")).send().await.unwrap();
+    assert_eq!(
+        (status, v["error"]["code"].as_str()),
+        (404, Some("not_found"))
+    );
+    let resp = client()
+        .patch(format!("{base}/api/v1/sessions"))
+        .send()
+        .await
+        .unwrap();
     assert_eq!(resp.status(), 405);
-    let html = client().get(format!("{base}/")).send().await.unwrap().text().await.unwrap();
+    let html = client()
+        .get(format!("{base}/"))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
     assert!(html.contains("navguard"));
     server.shutdown().await;
 }

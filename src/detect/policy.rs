@@ -78,7 +78,10 @@ fn default_n2() -> u32 {
 impl PolicyConfig {
     /// The counters policy with seed 004's defaults N1 = 10, N2 = 5.
     pub fn counters_default() -> Self {
-        PolicyConfig::Counters { n1: default_n1(), n2: default_n2() }
+        PolicyConfig::Counters {
+            n1: default_n1(),
+            n2: default_n2(),
+        }
     }
 
     /// Validates the parameters.
@@ -134,7 +137,13 @@ impl PolicyState {
             PolicyConfig::Counters { n1, .. } => n1,
             PolicyConfig::Classic => 0,
         };
-        PolicyState { config, t1: 0, t2, t3: 0, health: Health::Healthy }
+        PolicyState {
+            config,
+            t1: 0,
+            t2,
+            t3: 0,
+            health: Health::Healthy,
+        }
     }
 
     /// The policy in force.
@@ -164,7 +173,12 @@ impl PolicyState {
     /// The decision for an epoch whose test did not run (no measurement):
     /// the filter predicts only; the state and counters are unchanged.
     pub fn idle(&self) -> Decision {
-        Decision { health: self.health, update: false, fuse: self.health != Health::Isolated, reset: false }
+        Decision {
+            health: self.health,
+            update: false,
+            fuse: self.health != Health::Isolated,
+            reset: false,
+        }
     }
 
     /// Advances one epoch given whether the statistic exceeded its threshold.
@@ -219,9 +233,25 @@ mod tests {
     fn classic_policy_isolates_exactly_the_exceeding_epochs() {
         let mut p = PolicyState::new(PolicyConfig::Classic);
         let d = p.step(true);
-        assert_eq!(d, Decision { health: Health::Isolated, update: false, fuse: false, reset: false });
+        assert_eq!(
+            d,
+            Decision {
+                health: Health::Isolated,
+                update: false,
+                fuse: false,
+                reset: false
+            }
+        );
         let d = p.step(false);
-        assert_eq!(d, Decision { health: Health::Healthy, update: true, fuse: true, reset: false });
+        assert_eq!(
+            d,
+            Decision {
+                health: Health::Healthy,
+                update: true,
+                fuse: true,
+                reset: false
+            }
+        );
     }
 
     #[test]
@@ -237,13 +267,29 @@ mod tests {
         // First exceedance: t1 = 1, t3 = 1 <= N2 -> suspect, predict only, still fused.
         let d = p.step(true);
         assert_eq!(p.counters(), (1, 3, 1));
-        assert_eq!(d, Decision { health: Health::Suspect, update: false, fuse: true, reset: false });
+        assert_eq!(
+            d,
+            Decision {
+                health: Health::Suspect,
+                update: false,
+                fuse: true,
+                reset: false
+            }
+        );
         // Second: t3 = 2 <= N2 -> still suspect.
         assert_eq!(p.step(true).health, Health::Suspect);
         // Third: t3 = 3 > N2 -> isolated, out of fusion.
         let d = p.step(true);
         assert_eq!(p.counters(), (3, 3, 3));
-        assert_eq!(d, Decision { health: Health::Isolated, update: false, fuse: false, reset: false });
+        assert_eq!(
+            d,
+            Decision {
+                health: Health::Isolated,
+                update: false,
+                fuse: false,
+                reset: false
+            }
+        );
         // Quiet epochs: t1 and t2 count down; t3 stays, so still isolated.
         assert_eq!(p.step(false).health, Health::Isolated);
         assert_eq!(p.counters(), (2, 2, 3));
@@ -252,7 +298,15 @@ mod tests {
         // t1 reaches 0 (and t2 too): healthy, t3 cleared, reset from the master.
         let d = p.step(false);
         assert_eq!(p.counters(), (0, 0, 0));
-        assert_eq!(d, Decision { health: Health::Healthy, update: true, fuse: true, reset: true });
+        assert_eq!(
+            d,
+            Decision {
+                health: Health::Healthy,
+                update: true,
+                fuse: true,
+                reset: true
+            }
+        );
     }
 
     #[test]
@@ -334,7 +388,10 @@ mod tests {
 
     #[test]
     fn zero_n1_is_rejected() {
-        assert_eq!(PolicyConfig::Counters { n1: 0, n2: 5 }.check(), Err(PolicyError::ZeroN1));
+        assert_eq!(
+            PolicyConfig::Counters { n1: 0, n2: 5 }.check(),
+            Err(PolicyError::ZeroN1)
+        );
         assert!(PolicyConfig::counters_default().check().is_ok());
     }
 

@@ -134,10 +134,18 @@ mod tests {
 
     #[test]
     fn test_ratio_is_statistic_over_threshold() {
-        let s = Statistic { value: 30.0, threshold: 20.0, dof: 2 };
+        let s = Statistic {
+            value: 30.0,
+            threshold: 20.0,
+            dof: 2,
+        };
         assert_relative_eq!(s.test_ratio(), 1.5);
         assert!(s.exceeds());
-        let at = Statistic { value: 20.0, threshold: 20.0, dof: 2 };
+        let at = Statistic {
+            value: 20.0,
+            threshold: 20.0,
+            dof: 2,
+        };
         assert!(!at.exceeds(), "equality does not exceed: λ > T_D is strict");
     }
 
@@ -154,13 +162,23 @@ mod tests {
         assert_eq!(spec.resolve(1).unwrap(), 20.0);
         assert_eq!(spec.resolve(6).unwrap(), 20.0);
         // χ²(2) survival at 20 is exp(-10).
-        assert_relative_eq!(spec.p_fa(2).unwrap(), (-10.0f64).exp(), max_relative = 1e-10);
+        assert_relative_eq!(
+            spec.p_fa(2).unwrap(),
+            (-10.0f64).exp(),
+            max_relative = 1e-10
+        );
     }
 
     #[test]
     fn wire_pair_must_name_at_most_one_form() {
-        assert_eq!(ThresholdSpec::from_parts(Some(0.01), Some(3.0)), Err(ThresholdError::Ambiguous));
-        assert_eq!(ThresholdSpec::from_parts(None, None), Ok(ThresholdSpec::PFa(0.002)));
+        assert_eq!(
+            ThresholdSpec::from_parts(Some(0.01), Some(3.0)),
+            Err(ThresholdError::Ambiguous)
+        );
+        assert_eq!(
+            ThresholdSpec::from_parts(None, None),
+            Ok(ThresholdSpec::PFa(0.002))
+        );
         assert!(ThresholdSpec::from_parts(Some(1.5), None).is_err());
         assert!(ThresholdSpec::from_parts(None, Some(-1.0)).is_err());
         assert!(ThresholdSpec::from_parts(None, Some(f64::NAN)).is_err());

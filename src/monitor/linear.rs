@@ -6,7 +6,10 @@
 use nalgebra::{DMatrix, DVector};
 use serde::Deserialize;
 
-use super::{ConfigError, Epoch, EpochError, Monitor, MonitorKind, MonitorReport, Outputs, StepError, TestBank};
+use super::{
+    ConfigError, Epoch, EpochError, Monitor, MonitorKind, MonitorReport, Outputs, StepError,
+    TestBank,
+};
 use crate::detect::{PolicyConfig, ThresholdError, ThresholdSpec};
 use crate::filter::kalman::{self, LinearObservation, LinearTransition, StateEstimate};
 
@@ -48,7 +51,11 @@ pub struct LinearConfig {
 /// semi-definite matrix (round-off in user-typed or computed matrices).
 const SYM_TOL: f64 = 1e-9;
 
-fn matrix(field: &str, rows: &[Vec<f64>], shape: (Option<usize>, Option<usize>)) -> Result<DMatrix<f64>, ConfigError> {
+fn matrix(
+    field: &str,
+    rows: &[Vec<f64>],
+    shape: (Option<usize>, Option<usize>),
+) -> Result<DMatrix<f64>, ConfigError> {
     let nrows = rows.len();
     if nrows == 0 {
         return Err(ConfigError::new(field, "must have at least one row"));
@@ -61,18 +68,30 @@ fn matrix(field: &str, rows: &[Vec<f64>], shape: (Option<usize>, Option<usize>))
         if row.len() != ncols {
             return Err(ConfigError::new(
                 format!("{field}[{i}]"),
-                format!("ragged matrix: row has {} elements, row 0 has {ncols}", row.len()),
+                format!(
+                    "ragged matrix: row has {} elements, row 0 has {ncols}",
+                    row.len()
+                ),
             ));
         }
         if let Some(j) = row.iter().position(|v| !v.is_finite()) {
-            return Err(ConfigError::new(format!("{field}[{i}][{j}]"), "must be finite"));
+            return Err(ConfigError::new(
+                format!("{field}[{i}][{j}]"),
+                "must be finite",
+            ));
         }
     }
     if let Some(want) = shape.0.filter(|&w| w != nrows) {
-        return Err(ConfigError::new(field, format!("has {nrows} rows, expected {want}")));
+        return Err(ConfigError::new(
+            field,
+            format!("has {nrows} rows, expected {want}"),
+        ));
     }
     if let Some(want) = shape.1.filter(|&w| w != ncols) {
-        return Err(ConfigError::new(field, format!("has {ncols} columns, expected {want}")));
+        return Err(ConfigError::new(
+            field,
+            format!("has {ncols} columns, expected {want}"),
+        ));
     }
     Ok(DMatrix::from_fn(nrows, ncols, |i, j| rows[i][j]))
 }
@@ -85,7 +104,11 @@ fn check_covariance(field: &str, m: &DMatrix<f64>, strict: bool) -> Result<(), C
             if (m[(i, j)] - m[(j, i)]).abs() > SYM_TOL * scale {
                 return Err(ConfigError::new(
                     field,
-                    format!("not symmetric: [{i}][{j}] = {} but [{j}][{i}] = {}", m[(i, j)], m[(j, i)]),
+                    format!(
+                        "not symmetric: [{i}][{j}] = {} but [{j}][{i}] = {}",
+                        m[(i, j)],
+                        m[(j, i)]
+                    ),
                 ));
             }
         }
@@ -110,11 +133,15 @@ fn check_covariance(field: &str, m: &DMatrix<f64>, strict: bool) -> Result<(), C
 impl LinearConfig {
     /// Parses and validates the `config` JSON of a `linear` monitor.
     pub fn from_json(value: &serde_json::Value) -> Result<Self, ConfigError> {
-        let wire = LinearConfigWire::deserialize(value).map_err(|e| ConfigError::new("", e.to_string()))?;
+        let wire = LinearConfigWire::deserialize(value)
+            .map_err(|e| ConfigError::new("", e.to_string()))?;
         let f = matrix("f", &wire.f, (None, None))?;
         let n = f.nrows();
         if f.ncols() != n {
-            return Err(ConfigError::new("f", format!("must be square, is {}x{}", n, f.ncols())));
+            return Err(ConfigError::new(
+                "f",
+                format!("must be square, is {}x{}", n, f.ncols()),
+            ));
         }
         let h = matrix("h", &wire.h, (None, Some(n)))?;
         let m = h.nrows();
@@ -122,16 +149,31 @@ impl LinearConfig {
         let r = matrix("r", &wire.r, (Some(m), Some(m)))?;
         let p0 = matrix("p0", &wire.p0, (Some(n), Some(n)))?;
         if wire.x0.len() != n {
-            return Err(ConfigError::new("x0", format!("has {} elements, expected {n}", wire.x0.len())));
+            return Err(ConfigError::new(
+                "x0",
+                format!("has {} elements, expected {n}", wire.x0.len()),
+            ));
         }
         if let Some(j) = wire.x0.iter().position(|v| !v.is_finite()) {
             return Err(ConfigError::new(format!("x0[{j}]"), "must be finite"));
         }
-        let b = wire.b.as_deref().map(|b| matrix("b", b, (Some(n), None))).transpose()?;
+        let b = wire
+            .b
+            .as_deref()
+            .map(|b| matrix("b", b, (Some(n), None)))
+            .transpose()?;
         check_covariance("q", &q, false)?;
         check_covariance("r", &r, true)?;
         check_covariance("p0", &p0, false)?;
-        Ok(LinearConfig { f, h, q, r, x0: DVector::from_vec(wire.x0), p0, b })
+        Ok(LinearConfig {
+            f,
+            h,
+            q,
+            r,
+            x0: DVector::from_vec(wire.x0),
+            p0,
+            b,
+        })
     }
 
     /// State dimension n.
@@ -160,13 +202,26 @@ const RESIDUAL: usize = 0;
 
 impl LinearMonitor {
     /// Builds the monitor; its one test `residual` has dof m.
-    pub fn new(config: LinearConfig, policy: PolicyConfig, spec: ThresholdSpec) -> Result<Self, ThresholdError> {
+    pub fn new(
+        config: LinearConfig,
+        policy: PolicyConfig,
+        spec: ThresholdSpec,
+    ) -> Result<Self, ThresholdError> {
         let dof = config.measurements() as u32;
         let bank = TestBank::new(&[("residual", dof)], spec, policy)?;
-        let initial = StateEstimate { x: config.x0.clone(), p: config.p0.clone() };
+        let initial = StateEstimate {
+            x: config.x0.clone(),
+            p: config.p0.clone(),
+        };
         Ok(LinearMonitor {
-            transition: LinearTransition { f: config.f, q: config.q },
-            observation: LinearObservation { h: config.h, r: config.r },
+            transition: LinearTransition {
+                f: config.f,
+                q: config.q,
+            },
+            observation: LinearObservation {
+                h: config.h,
+                r: config.r,
+            },
             b: config.b,
             estimate: initial.clone(),
             initial,
@@ -197,7 +252,12 @@ impl Monitor for LinearMonitor {
         if let Some(z) = &epoch.z {
             let want = self.observation.h.nrows();
             if z.len() != want {
-                return Err(EpochError::WrongLength { monitor: name.to_owned(), field: "z", got: z.len(), want });
+                return Err(EpochError::WrongLength {
+                    monitor: name.to_owned(),
+                    field: "z",
+                    got: z.len(),
+                    want,
+                });
             }
         }
         if let Some(u) = &epoch.u {
@@ -224,16 +284,22 @@ impl Monitor for LinearMonitor {
     fn step(&mut self, epoch: &Epoch) -> Result<MonitorReport, StepError> {
         // Predict (with control when both B and u are present; a missing u is zero).
         let prior = match (&self.b, &epoch.u) {
-            (Some(b), Some(u)) => {
-                kalman::predict_with_control(&self.estimate, &self.transition, b, &DVector::from_column_slice(u))?
-            }
+            (Some(b), Some(u)) => kalman::predict_with_control(
+                &self.estimate,
+                &self.transition,
+                b,
+                &DVector::from_column_slice(u),
+            )?,
             _ => kalman::predict(&self.estimate, &self.transition)?,
         };
         let Some(z) = &epoch.z else {
             self.estimate = prior;
             return Ok(MonitorReport {
                 tests: Vec::new(),
-                outputs: Outputs::Linear { innovation: None, x: self.estimate.x.as_slice().to_vec() },
+                outputs: Outputs::Linear {
+                    innovation: None,
+                    x: self.estimate.x.as_slice().to_vec(),
+                },
             });
         };
         let z = DVector::from_column_slice(z);
@@ -243,7 +309,11 @@ impl Monitor for LinearMonitor {
         let posterior = kalman::update(&prior, &self.observation, &innovation)?.0;
         let outcome = self.bank.evaluate(RESIDUAL, innovation.statistic);
         // seed 004 §2: a suspect or isolated filter predicts without updating.
-        self.estimate = if outcome.decision.update { posterior } else { prior };
+        self.estimate = if outcome.decision.update {
+            posterior
+        } else {
+            prior
+        };
         Ok(MonitorReport {
             tests: vec![outcome],
             outputs: Outputs::Linear {
@@ -276,7 +346,11 @@ mod tests {
         })
     }
 
-    fn field_error(mut config: serde_json::Value, key: &str, value: serde_json::Value) -> ConfigError {
+    fn field_error(
+        mut config: serde_json::Value,
+        key: &str,
+        value: serde_json::Value,
+    ) -> ConfigError {
         config[key] = value;
         LinearConfig::from_json(&config).unwrap_err()
     }
@@ -311,17 +385,40 @@ mod tests {
         assert_eq!(e.field, "b");
         let mut c = cv_config();
         c["extra"] = json!(1);
-        assert!(LinearConfig::from_json(&c).unwrap_err().reason.contains("unknown field"));
+        assert!(
+            LinearConfig::from_json(&c)
+                .unwrap_err()
+                .reason
+                .contains("unknown field")
+        );
     }
 
     #[test]
     fn wrong_length_z_is_refused_before_stepping() {
         let c = LinearConfig::from_json(&cv_config()).unwrap();
         let m = LinearMonitor::new(c, PolicyConfig::Classic, ThresholdSpec::default()).unwrap();
-        let e = Epoch { t: 0.0, z: Some(vec![1.0, 2.0]), ..Default::default() };
-        assert!(matches!(m.check_epoch("lin", &e), Err(EpochError::WrongLength { got: 2, want: 1, .. })));
-        let e = Epoch { t: 0.0, u: Some(vec![1.0]), ..Default::default() };
-        assert!(matches!(m.check_epoch("lin", &e), Err(EpochError::UnknownInput(_))));
+        let e = Epoch {
+            t: 0.0,
+            z: Some(vec![1.0, 2.0]),
+            ..Default::default()
+        };
+        assert!(matches!(
+            m.check_epoch("lin", &e),
+            Err(EpochError::WrongLength {
+                got: 2,
+                want: 1,
+                ..
+            })
+        ));
+        let e = Epoch {
+            t: 0.0,
+            u: Some(vec![1.0]),
+            ..Default::default()
+        };
+        assert!(matches!(
+            m.check_epoch("lin", &e),
+            Err(EpochError::UnknownInput(_))
+        ));
     }
 
     #[test]
@@ -329,7 +426,13 @@ mod tests {
         // x⁻ = 0, P⁻ = F P0 Fᵀ + Q = [[20.25, 10.5], [10.5, 11]], S = 21.25, r = z = 2.
         let c = LinearConfig::from_json(&cv_config()).unwrap();
         let mut m = LinearMonitor::new(c, PolicyConfig::Classic, ThresholdSpec::default()).unwrap();
-        let report = m.step(&Epoch { t: 0.0, z: Some(vec![2.0]), ..Default::default() }).unwrap();
+        let report = m
+            .step(&Epoch {
+                t: 0.0,
+                z: Some(vec![2.0]),
+                ..Default::default()
+            })
+            .unwrap();
         let lambda = 4.0 / 21.25;
         assert!((report.tests[0].statistic.value - lambda).abs() < 1e-12);
         let Outputs::Linear { x, innovation } = report.outputs;
@@ -341,19 +444,42 @@ mod tests {
     #[test]
     fn suspect_filter_predicts_without_updating() {
         let c = LinearConfig::from_json(&cv_config()).unwrap();
-        let mut m = LinearMonitor::new(c, PolicyConfig::counters_default(), ThresholdSpec::Threshold(5.0)).unwrap();
-        let report = m.step(&Epoch { t: 0.0, z: Some(vec![100.0]), ..Default::default() }).unwrap();
+        let mut m = LinearMonitor::new(
+            c,
+            PolicyConfig::counters_default(),
+            ThresholdSpec::Threshold(5.0),
+        )
+        .unwrap();
+        let report = m
+            .step(&Epoch {
+                t: 0.0,
+                z: Some(vec![100.0]),
+                ..Default::default()
+            })
+            .unwrap();
         assert_eq!(report.tests[0].decision.health, Health::Suspect);
         let Outputs::Linear { x, .. } = report.outputs;
-        assert_eq!(x, vec![0.0, 0.0], "the prior (F·0) is kept, the outlier is not used");
-        assert!((m.estimate().p[(0, 0)] - 20.25).abs() < 1e-12, "P is the predicted one");
+        assert_eq!(
+            x,
+            vec![0.0, 0.0],
+            "the prior (F·0) is kept, the outlier is not used"
+        );
+        assert!(
+            (m.estimate().p[(0, 0)] - 20.25).abs() < 1e-12,
+            "P is the predicted one"
+        );
     }
 
     #[test]
     fn epoch_without_z_only_predicts_and_runs_no_test() {
         let c = LinearConfig::from_json(&cv_config()).unwrap();
         let mut m = LinearMonitor::new(c, PolicyConfig::Classic, ThresholdSpec::default()).unwrap();
-        let report = m.step(&Epoch { t: 0.0, ..Default::default() }).unwrap();
+        let report = m
+            .step(&Epoch {
+                t: 0.0,
+                ..Default::default()
+            })
+            .unwrap();
         assert!(report.tests.is_empty());
         assert!((m.estimate().p[(0, 0)] - 20.25).abs() < 1e-12);
     }
@@ -362,7 +488,12 @@ mod tests {
     fn reset_restores_the_initial_estimate() {
         let c = LinearConfig::from_json(&cv_config()).unwrap();
         let mut m = LinearMonitor::new(c, PolicyConfig::Classic, ThresholdSpec::default()).unwrap();
-        m.step(&Epoch { t: 0.0, z: Some(vec![3.0]), ..Default::default() }).unwrap();
+        m.step(&Epoch {
+            t: 0.0,
+            z: Some(vec![3.0]),
+            ..Default::default()
+        })
+        .unwrap();
         m.reset();
         assert_eq!(m.estimate().x, DVector::from_vec(vec![0.0, 0.0]));
         assert_eq!(m.estimate().p[(0, 0)], 10.0);

@@ -56,7 +56,10 @@ pub struct ConfigError {
 impl ConfigError {
     /// Builds an error for `field`.
     pub fn new(field: impl Into<String>, reason: impl Into<String>) -> Self {
-        ConfigError { field: field.into(), reason: reason.into() }
+        ConfigError {
+            field: field.into(),
+            reason: reason.into(),
+        }
     }
 }
 
@@ -173,7 +176,11 @@ pub fn build(spec: &MonitorSpec) -> Result<Box<dyn Monitor>, BuildError> {
     match spec.kind {
         MonitorKind::Linear => {
             let config = linear::LinearConfig::from_json(&spec.config)?;
-            Ok(Box::new(linear::LinearMonitor::new(config, spec.policy, spec.threshold)?))
+            Ok(Box::new(linear::LinearMonitor::new(
+                config,
+                spec.policy,
+                spec.threshold,
+            )?))
         }
         other => Err(BuildError::Unsupported(other.as_str())),
     }

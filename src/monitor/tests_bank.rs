@@ -1,7 +1,9 @@
 //! The tests of one monitor: names, dof, thresholds and policy states, shared
 //! by every monitor kind so thresholds and policies behave the same everywhere.
 
-use crate::detect::{Decision, Health, PolicyConfig, PolicyState, Statistic, ThresholdError, ThresholdSpec};
+use crate::detect::{
+    Decision, Health, PolicyConfig, PolicyState, Statistic, ThresholdError, ThresholdSpec,
+};
 
 /// One test's running state.
 #[derive(Debug, Clone)]
@@ -50,10 +52,19 @@ impl TestBank {
         let slots = tests
             .iter()
             .map(|&(name, dof)| {
-                Ok(TestSlot { name, dof, threshold: spec.resolve(dof)?, policy: PolicyState::new(policy) })
+                Ok(TestSlot {
+                    name,
+                    dof,
+                    threshold: spec.resolve(dof)?,
+                    policy: PolicyState::new(policy),
+                })
             })
             .collect::<Result<Vec<_>, ThresholdError>>()?;
-        Ok(TestBank { spec, policy, slots })
+        Ok(TestBank {
+            spec,
+            policy,
+            slots,
+        })
     }
 
     /// The tests.
@@ -73,7 +84,11 @@ impl TestBank {
 
     /// Applies a new threshold spec to every test; on error nothing changes.
     pub fn set_spec(&mut self, spec: ThresholdSpec) -> Result<(), ThresholdError> {
-        let thresholds = self.slots.iter().map(|s| spec.resolve(s.dof)).collect::<Result<Vec<_>, _>>()?;
+        let thresholds = self
+            .slots
+            .iter()
+            .map(|s| spec.resolve(s.dof))
+            .collect::<Result<Vec<_>, _>>()?;
         for (slot, threshold) in self.slots.iter_mut().zip(thresholds) {
             slot.threshold = threshold;
         }
@@ -99,10 +114,20 @@ impl TestBank {
     /// Evaluates test `index` with statistic `value` and advances its policy.
     pub fn evaluate(&mut self, index: usize, value: f64) -> TestOutcome {
         let slot = &mut self.slots[index];
-        let statistic = Statistic { value, threshold: slot.threshold, dof: slot.dof };
+        let statistic = Statistic {
+            value,
+            threshold: slot.threshold,
+            dof: slot.dof,
+        };
         let previous = slot.policy.health();
         let decision = slot.policy.step(statistic.exceeds());
-        TestOutcome { index, name: slot.name, statistic, decision, previous }
+        TestOutcome {
+            index,
+            name: slot.name,
+            statistic,
+            decision,
+            previous,
+        }
     }
 
     /// The decision for test `index` on an epoch where it does not run.
@@ -117,7 +142,12 @@ mod tests {
 
     #[test]
     fn new_spec_resolves_each_test_by_its_own_dof() {
-        let mut bank = TestBank::new(&[("a", 1), ("b", 6)], ThresholdSpec::PFa(0.002), PolicyConfig::Classic).unwrap();
+        let mut bank = TestBank::new(
+            &[("a", 1), ("b", 6)],
+            ThresholdSpec::PFa(0.002),
+            PolicyConfig::Classic,
+        )
+        .unwrap();
         assert!((bank.slots()[0].threshold - 9.5495).abs() < 1e-4);
         assert!((bank.slots()[1].threshold - 20.7912).abs() < 1e-4);
         bank.set_spec(ThresholdSpec::Threshold(13.0)).unwrap();
@@ -126,7 +156,12 @@ mod tests {
 
     #[test]
     fn failed_spec_change_leaves_thresholds_alone() {
-        let mut bank = TestBank::new(&[("a", 2)], ThresholdSpec::Threshold(20.0), PolicyConfig::Classic).unwrap();
+        let mut bank = TestBank::new(
+            &[("a", 2)],
+            ThresholdSpec::Threshold(20.0),
+            PolicyConfig::Classic,
+        )
+        .unwrap();
         assert!(bank.set_spec(ThresholdSpec::PFa(2.0)).is_err());
         assert_eq!(bank.slots()[0].threshold, 20.0);
         assert_eq!(bank.spec(), ThresholdSpec::Threshold(20.0));
@@ -134,10 +169,21 @@ mod tests {
 
     #[test]
     fn evaluate_reports_previous_and_new_health() {
-        let mut bank = TestBank::new(&[("a", 2)], ThresholdSpec::Threshold(5.0), PolicyConfig::Classic).unwrap();
+        let mut bank = TestBank::new(
+            &[("a", 2)],
+            ThresholdSpec::Threshold(5.0),
+            PolicyConfig::Classic,
+        )
+        .unwrap();
         let o = bank.evaluate(0, 7.0);
-        assert_eq!((o.previous, o.decision.health), (Health::Healthy, Health::Isolated));
+        assert_eq!(
+            (o.previous, o.decision.health),
+            (Health::Healthy, Health::Isolated)
+        );
         let o = bank.evaluate(0, 1.0);
-        assert_eq!((o.previous, o.decision.health), (Health::Isolated, Health::Healthy));
+        assert_eq!(
+            (o.previous, o.decision.health),
+            (Health::Isolated, Health::Healthy)
+        );
     }
 }

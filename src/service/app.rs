@@ -36,7 +36,10 @@ pub struct AppState {
 impl AppState {
     /// What a session actor needs.
     pub fn actor_deps(&self) -> ActorDeps {
-        ActorDeps { store: self.store.clone(), metrics: self.metrics.clone() }
+        ActorDeps {
+            store: self.store.clone(),
+            metrics: self.metrics.clone(),
+        }
     }
 }
 
@@ -49,7 +52,10 @@ pub const ROUTES: &[(&str, &[&str])] = &[
     ("/api/v1/sessions", &["GET", "POST"]),
     ("/api/v1/sessions/{id}", &["GET", "DELETE"]),
     ("/api/v1/sessions/{id}/stats", &["GET"]),
-    ("/api/v1/sessions/{id}/monitors/{name}/threshold", &["GET", "PUT"]),
+    (
+        "/api/v1/sessions/{id}/monitors/{name}/threshold",
+        &["GET", "PUT"],
+    ),
     ("/api/v1/sessions/{id}/ingest", &["GET"]),
     ("/api/v1/sessions/{id}/events", &["GET"]),
     ("/api/v1/chi2/threshold", &["GET"]),
@@ -65,7 +71,9 @@ fn handlers(path: &str) -> MethodRouter<AppState> {
         "/api/v1/sessions" => get(sessions::list).post(sessions::create),
         "/api/v1/sessions/{id}" => get(sessions::get).delete(sessions::delete),
         "/api/v1/sessions/{id}/stats" => get(sessions::stats),
-        "/api/v1/sessions/{id}/monitors/{name}/threshold" => get(thresholds::get).put(thresholds::put),
+        "/api/v1/sessions/{id}/monitors/{name}/threshold" => {
+            get(thresholds::get).put(thresholds::put)
+        }
         "/api/v1/sessions/{id}/ingest" => get(ingest::ingest),
         "/api/v1/sessions/{id}/events" => get(events::events),
         "/api/v1/chi2/threshold" => get(chi2::threshold),
@@ -80,23 +88,23 @@ async fn not_found() -> ApiError {
     ApiError::NotFound("no such route".into())
 }
 
-async fn method_not_allowed() -> ApiError {
-    ApiError::MethodNotAllowed
-}
-
 /// Builds the router.
 pub fn app(state: AppState) -> Router {
     let mut public = Router::new();
     let mut api = Router::new();
-    for (path, _) in ROUTES {
-        let methods = handlers(path).fallback(method_not_allowed);
+    for &(path, allowed) in ROUTES {
+        let methods =
+            handlers(path).fallback(move || async move { ApiError::MethodNotAllowed(allowed) });
         if path.starts_with("/api/") {
             api = api.route(path, methods);
         } else {
             public = public.route(path, methods);
         }
     }
-    let api = api.route_layer(middleware::from_fn_with_state(state.clone(), auth::require_token));
+    let api = api.route_layer(middleware::from_fn_with_state(
+        state.clone(),
+        auth::require_token,
+    ));
     public
         .merge(api)
         .fallback(not_found)
@@ -114,7 +122,11 @@ mod tests {
         for (path, methods) in ROUTES {
             assert!(!methods.is_empty(), "{path}");
             // An empty MethodRouter would answer every method with 405.
-            assert!(format!("{:?}", handlers(path)).len() > format!("{:?}", MethodRouter::<AppState>::new()).len(), "{path}");
+            assert!(
+                format!("{:?}", handlers(path)).len()
+                    > format!("{:?}", MethodRouter::<AppState>::new()).len(),
+                "{path}"
+            );
         }
     }
 }

@@ -19,22 +19,35 @@ fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
 fn presented_tokens(req: &Request) -> Vec<String> {
     let mut tokens = Vec::new();
     let headers = req.headers();
+    // RFC 9110 §11.1: the scheme name is case-insensitive.
     if let Some(value) = headers.get(AUTHORIZATION).and_then(|v| v.to_str().ok())
-        && let Some(token) = value.strip_prefix("Bearer ")
+        && let Some((scheme, token)) = value.split_once(' ')
+        && scheme.eq_ignore_ascii_case("bearer")
     {
         tokens.push(token.trim().to_owned());
     }
-    let is_upgrade = headers.get(UPGRADE).and_then(|v| v.to_str().ok()).is_some_and(|v| v.eq_ignore_ascii_case("websocket"));
+    let is_upgrade = headers
+        .get(UPGRADE)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| v.eq_ignore_ascii_case("websocket"));
     if is_upgrade {
-        if let Some(protocols) = headers.get(SEC_WEBSOCKET_PROTOCOL).and_then(|v| v.to_str().ok()) {
-            tokens.extend(protocols.split(',').filter_map(|p| p.trim().strip_prefix("bearer.")).map(str::to_owned));
+        if let Some(protocols) = headers
+            .get(SEC_WEBSOCKET_PROTOCOL)
+            .and_then(|v| v.to_str().ok())
+        {
+            tokens.extend(
+                protocols
+                    .split(',')
+                    .filter_map(|p| p.trim().strip_prefix("bearer."))
+                    .map(str::to_owned),
+            );
         }
         if let Some(query) = req.uri().query() {
             tokens.extend(
                 query
                     .split('&')
                     .filter_map(|pair| pair.strip_prefix("token="))
-                    .map(|t| percent_decode(t)),
+                    .map(percent_decode),
             );
         }
     }
@@ -67,11 +80,18 @@ fn percent_decode(s: &str) -> String {
 
 /// Middleware: passes the request on when no token is configured or a
 /// presented token matches; otherwise 401.
-pub async fn require_token(State(state): State<AppState>, req: Request, next: Next) -> Result<Response, ApiError> {
+pub async fn require_token(
+    State(state): State<AppState>,
+    req: Request,
+    next: Next,
+) -> Result<Response, ApiError> {
     let Some(expected) = state.config.token.as_deref() else {
         return Ok(next.run(req).await);
     };
-    if presented_tokens(&req).iter().any(|t| constant_time_eq(t.as_bytes(), expected.as_bytes())) {
+    if presented_tokens(&req)
+        .iter()
+        .any(|t| constant_time_eq(t.as_bytes(), expected.as_bytes()))
+    {
         Ok(next.run(req).await)
     } else {
         Err(ApiError::Unauthorized)

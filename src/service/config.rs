@@ -46,6 +46,11 @@ pub struct ServiceConfig {
 impl ServiceConfig {
     /// A config with defaults for the given address and database file.
     pub fn new(bind: SocketAddr, db_path: impl Into<PathBuf>) -> Self {
-        ServiceConfig { bind, db_path: db_path.into(), token: None, limits: Limits::default() }
+        ServiceConfig {
+            bind,
+            db_path: db_path.into(),
+            token: None,
+            limits: Limits::default(),
+        }
     }
 }

@@ -21,15 +21,18 @@ pub enum ApiError {
     /// 404: no such session, monitor, model or route.
     #[error("{0}")]
     NotFound(String),
-    /// 405: the route exists but not with this method.
-    #[error("method not allowed")]
-    MethodNotAllowed,
+    /// 405: the route exists but not with this method; carries the allowed ones.
+    #[error("method not allowed; this route allows {}", .0.join(", "))]
+    MethodNotAllowed(&'static [&'static str]),
     /// 409: the request conflicts with the current state (duplicate id, stream already attached).
     #[error("{0}")]
     Conflict(String),
     /// 413: the request is over a configured limit.
     #[error("{0}")]
     TooLarge(String),
+    /// 426: a socket route was requested without a WebSocket upgrade.
+    #[error("{0}")]
+    UpgradeRequired(String),
     /// 415: the body is not `application/json`.
     #[error("{0}")]
     UnsupportedMediaType(String),
@@ -52,7 +55,10 @@ pub enum ApiError {
 impl ApiError {
     /// A 422 naming a field.
     pub fn invalid(field: impl Into<String>, message: impl Into<String>) -> Self {
-        ApiError::Invalid { field: Some(field.into()), message: message.into() }
+        ApiError::Invalid {
+            field: Some(field.into()),
+            message: message.into(),
+        }
     }
 
     fn status_and_code(&self) -> (StatusCode, &'static str) {
@@ -60,10 +66,13 @@ impl ApiError {
             ApiError::BadRequest(_) => (StatusCode::BAD_REQUEST, "bad_request"),
             ApiError::Unauthorized => (StatusCode::UNAUTHORIZED, "unauthorized"),
             ApiError::NotFound(_) => (StatusCode::NOT_FOUND, "not_found"),
-            ApiError::MethodNotAllowed => (StatusCode::METHOD_NOT_ALLOWED, "method_not_allowed"),
+            ApiError::MethodNotAllowed(_) => (StatusCode::METHOD_NOT_ALLOWED, "method_not_allowed"),
+            ApiError::UpgradeRequired(_) => (StatusCode::UPGRADE_REQUIRED, "upgrade_required"),
             ApiError::Conflict(_) => (StatusCode::CONFLICT, "conflict"),
             ApiError::TooLarge(_) => (StatusCode::PAYLOAD_TOO_LARGE, "too_large"),
-            ApiError::UnsupportedMediaType(_) => (StatusCode::UNSUPPORTED_MEDIA_TYPE, "unsupported_media_type"),
+            ApiError::UnsupportedMediaType(_) => {
+                (StatusCode::UNSUPPORTED_MEDIA_TYPE, "unsupported_media_type")
+            }
             ApiError::Invalid { .. } => (StatusCode::UNPROCESSABLE_ENTITY, "invalid"),
             ApiError::Unavailable(_) => (StatusCode::SERVICE_UNAVAILABLE, "unavailable"),
             ApiError::Internal(_) => (StatusCode::INTERNAL_SERVER_ERROR, "internal"),
@@ -84,14 +93,33 @@ impl IntoResponse for ApiError {
             tracing::error!(%detail, "internal error");
         }
         let mut error = json!({ "code": code, "message": self.to_string() });
-        if let ApiError::Invalid { field: Some(field), .. } = &self {
+        if let ApiError::Invalid {
+            field: Some(field), ..
+        } = &self
+        {
             error["field"] = json!(field);
         }
         let mut response = (status, Json(json!({ "error": error }))).into_response();
-        if matches!(self, ApiError::Unauthorized) {
-            response
-                .headers_mut()
-                .insert(axum::http::header::WWW_AUTHENTICATE, axum::http::HeaderValue::from_static("Bearer"));
+        let headers = response.headers_mut();
+        match &self {
+            ApiError::Unauthorized => {
+                headers.insert(
+                    axum::http::header::WWW_AUTHENTICATE,
+                    axum::http::HeaderValue::from_static("Bearer"),
+                );
+            }
+            ApiError::MethodNotAllowed(methods) => {
+                if let Ok(allow) = axum::http::HeaderValue::from_str(&methods.join(", ")) {
+                    headers.insert(axum::http::header::ALLOW, allow);
+                }
+            }
+            ApiError::UpgradeRequired(_) => {
+                headers.insert(
+                    axum::http::header::UPGRADE,
+                    axum::http::HeaderValue::from_static("websocket"),
+                );
+            }
+            _ => {}
         }
         response
     }

@@ -5,13 +5,14 @@
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
+use axum::extract::ws::rejection::WebSocketUpgradeRejection;
 use axum::extract::ws::{CloseFrame, Message, Utf8Bytes, WebSocket, WebSocketUpgrade};
 use axum::extract::{Path, State};
 use axum::response::Response;
 
 use super::app::AppState;
 use super::error::ApiError;
-use super::ingest::SUBPROTOCOL;
+use super::ingest::{SUBPROTOCOL, upgrade_rejection};
 use super::session::SessionHandle;
 use super::wire;
 
@@ -22,14 +23,20 @@ const STATS_INTERVAL: Duration = Duration::from_millis(50);
 pub async fn events(
     State(state): State<AppState>,
     Path(id): Path<String>,
-    ws: WebSocketUpgrade,
+    ws: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
 ) -> Result<Response, ApiError> {
-    let handle = state.registry.get(&id).ok_or_else(|| ApiError::NotFound(format!("no session '{id}'")))?;
-    Ok(ws.protocols([SUBPROTOCOL]).on_upgrade(move |socket| async move {
-        state.metrics.event_sockets.fetch_add(1, Ordering::Relaxed);
-        run(socket, state.clone(), handle).await;
-        state.metrics.event_sockets.fetch_sub(1, Ordering::Relaxed);
-    }))
+    let handle = state
+        .registry
+        .get(&id)
+        .ok_or_else(|| ApiError::NotFound(format!("no session '{id}'")))?;
+    let ws = ws.map_err(upgrade_rejection)?;
+    Ok(ws
+        .protocols([SUBPROTOCOL])
+        .on_upgrade(move |socket| async move {
+            state.metrics.event_sockets.fetch_add(1, Ordering::Relaxed);
+            run(socket, state.clone(), handle).await;
+            state.metrics.event_sockets.fetch_sub(1, Ordering::Relaxed);
+        }))
 }
 
 async fn run(mut socket: WebSocket, state: AppState, handle: SessionHandle) {

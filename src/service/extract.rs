@@ -31,9 +31,14 @@ where
 fn json_rejection(rejection: JsonRejection) -> ApiError {
     let text = rejection.body_text();
     match rejection.status() {
-        StatusCode::PAYLOAD_TOO_LARGE => ApiError::TooLarge("request body is over the size limit".into()),
+        StatusCode::PAYLOAD_TOO_LARGE => {
+            ApiError::TooLarge("request body is over the size limit".into())
+        }
         StatusCode::UNSUPPORTED_MEDIA_TYPE => ApiError::UnsupportedMediaType(text),
-        StatusCode::UNPROCESSABLE_ENTITY => ApiError::Invalid { field: None, message: text },
+        StatusCode::UNPROCESSABLE_ENTITY => ApiError::Invalid {
+            field: None,
+            message: text,
+        },
         _ => ApiError::BadRequest(text),
     }
 }

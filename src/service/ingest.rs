@@ -5,6 +5,7 @@
 use std::sync::atomic::Ordering;
 use std::time::Instant;
 
+use axum::extract::ws::rejection::WebSocketUpgradeRejection;
 use axum::extract::ws::{CloseFrame, Message, Utf8Bytes, WebSocket, WebSocketUpgrade};
 use axum::extract::{Path, State};
 use axum::response::Response;
@@ -29,16 +30,39 @@ const HARD_CAP_FACTOR: usize = 16;
 pub async fn ingest(
     State(state): State<AppState>,
     Path(id): Path<String>,
-    ws: WebSocketUpgrade,
+    ws: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
 ) -> Result<Response, ApiError> {
-    let handle = state.registry.get(&id).ok_or_else(|| ApiError::NotFound(format!("no session '{id}'")))?;
+    let handle = state
+        .registry
+        .get(&id)
+        .ok_or_else(|| ApiError::NotFound(format!("no session '{id}'")))?;
+    let ws = ws.map_err(upgrade_rejection)?;
     let link = handle.attach().await?;
-    let cap = state.config.limits.max_frame_bytes.saturating_mul(HARD_CAP_FACTOR);
-    Ok(ws.protocols([SUBPROTOCOL]).max_message_size(cap).max_frame_size(cap).on_upgrade(move |socket| async move {
-        state.metrics.ingest_sockets.fetch_add(1, Ordering::Relaxed);
-        run(socket, state.clone(), handle, link).await;
-        state.metrics.ingest_sockets.fetch_sub(1, Ordering::Relaxed);
-    }))
+    let cap = state
+        .config
+        .limits
+        .max_frame_bytes
+        .saturating_mul(HARD_CAP_FACTOR);
+    Ok(ws
+        .protocols([SUBPROTOCOL])
+        .max_message_size(cap)
+        .max_frame_size(cap)
+        .on_upgrade(move |socket| async move {
+            state.metrics.ingest_sockets.fetch_add(1, Ordering::Relaxed);
+            run(socket, state.clone(), handle, link).await;
+            state.metrics.ingest_sockets.fetch_sub(1, Ordering::Relaxed);
+        }))
+}
+
+/// A socket route requested without a valid upgrade: JSON 426 (or 400 for a
+/// malformed handshake) instead of axum's plain text.
+pub fn upgrade_rejection(rejection: WebSocketUpgradeRejection) -> ApiError {
+    let text = format!("this route is a WebSocket: {}", rejection.body_text());
+    if rejection.status() == axum::http::StatusCode::UPGRADE_REQUIRED {
+        ApiError::UpgradeRequired(text)
+    } else {
+        ApiError::BadRequest(text)
+    }
 }
 
 /// What to do with one text frame.
@@ -52,11 +76,19 @@ fn on_text(text: &str, stream: u64, state: &AppState) -> Next {
     if text.len() > limits.max_frame_bytes {
         return Next::Refuse(FrameError::new(
             "frame_too_large",
-            format!("frame is {} bytes, the limit is {}", text.len(), limits.max_frame_bytes),
+            format!(
+                "frame is {} bytes, the limit is {}",
+                text.len(),
+                limits.max_frame_bytes
+            ),
         ));
     }
     match wire::parse_frame(text, limits.max_batch_epochs) {
-        Ok(epochs) => Next::Forward(FrameCommand { stream, epochs, received: Instant::now() }),
+        Ok(epochs) => Next::Forward(FrameCommand {
+            stream,
+            epochs,
+            received: Instant::now(),
+        }),
         Err(e) => Next::Refuse(e),
     }
 }
@@ -128,7 +160,11 @@ async fn run(mut socket: WebSocket, state: AppState, handle: SessionHandle, link
     handle.detach(stream).await;
 }
 
-async fn send_error(socket: &mut WebSocket, state: &AppState, e: &FrameError) -> Result<(), axum::Error> {
+async fn send_error(
+    socket: &mut WebSocket,
+    state: &AppState,
+    e: &FrameError,
+) -> Result<(), axum::Error> {
     state.metrics.frame_errors.fetch_add(1, Ordering::Relaxed);
     let text = serde_json::to_string(&ErrorEvent::from(e)).unwrap_or_default();
     socket.send(Message::Text(text.into())).await

@@ -5,7 +5,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 /// Upper bounds of the frame-latency histogram buckets, seconds.
-const LATENCY_BUCKETS_S: [f64; 12] = [1e-5, 2.5e-5, 5e-5, 1e-4, 2.5e-4, 5e-4, 1e-3, 2.5e-3, 5e-3, 1e-2, 5e-2, 0.25];
+const LATENCY_BUCKETS_S: [f64; 12] = [
+    1e-5, 2.5e-5, 5e-5, 1e-4, 2.5e-4, 5e-4, 1e-3, 2.5e-3, 5e-3, 1e-2, 5e-2, 0.25,
+];
 
 /// Counters shared by every socket and session.
 #[derive(Debug, Default)]
@@ -35,28 +37,70 @@ impl Metrics {
             self.latency_buckets[i].fetch_add(1, Ordering::Relaxed);
         }
         self.latency_count.fetch_add(1, Ordering::Relaxed);
-        self.latency_sum_ns.fetch_add(elapsed.as_nanos() as u64, Ordering::Relaxed);
+        self.latency_sum_ns
+            .fetch_add(elapsed.as_nanos() as u64, Ordering::Relaxed);
     }
 
     /// Renders the Prometheus text exposition.
     pub fn render(&self, sessions: usize) -> String {
         let mut out = String::with_capacity(2048);
         let counter = |out: &mut String, name: &str, help: &str, v: u64| {
-            let _ = writeln!(out, "# HELP {name} {help}\n# TYPE {name} counter\n{name} {v}");
+            let _ = writeln!(
+                out,
+                "# HELP {name} {help}\n# TYPE {name} counter\n{name} {v}"
+            );
         };
         let gauge = |out: &mut String, name: &str, help: &str, v: f64| {
             let _ = writeln!(out, "# HELP {name} {help}\n# TYPE {name} gauge\n{name} {v}");
         };
         let get = |a: &AtomicU64| a.load(Ordering::Relaxed);
-        counter(&mut out, "navguard_frames_total", "Ingest frames accepted.", get(&self.frames));
-        counter(&mut out, "navguard_epochs_total", "Epochs processed.", get(&self.epochs));
-        counter(&mut out, "navguard_frame_errors_total", "Ingest frames refused with an error event.", get(&self.frame_errors));
-        counter(&mut out, "navguard_alarms_total", "Alarms raised.", get(&self.alarms));
-        gauge(&mut out, "navguard_sessions", "Sessions defined.", sessions as f64);
-        gauge(&mut out, "navguard_ingest_sockets", "Open ingest sockets.", get(&self.ingest_sockets) as f64);
-        gauge(&mut out, "navguard_event_sockets", "Open event sockets.", get(&self.event_sockets) as f64);
+        counter(
+            &mut out,
+            "navguard_frames_total",
+            "Ingest frames accepted.",
+            get(&self.frames),
+        );
+        counter(
+            &mut out,
+            "navguard_epochs_total",
+            "Epochs processed.",
+            get(&self.epochs),
+        );
+        counter(
+            &mut out,
+            "navguard_frame_errors_total",
+            "Ingest frames refused with an error event.",
+            get(&self.frame_errors),
+        );
+        counter(
+            &mut out,
+            "navguard_alarms_total",
+            "Alarms raised.",
+            get(&self.alarms),
+        );
+        gauge(
+            &mut out,
+            "navguard_sessions",
+            "Sessions defined.",
+            sessions as f64,
+        );
+        gauge(
+            &mut out,
+            "navguard_ingest_sockets",
+            "Open ingest sockets.",
+            get(&self.ingest_sockets) as f64,
+        );
+        gauge(
+            &mut out,
+            "navguard_event_sockets",
+            "Open event sockets.",
+            get(&self.event_sockets) as f64,
+        );
         let name = "navguard_frame_latency_seconds";
-        let _ = writeln!(out, "# HELP {name} Frame arrival to end of processing.\n# TYPE {name} histogram");
+        let _ = writeln!(
+            out,
+            "# HELP {name} Frame arrival to end of processing.\n# TYPE {name} histogram"
+        );
         let mut cumulative = 0;
         for (bound, bucket) in LATENCY_BUCKETS_S.iter().zip(&self.latency_buckets) {
             cumulative += get(bucket);
@@ -64,10 +108,19 @@ impl Metrics {
         }
         let count = get(&self.latency_count);
         let _ = writeln!(out, "{name}_bucket{{le=\"+Inf\"}} {count}");
-        let _ = writeln!(out, "{name}_sum {}", get(&self.latency_sum_ns) as f64 * 1e-9);
+        let _ = writeln!(
+            out,
+            "{name}_sum {}",
+            get(&self.latency_sum_ns) as f64 * 1e-9
+        );
         let _ = writeln!(out, "{name}_count {count}");
         if let Some(rss) = resident_memory_bytes() {
-            gauge(&mut out, "process_resident_memory_bytes", "Resident set size.", rss as f64);
+            gauge(
+                &mut out,
+                "process_resident_memory_bytes",
+                "Resident set size.",
+                rss as f64,
+            );
         }
         out
     }
@@ -91,9 +144,18 @@ mod tests {
         m.observe_frame_latency(Duration::from_millis(2));
         m.observe_frame_latency(Duration::from_secs(1));
         let text = m.render(3);
-        assert!(text.contains("navguard_frame_latency_seconds_bucket{le=\"0.000025\"} 1"), "{text}");
-        assert!(text.contains("navguard_frame_latency_seconds_bucket{le=\"0.0025\"} 2"), "{text}");
-        assert!(text.contains("navguard_frame_latency_seconds_bucket{le=\"+Inf\"} 3"), "{text}");
+        assert!(
+            text.contains("navguard_frame_latency_seconds_bucket{le=\"0.000025\"} 1"),
+            "{text}"
+        );
+        assert!(
+            text.contains("navguard_frame_latency_seconds_bucket{le=\"0.0025\"} 2"),
+            "{text}"
+        );
+        assert!(
+            text.contains("navguard_frame_latency_seconds_bucket{le=\"+Inf\"} 3"),
+            "{text}"
+        );
         assert!(text.contains("navguard_sessions 3"));
     }
 }

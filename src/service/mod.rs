@@ -40,7 +40,9 @@ pub fn now_ms() -> i64 {
 #[derive(Debug, thiserror::Error)]
 pub enum StartError {
     /// DESIGN §4.5: a non-loopback address needs a token.
-    #[error("refusing to bind {0} without a token: set --token or NAVGUARD_TOKEN, or bind a loopback address")]
+    #[error(
+        "refusing to bind {0} without a token: set --token or NAVGUARD_TOKEN, or bind a loopback address"
+    )]
     OpenWithoutToken(SocketAddr),
     /// The store could not be opened.
     #[error("store: {0}")]
@@ -86,8 +88,12 @@ pub async fn start(config: ServiceConfig) -> Result<Server, StartError> {
             return Err(StartError::StoredSession(id, "duplicate id".into()));
         }
     }
-    let listener = TcpListener::bind(state.config.bind).await.map_err(|e| StartError::Bind(state.config.bind, e))?;
-    let addr = listener.local_addr().map_err(|e| StartError::Bind(state.config.bind, e))?;
+    let listener = TcpListener::bind(state.config.bind)
+        .await
+        .map_err(|e| StartError::Bind(state.config.bind, e))?;
+    let addr = listener
+        .local_addr()
+        .map_err(|e| StartError::Bind(state.config.bind, e))?;
     let router = app(state.clone());
     let mut stop = state.shutdown.clone();
     let task = tokio::spawn(async move {
@@ -98,7 +104,12 @@ pub async fn start(config: ServiceConfig) -> Result<Server, StartError> {
             .await
     });
     tracing::info!(%addr, "navguard listening");
-    Ok(Server { addr, state, shutdown: shutdown_tx, task })
+    Ok(Server {
+        addr,
+        state,
+        shutdown: shutdown_tx,
+        task,
+    })
 }
 
 impl Server {

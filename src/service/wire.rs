@@ -183,7 +183,7 @@ struct WireEpoch {
 pub struct FrameError {
     /// Machine-readable code (`malformed_json`, `non_finite`, `unknown_input`,
     /// `wrong_length`, `invalid_epoch`, `time_backwards`, `frame_too_large`,
-    /// `batch_too_large`, `empty_batch`, `numerical`, `session_gone`).
+    /// `batch_too_large`, `empty_batch`, `numerical`).
     pub code: &'static str,
     /// Human-readable reason.
     pub message: String,
@@ -194,7 +194,11 @@ pub struct FrameError {
 impl FrameError {
     /// Builds an error without an epoch index.
     pub fn new(code: &'static str, message: impl Into<String>) -> Self {
-        FrameError { code, message: message.into(), index: None }
+        FrameError {
+            code,
+            message: message.into(),
+            index: None,
+        }
     }
 
     /// Attaches the epoch index.
@@ -230,7 +234,10 @@ fn has_non_finite_token(text: &str) -> bool {
 fn classify(err: serde_json::Error, text: &str) -> FrameError {
     let message = err.to_string();
     if message.contains("number out of range") || (err.is_syntax() && has_non_finite_token(text)) {
-        return FrameError::new("non_finite", format!("non-finite number in frame: {message}"));
+        return FrameError::new(
+            "non_finite",
+            format!("non-finite number in frame: {message}"),
+        );
     }
     if message.contains("unknown field") {
         return FrameError::new("unknown_input", message);
@@ -248,7 +255,10 @@ fn finite(what: &str, values: &[f64]) -> Result<(), FrameError> {
     if values.iter().all(|v| v.is_finite()) {
         Ok(())
     } else {
-        Err(FrameError::new("non_finite", format!("{what} holds a non-finite number")))
+        Err(FrameError::new(
+            "non_finite",
+            format!("{what} holds a non-finite number"),
+        ))
     }
 }
 
@@ -256,7 +266,10 @@ fn latitude(what: &str, lat_deg: f64) -> Result<f64, FrameError> {
     if (-90.0..=90.0).contains(&lat_deg) {
         Ok(lat_deg.to_radians())
     } else {
-        Err(FrameError::new("invalid_epoch", format!("{what} = {lat_deg}° is outside [-90, 90]")))
+        Err(FrameError::new(
+            "invalid_epoch",
+            format!("{what} = {lat_deg}° is outside [-90, 90]"),
+        ))
     }
 }
 
@@ -264,7 +277,10 @@ fn longitude(what: &str, lon_deg: f64) -> Result<f64, FrameError> {
     if (-360.0..=360.0).contains(&lon_deg) {
         Ok(lon_deg.to_radians())
     } else {
-        Err(FrameError::new("invalid_epoch", format!("{what} = {lon_deg}° is outside [-360, 360]")))
+        Err(FrameError::new(
+            "invalid_epoch",
+            format!("{what} = {lon_deg}° is outside [-360, 360]"),
+        ))
     }
 }
 
@@ -298,7 +314,12 @@ impl TryFrom<WireEpoch> for Epoch {
                 if let Some(v) = &g.vel {
                     finite("gnss.vel", v)?;
                 }
-                Some(GnssBlock { lat: latitude("gnss.lat", g.lat)?, lon: longitude("gnss.lon", g.lon)?, h: g.h, vel: g.vel })
+                Some(GnssBlock {
+                    lat: latitude("gnss.lat", g.lat)?,
+                    lon: longitude("gnss.lon", g.lon)?,
+                    h: g.h,
+                    vel: g.vel,
+                })
             }
             None => None,
         };
@@ -312,7 +333,10 @@ impl TryFrom<WireEpoch> for Epoch {
         let cns = match w.cns {
             Some(c) => {
                 finite("cns", &[c.lat, c.lon])?;
-                Some(CnsBlock { lat: latitude("cns.lat", c.lat)?, lon: longitude("cns.lon", c.lon)? })
+                Some(CnsBlock {
+                    lat: latitude("cns.lat", c.lat)?,
+                    lon: longitude("cns.lon", c.lon)?,
+                })
             }
             None => None,
         };
@@ -322,7 +346,10 @@ impl TryFrom<WireEpoch> for Epoch {
                 if let Some(tas) = a.tas {
                     finite("ads.tas", &[tas])?;
                 }
-                Some(AdsBlock { baro_h: a.baro_h, tas: a.tas })
+                Some(AdsBlock {
+                    baro_h: a.baro_h,
+                    tas: a.tas,
+                })
             }
             None => None,
         };
@@ -357,7 +384,19 @@ impl TryFrom<WireEpoch> for Epoch {
             }
             None => None,
         };
-        Ok(Epoch { t: w.t, ins, gnss, dvl_vel_b, cns, ads, tacan_range_m, gyros: w.gyros, channels, z: w.z, u: w.u })
+        Ok(Epoch {
+            t: w.t,
+            ins,
+            gnss,
+            dvl_vel_b,
+            cns,
+            ads,
+            tacan_range_m,
+            gyros: w.gyros,
+            channels,
+            z: w.z,
+            u: w.u,
+        })
     }
 }
 
@@ -371,12 +410,18 @@ pub fn parse_frame(text: &str, max_batch: usize) -> Result<Vec<Epoch>, FrameErro
         vec![serde_json::from_str(text).map_err(|e| classify(e, text))?]
     };
     if wire.is_empty() {
-        return Err(FrameError::new("empty_batch", "a batch must hold at least one epoch"));
+        return Err(FrameError::new(
+            "empty_batch",
+            "a batch must hold at least one epoch",
+        ));
     }
     if wire.len() > max_batch {
         return Err(FrameError::new(
             "batch_too_large",
-            format!("batch holds {} epochs, the limit is {max_batch}", wire.len()),
+            format!(
+                "batch holds {} epochs, the limit is {max_batch}",
+                wire.len()
+            ),
         ));
     }
     let mut epochs = Vec::with_capacity(wire.len());
@@ -416,7 +461,13 @@ pub struct TestResultWire {
 impl TestResultWire {
     /// From a statistic and the decided health.
     pub fn new(s: &Statistic, state: Health) -> Self {
-        TestResultWire { statistic: s.value, threshold: s.threshold, dof: s.dof, test_ratio: s.test_ratio(), state }
+        TestResultWire {
+            statistic: s.value,
+            threshold: s.threshold,
+            dof: s.dof,
+            test_ratio: s.test_ratio(),
+            state,
+        }
     }
 }
 
@@ -507,7 +558,12 @@ pub struct ErrorEvent<'a> {
 
 impl<'a> From<&'a FrameError> for ErrorEvent<'a> {
     fn from(e: &'a FrameError) -> Self {
-        ErrorEvent { kind: "error", code: e.code, message: &e.message, index: e.index }
+        ErrorEvent {
+            kind: "error",
+            code: e.code,
+            message: &e.message,
+            index: e.index,
+        }
     }
 }
 
@@ -564,19 +620,32 @@ mod tests {
         assert_eq!(code(r#"{"t": 1, "z": [Infinity]}"#), "non_finite");
         assert_eq!(code(r#"{"t": 1e999}"#), "non_finite");
         assert_eq!(code(r#"{"t": 1, "lidar": {}}"#), "unknown_input");
-        assert_eq!(code(r#"{"t": 1, "ins": {"lat":0,"lon":0,"h":0,"vel":[1,2],"att":[0,0,0]}}"#), "wrong_length");
-        assert_eq!(code(r#"{"t": 1, "gnss": {"lat":91,"lon":0,"h":0}}"#), "invalid_epoch");
+        assert_eq!(
+            code(r#"{"t": 1, "ins": {"lat":0,"lon":0,"h":0,"vel":[1,2],"att":[0,0,0]}}"#),
+            "wrong_length"
+        );
+        assert_eq!(
+            code(r#"{"t": 1, "gnss": {"lat":91,"lon":0,"h":0}}"#),
+            "invalid_epoch"
+        );
         assert_eq!(code(r#"{"z": [1]}"#), "invalid_epoch");
         assert_eq!(code(r#"[{"t": 2}, {"t": 1}]"#), "time_backwards");
         assert_eq!(code(r#"[]"#), "empty_batch");
-        assert_eq!(code(r#"[{"t":1},{"t":2},{"t":3},{"t":4}]"#), "batch_too_large");
+        assert_eq!(
+            code(r#"[{"t":1},{"t":2},{"t":3},{"t":4}]"#),
+            "batch_too_large"
+        );
         // A NaN inside a string is not a non-finite number.
         assert_eq!(code(r#"{"t": 1, "note": "NaN"}"#), "unknown_input");
     }
 
     #[test]
     fn batch_errors_name_the_epoch() {
-        let e = parse_frame(r#"[{"t": 0}, {"t": 1, "gnss": {"lat":95,"lon":0,"h":0}}]"#, 5).unwrap_err();
+        let e = parse_frame(
+            r#"[{"t": 0}, {"t": 1, "gnss": {"lat":95,"lon":0,"h":0}}]"#,
+            5,
+        )
+        .unwrap_err();
         assert_eq!(e.index, Some(1));
     }
 

@@ -36,7 +36,10 @@ pub fn ws(server: &Server) -> String {
 
 /// Opens a WebSocket.
 pub async fn connect(url: &str) -> Socket {
-    tokio_tungstenite::connect_async(url).await.expect("socket connects").0
+    tokio_tungstenite::connect_async(url)
+        .await
+        .expect("socket connects")
+        .0
 }
 
 /// Receives the next text message as JSON (10 s timeout).
@@ -69,12 +72,18 @@ pub async fn recv_until(socket: &mut Socket, pred: impl Fn(&Value) -> bool) -> (
 
 /// Sends a JSON value as one text frame.
 pub async fn send(socket: &mut Socket, value: &Value) {
-    socket.send(Message::Text(value.to_string().into())).await.expect("send");
+    socket
+        .send(Message::Text(value.to_string().into()))
+        .await
+        .expect("send");
 }
 
 /// Sends raw text as one frame.
 pub async fn send_text(socket: &mut Socket, text: &str) {
-    socket.send(Message::Text(text.to_owned().into())).await.expect("send");
+    socket
+        .send(Message::Text(text.to_owned().into()))
+        .await
+        .expect("send");
 }
 
 /// Opens the ingest socket of `session` and waits for its `ready` message.
@@ -94,7 +103,10 @@ pub struct Gauss {
 impl Gauss {
     /// A source seeded with `seed`.
     pub fn new(seed: u64) -> Self {
-        Gauss { state: seed, spare: None }
+        Gauss {
+            state: seed,
+            spare: None,
+        }
     }
 
     fn next_u64(&mut self) -> u64 {
@@ -171,7 +183,8 @@ impl CvModel {
 
 /// A session body with one `linear` monitor named `cv`.
 pub fn cv_session(id: &str, model: &CvModel, policy: Value, threshold: Value, echo: bool) -> Value {
-    let mut monitor = json!({"name": "cv", "type": "linear", "config": model.config(), "policy": policy});
+    let mut monitor =
+        json!({"name": "cv", "type": "linear", "config": model.config(), "policy": policy});
     for (k, v) in threshold.as_object().expect("threshold object") {
         monitor[k] = v.clone();
     }
@@ -180,7 +193,12 @@ pub fn cv_session(id: &str, model: &CvModel, policy: Value, threshold: Value, ec
 
 /// POSTs a session and asserts 201.
 pub async fn create_session(client: &reqwest::Client, server: &Server, body: &Value) -> Value {
-    let resp = client.post(format!("{}/api/v1/sessions", http(server))).json(body).send().await.unwrap();
+    let resp = client
+        .post(format!("{}/api/v1/sessions", http(server)))
+        .json(body)
+        .send()
+        .await
+        .unwrap();
     let status = resp.status();
     let text = resp.text().await.unwrap();
     assert_eq!(status, 201, "{text}");
@@ -189,5 +207,8 @@ pub async fn create_session(client: &reqwest::Client, server: &Server, body: &Va
 
 /// Epoch frames for measurements starting at time index `from`.
 pub fn epochs(z: &[f64], from: usize) -> Vec<Value> {
-    z.iter().enumerate().map(|(i, z)| json!({"t": (from + i) as f64, "z": [z]})).collect()
+    z.iter()
+        .enumerate()
+        .map(|(i, z)| json!({"t": (from + i) as f64, "z": [z]}))
+        .collect()
 }

@@ -25,6 +25,8 @@ pub struct AlarmsQuery {
     until: Option<i64>,
     /// Only ids below this (the `next_before` of the previous page).
     before: Option<i64>,
+    /// Only ids above this (catch up after a reconnect: the newest id seen).
+    after: Option<i64>,
     limit: Option<i64>,
 }
 
@@ -32,15 +34,22 @@ pub struct AlarmsQuery {
 #[derive(Debug, Serialize)]
 pub struct AlarmPage {
     alarms: Vec<AlarmRecord>,
-    /// Pass as `before` for the next (older) page; absent on the last page.
+    /// Pass as `before` for the next (older) page; `null` when this page is
+    /// shorter than `limit` (a full last page leads to one empty page).
     next_before: Option<i64>,
 }
 
-/// `GET /api/v1/alarms?session=&monitor=&since=&until=&before=&limit=`
-pub async fn list(State(state): State<AppState>, ApiQuery(q): ApiQuery<AlarmsQuery>) -> Result<Json<AlarmPage>, ApiError> {
+/// `GET /api/v1/alarms?session=&monitor=&since=&until=&before=&after=&limit=`
+pub async fn list(
+    State(state): State<AppState>,
+    ApiQuery(q): ApiQuery<AlarmsQuery>,
+) -> Result<Json<AlarmPage>, ApiError> {
     let limit = q.limit.unwrap_or(DEFAULT_LIMIT);
     if !(1..=MAX_LIMIT).contains(&limit) {
-        return Err(ApiError::invalid("limit", format!("must be between 1 and {MAX_LIMIT}")));
+        return Err(ApiError::invalid(
+            "limit",
+            format!("must be between 1 and {MAX_LIMIT}"),
+        ));
     }
     let query = AlarmQuery {
         session: q.session,
@@ -48,9 +57,17 @@ pub async fn list(State(state): State<AppState>, ApiQuery(q): ApiQuery<AlarmsQue
         since_ms: q.since,
         until_ms: q.until,
         before_id: q.before,
+        after_id: q.after,
         limit,
     };
     let alarms = state.store.alarms(&query).await?;
-    let next_before = if alarms.len() as i64 == limit { alarms.last().map(|a| a.id) } else { None };
-    Ok(Json(AlarmPage { alarms, next_before }))
+    let next_before = if alarms.len() as i64 == limit {
+        alarms.last().map(|a| a.id)
+    } else {
+        None
+    };
+    Ok(Json(AlarmPage {
+        alarms,
+        next_before,
+    }))
 }

@@ -27,12 +27,18 @@ fn invalid(e: chi2::Chi2Error, field: &str) -> ApiError {
 }
 
 /// `T_D = F⁻¹_{χ²(dof)}(1 − p_fa)`.
-pub async fn threshold(ApiQuery(q): ApiQuery<ThresholdQuery>) -> Result<Json<ThresholdAnswer>, ApiError> {
+pub async fn threshold(
+    ApiQuery(q): ApiQuery<ThresholdQuery>,
+) -> Result<Json<ThresholdAnswer>, ApiError> {
     if q.dof == 0 {
         return Err(ApiError::invalid("dof", "must be at least 1"));
     }
     let threshold = chi2::threshold(q.dof, q.p_fa).map_err(|e| invalid(e, "p_fa"))?;
-    Ok(Json(ThresholdAnswer { dof: q.dof, p_fa: q.p_fa, threshold }))
+    Ok(Json(ThresholdAnswer {
+        dof: q.dof,
+        p_fa: q.p_fa,
+        threshold,
+    }))
 }
 
 /// Query of `GET /api/v1/chi2/missed-detection`: the threshold as `threshold`
@@ -70,18 +76,38 @@ pub async fn missed_detection(
             t
         }
         (None, Some(p)) => chi2::threshold(q.dof, p).map_err(|e| invalid(e, "p_fa"))?,
-        _ => return Err(ApiError::invalid("threshold", "give exactly one of `threshold` or `p_fa`")),
-    };
-    let p_fa = chi2::false_alarm_probability(q.dof, threshold).map_err(|e| invalid(e, "threshold"))?;
-    let (noncentrality, p_md) = match (q.noncentrality, q.p_md) {
-        (Some(lambda), None) => {
-            (lambda, chi2::missed_detection(q.dof, threshold, lambda).map_err(|e| invalid(e, "noncentrality"))?)
+        _ => {
+            return Err(ApiError::invalid(
+                "threshold",
+                "give exactly one of `threshold` or `p_fa`",
+            ));
         }
+    };
+    let p_fa =
+        chi2::false_alarm_probability(q.dof, threshold).map_err(|e| invalid(e, "threshold"))?;
+    let (noncentrality, p_md) = match (q.noncentrality, q.p_md) {
+        (Some(lambda), None) => (
+            lambda,
+            chi2::missed_detection(q.dof, threshold, lambda)
+                .map_err(|e| invalid(e, "noncentrality"))?,
+        ),
         (None, Some(p_md)) => (
-            chi2::noncentrality_for_missed_detection(q.dof, threshold, p_md).map_err(|e| invalid(e, "p_md"))?,
+            chi2::noncentrality_for_missed_detection(q.dof, threshold, p_md)
+                .map_err(|e| invalid(e, "p_md"))?,
             p_md,
         ),
-        _ => return Err(ApiError::invalid("noncentrality", "give exactly one of `noncentrality` or `p_md`")),
+        _ => {
+            return Err(ApiError::invalid(
+                "noncentrality",
+                "give exactly one of `noncentrality` or `p_md`",
+            ));
+        }
     };
-    Ok(Json(MissedDetectionAnswer { dof: q.dof, threshold, p_fa, noncentrality, p_md }))
+    Ok(Json(MissedDetectionAnswer {
+        dof: q.dof,
+        threshold,
+        p_fa,
+        noncentrality,
+        p_md,
+    }))
 }

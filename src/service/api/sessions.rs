@@ -5,6 +5,7 @@ use axum::extract::{Path, State};
 use axum::http::StatusCode;
 use serde::Serialize;
 
+use crate::detect::{Health, ThresholdSpec};
 use crate::service::app::AppState;
 use crate::service::error::ApiError;
 use crate::service::extract::ApiJson;
@@ -13,7 +14,6 @@ use crate::service::session::actor;
 use crate::service::session::{SessionHandle, SessionStats, validate_session};
 use crate::service::store::StoredSession;
 use crate::service::wire::{CreateSession, MonitorSpecWire};
-use crate::detect::Health;
 
 /// A test's effective threshold and current state, in a session view.
 #[derive(Debug, Serialize)]
@@ -54,14 +54,29 @@ fn view(handle: &SessionHandle) -> SessionView {
                 .map(|m| {
                     m.tests
                         .iter()
-                        .map(|(name, t)| (*name, TestView { dof: t.dof, threshold: t.threshold, state: t.state }))
+                        .map(|(name, t)| {
+                            (
+                                *name,
+                                TestView {
+                                    dof: t.dof,
+                                    threshold: t.threshold,
+                                    state: t.state,
+                                },
+                            )
+                        })
                         .collect()
                 })
                 .unwrap_or_default();
             MonitorView { spec, tests }
         })
         .collect();
-    SessionView { id: stored.id, echo: stored.echo, created_at_ms: stored.created_at_ms, connected: stats.connected, monitors }
+    SessionView {
+        id: stored.id,
+        echo: stored.echo,
+        created_at_ms: stored.created_at_ms,
+        connected: stats.connected,
+        monitors,
+    }
 }
 
 /// A fresh id: time and a process-wide counter, base 36.
@@ -85,20 +100,33 @@ pub async fn create(
     ApiJson(req): ApiJson<CreateSession>,
 ) -> Result<(StatusCode, Json<SessionView>), ApiError> {
     validate_session(&req, &state.config.limits)?;
+    let mut monitors = req.monitors;
+    // State the default threshold explicitly so every view shows what is in force.
+    for m in &mut monitors {
+        if m.p_fa.is_none() && m.threshold.is_none() {
+            m.p_fa = ThresholdSpec::default().p_fa_part();
+        }
+    }
     let stored = StoredSession {
         id: req.id.clone().unwrap_or_else(new_id),
         echo: req.echo,
-        monitors: req.monitors,
+        monitors,
         created_at_ms: now_ms(),
     };
     // Building the actor validates every monitor (422 naming the field).
     let handle = actor::spawn(stored.clone(), state.actor_deps())?;
-    if let Err((handle, duplicate)) = state.registry.try_insert(handle, state.config.limits.max_sessions) {
+    if let Err((handle, duplicate)) = state
+        .registry
+        .try_insert(handle, state.config.limits.max_sessions)
+    {
         handle.shutdown().await;
         return Err(if duplicate {
             ApiError::Conflict(format!("session '{}' already exists", stored.id))
         } else {
-            ApiError::TooLarge(format!("the server holds its limit of {} sessions", state.config.limits.max_sessions))
+            ApiError::TooLarge(format!(
+                "the server holds its limit of {} sessions",
+                state.config.limits.max_sessions
+            ))
         });
     }
     if let Err(e) = state.store.put_session(&stored).await {
@@ -107,7 +135,10 @@ pub async fn create(
         }
         return Err(e.into());
     }
-    let handle = state.registry.get(&stored.id).ok_or_else(|| ApiError::NotFound(format!("no session '{}'", stored.id)))?;
+    let handle = state
+        .registry
+        .get(&stored.id)
+        .ok_or_else(|| ApiError::NotFound(format!("no session '{}'", stored.id)))?;
     Ok((StatusCode::CREATED, Json(view(&handle))))
 }
 
@@ -119,27 +150,44 @@ pub struct SessionList {
 
 /// `GET /api/v1/sessions`
 pub async fn list(State(state): State<AppState>) -> Json<SessionList> {
-    Json(SessionList { sessions: state.registry.list().iter().map(view).collect() })
+    Json(SessionList {
+        sessions: state.registry.list().iter().map(view).collect(),
+    })
 }
 
 fn lookup(state: &AppState, id: &str) -> Result<SessionHandle, ApiError> {
-    state.registry.get(id).ok_or_else(|| ApiError::NotFound(format!("no session '{id}'")))
+    state
+        .registry
+        .get(id)
+        .ok_or_else(|| ApiError::NotFound(format!("no session '{id}'")))
 }
 
 /// `GET /api/v1/sessions/{id}`
-pub async fn get(State(state): State<AppState>, Path(id): Path<String>) -> Result<Json<SessionView>, ApiError> {
+pub async fn get(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<SessionView>, ApiError> {
     Ok(Json(view(&lookup(&state, &id)?)))
 }
 
 /// `DELETE /api/v1/sessions/{id}` → 204. The session's alarms stay in the log.
-pub async fn delete(State(state): State<AppState>, Path(id): Path<String>) -> Result<StatusCode, ApiError> {
-    let handle = state.registry.remove(&id).ok_or_else(|| ApiError::NotFound(format!("no session '{id}'")))?;
+pub async fn delete(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<StatusCode, ApiError> {
+    let handle = state
+        .registry
+        .remove(&id)
+        .ok_or_else(|| ApiError::NotFound(format!("no session '{id}'")))?;
     handle.shutdown().await;
     state.store.delete_session(&id).await?;
     Ok(StatusCode::NO_CONTENT)
 }
 
 /// `GET /api/v1/sessions/{id}/stats`
-pub async fn stats(State(state): State<AppState>, Path(id): Path<String>) -> Result<Json<SessionStats>, ApiError> {
+pub async fn stats(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<SessionStats>, ApiError> {
     Ok(Json(lookup(&state, &id)?.stats().await?))
 }

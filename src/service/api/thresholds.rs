@@ -14,7 +14,10 @@ pub async fn get(
     State(state): State<AppState>,
     Path((id, name)): Path<(String, String)>,
 ) -> Result<Json<ThresholdView>, ApiError> {
-    let handle = state.registry.get(&id).ok_or_else(|| ApiError::NotFound(format!("no session '{id}'")))?;
+    let handle = state
+        .registry
+        .get(&id)
+        .ok_or_else(|| ApiError::NotFound(format!("no session '{id}'")))?;
     Ok(Json(handle.threshold(&name).await?))
 }
 
@@ -24,7 +27,10 @@ pub async fn put(
     Path((id, name)): Path<(String, String)>,
     ApiJson(update): ApiJson<ThresholdUpdate>,
 ) -> Result<Json<ThresholdView>, ApiError> {
-    let handle = state.registry.get(&id).ok_or_else(|| ApiError::NotFound(format!("no session '{id}'")))?;
+    let handle = state
+        .registry
+        .get(&id)
+        .ok_or_else(|| ApiError::NotFound(format!("no session '{id}'")))?;
     let (view, stored) = handle.set_threshold(&name, update).await?;
     state.store.put_session(&stored).await?;
     Ok(Json(view))

@@ -12,7 +12,7 @@ use serde::Serialize;
 use tokio::sync::{mpsc, watch};
 
 use super::handle::{ControlCommand, FrameCommand, IngestLink, SessionHandle, SessionShared};
-use super::spec::build_monitors;
+use super::spec::{NamedMonitors, build_monitors};
 use super::stats::{MonitorStats, SessionStats, TestStats};
 use crate::detect::{Health, ThresholdSpec};
 use crate::monitor::{Epoch, Monitor, MonitorReport, TestOutcome};
@@ -21,8 +21,8 @@ use crate::service::metrics::Metrics;
 use crate::service::now_ms;
 use crate::service::store::{Store, StoredSession};
 use crate::service::wire::{
-    self, AlarmRecord, ErrorEvent, FrameError, MonitorResultWire, StateChange, TestThreshold, ThresholdUpdate,
-    ThresholdView,
+    self, AlarmRecord, ErrorEvent, FrameError, MonitorResultWire, StateChange, TestThreshold,
+    ThresholdUpdate, ThresholdView,
 };
 
 /// Frames queued per session before the ingest socket stops reading.
@@ -71,11 +71,17 @@ pub fn spawn(stored: StoredSession, deps: ActorDeps) -> Result<SessionHandle, Ap
     let (stats_tx, stats_rx) = watch::channel(Arc::new(stats.clone()));
     let (frames_tx, frames_rx) = mpsc::channel(FRAME_QUEUE);
     let (control_tx, control_rx) = mpsc::channel(CONTROL_QUEUE);
-    let shared = Arc::new(SessionShared { stored: std::sync::Mutex::new(stored.clone()), subscribers: Default::default() });
+    let shared = Arc::new(SessionShared {
+        stored: std::sync::Mutex::new(stored.clone()),
+        subscribers: Default::default(),
+    });
     let actor = Actor {
         id: id.clone(),
         echo: stored.echo,
-        monitors: monitors.into_iter().map(|(name, monitor)| NamedMonitor { name, monitor }).collect(),
+        monitors: monitors
+            .into_iter()
+            .map(|(name, monitor)| NamedMonitor { name, monitor })
+            .collect(),
         stats,
         deps,
         shared: shared.clone(),
@@ -87,10 +93,12 @@ pub fn spawn(stored: StoredSession, deps: ActorDeps) -> Result<SessionHandle, Ap
         rate_window: (Instant::now(), 0),
     };
     tokio::spawn(actor.run(frames_rx, control_rx));
-    Ok(SessionHandle::new(id, frames_tx, control_tx, stats_rx, shared))
+    Ok(SessionHandle::new(
+        id, frames_tx, control_tx, stats_rx, shared,
+    ))
 }
 
-fn initial_stats(id: &str, monitors: &[(String, Box<dyn Monitor>)]) -> SessionStats {
+fn initial_stats(id: &str, monitors: &NamedMonitors) -> SessionStats {
     SessionStats {
         session: id.to_owned(),
         connected: false,
@@ -99,12 +107,26 @@ fn initial_stats(id: &str, monitors: &[(String, Box<dyn Monitor>)]) -> SessionSt
         frame_errors: 0,
         last_t: None,
         last_frame_at_ms: None,
+        published_at_ms: now_ms(),
         epochs_per_s: 0.0,
         monitors: monitors
             .iter()
             .map(|(name, m)| {
-                let tests = m.tests().slots().iter().map(|s| (s.name, TestStats::new(s.dof, s.threshold))).collect();
-                (name.clone(), MonitorStats { kind: m.kind().as_str(), epochs: 0, worst_test_ratio: None, tests })
+                let tests = m
+                    .tests()
+                    .slots()
+                    .iter()
+                    .map(|s| (s.name, TestStats::new(s.dof, s.threshold)))
+                    .collect();
+                (
+                    name.clone(),
+                    MonitorStats {
+                        kind: m.kind().as_str(),
+                        epochs: 0,
+                        worst_test_ratio: None,
+                        tests,
+                    },
+                )
             })
             .collect(),
     }
@@ -120,13 +142,17 @@ struct ResultFrame<'a> {
 }
 
 impl Actor {
-    async fn run(mut self, mut frames: mpsc::Receiver<FrameCommand>, mut control: mpsc::Receiver<ControlCommand>) {
+    async fn run(
+        mut self,
+        mut frames: mpsc::Receiver<FrameCommand>,
+        mut control: mpsc::Receiver<ControlCommand>,
+    ) {
         loop {
             tokio::select! {
                 biased;
                 command = control.recv() => match command {
                     Some(ControlCommand::Shutdown) | None => break,
-                    Some(command) => self.control(command),
+                    Some(command) => self.control(command).await,
                 },
                 frame = frames.recv() => match frame {
                     Some(frame) => self.frame(frame).await,
@@ -135,19 +161,26 @@ impl Actor {
             }
         }
         // Close every event subscriber's queue so their sockets end too.
-        self.shared.subscribers.lock().unwrap_or_else(|p| p.into_inner()).clear();
+        self.shared
+            .subscribers
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clear();
         tracing::debug!(session = %self.id, "session actor stopped");
     }
 
-    fn control(&mut self, command: ControlCommand) {
+    async fn control(&mut self, command: ControlCommand) {
         match command {
             ControlCommand::Attach(reply) => {
-                let _ = reply.send(self.attach());
+                let attached = self.attach().await;
+                let _ = reply.send(attached);
             }
             ControlCommand::Detach(stream) => {
                 if stream == self.stream {
                     self.ingest = None;
                     self.stats.connected = false;
+                    self.stats.epochs_per_s = 0.0;
+                    self.rate_window = (Instant::now(), 0);
                     self.publish(true);
                 }
             }
@@ -158,19 +191,55 @@ impl Actor {
                 let _ = reply.send(self.set_threshold(&name, update));
             }
             ControlCommand::Stats(reply) => {
+                self.stats.published_at_ms = now_ms();
                 let _ = reply.send(self.stats.clone());
             }
             ControlCommand::Shutdown => {}
         }
     }
 
-    fn attach(&mut self) -> Result<IngestLink, ApiError> {
+    async fn attach(&mut self) -> Result<IngestLink, ApiError> {
         if self.ingest.as_ref().is_some_and(|tx| !tx.is_closed()) {
-            return Err(ApiError::Conflict(format!("session '{}' already has an ingest stream attached", self.id)));
+            return Err(ApiError::Conflict(format!(
+                "session '{}' already has an ingest stream attached",
+                self.id
+            )));
         }
-        // DESIGN §4.1: filter state starts afresh when a session's stream reconnects.
+        // DESIGN §4.1: filter state starts afresh when a session's stream
+        // reconnects. Tests left suspect or isolated by the previous stream
+        // return to healthy: say so, and clear their open alarms.
+        let mut returned = Vec::new();
         for m in &mut self.monitors {
+            for slot in m.monitor.tests().slots() {
+                if slot.policy.health() != Health::Healthy {
+                    returned.push((m.name.clone(), slot.name, slot.policy.health()));
+                }
+            }
             m.monitor.reset();
+        }
+        let t = self.last_t;
+        for (monitor, test, from) in returned {
+            if let Err(e) = self
+                .deps
+                .store
+                .clear_alarms(&self.id, &monitor, test, t)
+                .await
+            {
+                tracing::error!(session = %self.id, error = %e, "could not mark alarms cleared");
+            }
+            let change = StateChange {
+                session: self.id.to_string(),
+                monitor,
+                test: test.to_owned(),
+                t: t.unwrap_or(0.0),
+                from,
+                to: Health::Healthy,
+            };
+            self.broadcast(&Arc::from(wire::tagged("state", &change)));
+        }
+        // Alarms left open by a stream that ended before a restart are closed too.
+        if let Err(e) = self.deps.store.clear_session_alarms(&self.id).await {
+            tracing::error!(session = %self.id, error = %e, "could not mark alarms cleared");
         }
         self.last_t = None;
         self.stream += 1;
@@ -178,19 +247,30 @@ impl Actor {
         self.ingest = Some(tx);
         self.stats.connected = true;
         for (m, monitor_stats) in self.monitors.iter().zip(self.stats.monitors.values_mut()) {
-            for (slot, test) in m.monitor.tests().slots().iter().zip(monitor_stats.tests.values_mut()) {
+            for (slot, test) in m
+                .monitor
+                .tests()
+                .slots()
+                .iter()
+                .zip(monitor_stats.tests.values_mut())
+            {
                 test.state = slot.policy.health();
             }
         }
         self.publish(true);
-        Ok(IngestLink { stream: self.stream, outgoing: rx })
+        Ok(IngestLink {
+            stream: self.stream,
+            outgoing: rx,
+        })
     }
 
     fn find(&self, name: &str) -> Result<usize, ApiError> {
         self.monitors
             .iter()
             .position(|m| m.name == name)
-            .ok_or_else(|| ApiError::NotFound(format!("session '{}' has no monitor '{name}'", self.id)))
+            .ok_or_else(|| {
+                ApiError::NotFound(format!("session '{}' has no monitor '{name}'", self.id))
+            })
     }
 
     fn threshold_view(&self, index: usize) -> ThresholdView {
@@ -207,27 +287,47 @@ impl Actor {
                 .iter()
                 .map(|s| {
                     let p_fa = spec.p_fa(s.dof).unwrap_or(f64::NAN);
-                    (s.name.to_owned(), TestThreshold { dof: s.dof, threshold: s.threshold, p_fa })
+                    (
+                        s.name.to_owned(),
+                        TestThreshold {
+                            dof: s.dof,
+                            threshold: s.threshold,
+                            p_fa,
+                        },
+                    )
                 })
                 .collect(),
         }
     }
 
-    fn set_threshold(&mut self, name: &str, update: ThresholdUpdate) -> Result<(ThresholdView, StoredSession), ApiError> {
+    fn set_threshold(
+        &mut self,
+        name: &str,
+        update: ThresholdUpdate,
+    ) -> Result<(ThresholdView, StoredSession), ApiError> {
         let index = self.find(name)?;
         if update.p_fa.is_none() && update.threshold.is_none() && update.policy.is_none() {
-            return Err(ApiError::invalid("", "give `p_fa` or `threshold`, and/or `policy`"));
+            return Err(ApiError::Invalid {
+                field: None,
+                message: "give `p_fa` or `threshold`, and/or `policy`".into(),
+            });
         }
         let spec = match (update.p_fa, update.threshold) {
             (None, None) => None,
-            (p, t) => Some(ThresholdSpec::from_parts(p, t).map_err(|e| ApiError::invalid("p_fa", e.to_string()))?),
+            (p, t) => Some(
+                ThresholdSpec::from_parts(p, t)
+                    .map_err(|e| ApiError::invalid("p_fa", e.to_string()))?,
+            ),
         };
         if let Some(policy) = update.policy {
-            policy.check().map_err(|e| ApiError::invalid("policy", e.to_string()))?;
+            policy
+                .check()
+                .map_err(|e| ApiError::invalid("policy", e.to_string()))?;
         }
         let bank = self.monitors[index].monitor.tests_mut();
         if let Some(spec) = spec {
-            bank.set_spec(spec).map_err(|e| ApiError::invalid("p_fa", e.to_string()))?;
+            bank.set_spec(spec)
+                .map_err(|e| ApiError::invalid("p_fa", e.to_string()))?;
         }
         if let Some(policy) = update.policy {
             bank.set_policy(policy);
@@ -256,7 +356,11 @@ impl Actor {
         if let (Some(last), Some(first)) = (self.last_t, epochs.first())
             && first.t < last
         {
-            return Err(FrameError::new("time_backwards", format!("t = {} goes back from {last}", first.t)).at(0));
+            return Err(FrameError::new(
+                "time_backwards",
+                format!("t = {} goes back from {last}", first.t),
+            )
+            .at(0));
         }
         for (i, epoch) in epochs.iter().enumerate() {
             for m in &self.monitors {
@@ -283,13 +387,20 @@ impl Actor {
     /// Sends to every event subscriber; one whose queue is full is dropped
     /// (its socket closes) rather than silently missing an alarm.
     fn broadcast(&self, text: &Arc<str>) {
-        let mut subscribers = self.shared.subscribers.lock().unwrap_or_else(|p| p.into_inner());
+        let mut subscribers = self
+            .shared
+            .subscribers
+            .lock()
+            .unwrap_or_else(|p| p.into_inner());
         subscribers.retain(|tx| tx.try_send(text.clone()).is_ok());
     }
 
     async fn reject(&mut self, error: FrameError) {
         self.stats.frame_errors += 1;
-        self.deps.metrics.frame_errors.fetch_add(1, Ordering::Relaxed);
+        self.deps
+            .metrics
+            .frame_errors
+            .fetch_add(1, Ordering::Relaxed);
         let text = serde_json::to_string(&ErrorEvent::from(&error)).unwrap_or_default();
         self.send_ingest(text).await;
     }
@@ -350,24 +461,40 @@ impl Actor {
             self.stats.epochs_per_s = self.rate_window.1 as f64 / elapsed.as_secs_f64();
             self.rate_window = (now, 0);
         }
-        self.deps.metrics.observe_frame_latency(now.duration_since(frame.received));
+        self.deps
+            .metrics
+            .observe_frame_latency(now.duration_since(frame.received));
         self.publish(changed);
     }
 
     fn result_frame(&self, t: f64, reports: &[MonitorReport]) -> String {
-        let monitors = self.monitors.iter().zip(reports).map(|(m, r)| (m.name.as_str(), wire::monitor_result(r))).collect();
-        serde_json::to_string(&ResultFrame { kind: "result", t, monitors }).unwrap_or_default()
+        let monitors = self
+            .monitors
+            .iter()
+            .zip(reports)
+            .map(|(m, r)| (m.name.as_str(), wire::monitor_result(r)))
+            .collect();
+        serde_json::to_string(&ResultFrame {
+            kind: "result",
+            t,
+            monitors,
+        })
+        .unwrap_or_default()
     }
 
     /// Updates statistics; announces state changes and alarms. Returns true if any state changed.
     async fn record(&mut self, t: f64, reports: &[MonitorReport]) -> bool {
         let mut transitions: Vec<(usize, TestOutcome, f64)> = Vec::new();
         for (index, (m, report)) in self.monitors.iter().zip(reports).enumerate() {
-            let Some(monitor_stats) = self.stats.monitors.get_mut(&m.name) else { continue };
+            let Some(monitor_stats) = self.stats.monitors.get_mut(&m.name) else {
+                continue;
+            };
             monitor_stats.epochs += 1;
             let mut worst: Option<f64> = None;
             for outcome in &report.tests {
-                let Some(test) = monitor_stats.tests.get_mut(outcome.name) else { continue };
+                let Some(test) = monitor_stats.tests.get_mut(outcome.name) else {
+                    continue;
+                };
                 let delay_s = test.record(t, outcome);
                 let ratio = outcome.statistic.test_ratio();
                 worst = Some(worst.map_or(ratio, |w| w.max(ratio)));
@@ -391,10 +518,22 @@ impl Actor {
     async fn announce(&mut self, index: usize, t: f64, outcome: &TestOutcome, delay_s: f64) {
         let monitor = self.monitors[index].name.clone();
         let (from, to) = (outcome.previous, outcome.decision.health);
-        let change = StateChange { session: self.id.to_string(), monitor: monitor.clone(), test: outcome.name.to_owned(), t, from, to };
+        let change = StateChange {
+            session: self.id.to_string(),
+            monitor: monitor.clone(),
+            test: outcome.name.to_owned(),
+            t,
+            from,
+            to,
+        };
         let state_text: Arc<str> = Arc::from(wire::tagged("state", &change));
         let alarm_text = if to == Health::Healthy {
-            if let Err(e) = self.deps.store.clear_alarms(&self.id, &monitor, outcome.name, t).await {
+            if let Err(e) = self
+                .deps
+                .store
+                .clear_alarms(&self.id, &monitor, outcome.name, Some(t))
+                .await
+            {
                 tracing::error!(session = %self.id, error = %e, "could not mark alarms cleared");
             }
             None
@@ -441,6 +580,7 @@ impl Actor {
         let now = Instant::now();
         if force || now.duration_since(self.last_published) >= STATS_PERIOD {
             self.last_published = now;
+            self.stats.published_at_ms = now_ms();
             self.stats_tx.send_replace(Arc::new(self.stats.clone()));
         }
     }

@@ -50,7 +50,11 @@ pub enum ControlCommand {
     /// Read a monitor's thresholds.
     GetThreshold(String, oneshot::Sender<Result<ThresholdView, ApiError>>),
     /// Change a monitor's threshold and/or policy.
-    SetThreshold(String, ThresholdUpdate, oneshot::Sender<Result<(ThresholdView, StoredSession), ApiError>>),
+    SetThreshold(
+        String,
+        ThresholdUpdate,
+        oneshot::Sender<Result<(ThresholdView, StoredSession), ApiError>>,
+    ),
     /// Current statistics.
     Stats(oneshot::Sender<SessionStats>),
     /// Stop the actor.
@@ -85,7 +89,13 @@ impl SessionHandle {
         stats: watch::Receiver<Arc<SessionStats>>,
         shared: Arc<SessionShared>,
     ) -> Self {
-        SessionHandle { id, frames, control, stats, shared }
+        SessionHandle {
+            id,
+            frames,
+            control,
+            stats,
+            shared,
+        }
     }
 
     /// Session id.
@@ -105,17 +115,28 @@ impl SessionHandle {
 
     /// A copy of the stored spec.
     pub fn stored(&self) -> StoredSession {
-        self.shared.stored.lock().unwrap_or_else(|p| p.into_inner()).clone()
+        self.shared
+            .stored
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone()
     }
 
     /// Registers an event subscriber; returns its queue of JSON messages.
     pub fn subscribe(&self) -> mpsc::Receiver<Arc<str>> {
         let (tx, rx) = mpsc::channel(SUBSCRIBER_QUEUE);
-        self.shared.subscribers.lock().unwrap_or_else(|p| p.into_inner()).push(tx);
+        self.shared
+            .subscribers
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .push(tx);
         rx
     }
 
-    async fn ask<T>(&self, make: impl FnOnce(oneshot::Sender<T>) -> ControlCommand) -> Result<T, ApiError> {
+    async fn ask<T>(
+        &self,
+        make: impl FnOnce(oneshot::Sender<T>) -> ControlCommand,
+    ) -> Result<T, ApiError> {
         let (tx, rx) = oneshot::channel();
         let gone = || ApiError::NotFound(format!("session '{}' has stopped", self.id));
         tokio::time::timeout(CONTROL_TIMEOUT, self.control.send(make(tx)))
@@ -140,7 +161,8 @@ impl SessionHandle {
 
     /// A monitor's thresholds and policy.
     pub async fn threshold(&self, monitor: &str) -> Result<ThresholdView, ApiError> {
-        self.ask(|tx| ControlCommand::GetThreshold(monitor.to_owned(), tx)).await?
+        self.ask(|tx| ControlCommand::GetThreshold(monitor.to_owned(), tx))
+            .await?
     }
 
     /// Applies a threshold/policy change; returns the new view and the spec to persist.
@@ -149,7 +171,8 @@ impl SessionHandle {
         monitor: &str,
         update: ThresholdUpdate,
     ) -> Result<(ThresholdView, StoredSession), ApiError> {
-        self.ask(|tx| ControlCommand::SetThreshold(monitor.to_owned(), update, tx)).await?
+        self.ask(|tx| ControlCommand::SetThreshold(monitor.to_owned(), update, tx))
+            .await?
     }
 
     /// Exact current statistics.

@@ -25,7 +25,11 @@ impl Registry {
 
     /// Inserts unless the id is taken or the map holds `max` sessions;
     /// gives the handle back on failure.
-    pub fn try_insert(&self, handle: SessionHandle, max: usize) -> Result<(), (SessionHandle, bool)> {
+    pub fn try_insert(
+        &self,
+        handle: SessionHandle,
+        max: usize,
+    ) -> Result<(), (SessionHandle, bool)> {
         let mut map = self.lock();
         if map.contains_key(handle.id()) {
             return Err((handle, true));

@@ -10,7 +10,10 @@ use crate::service::wire::{CreateSession, MonitorSpecWire};
 
 /// Ids and names: 1–64 characters of `A–Z a–z 0–9 _ - .`, so they are safe in URLs and logs.
 pub fn valid_name(s: &str) -> bool {
-    !s.is_empty() && s.len() <= 64 && s.bytes().all(|c| c.is_ascii_alphanumeric() || matches!(c, b'_' | b'-' | b'.'))
+    !s.is_empty()
+        && s.len() <= 64
+        && s.bytes()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, b'_' | b'-' | b'.'))
 }
 
 /// Converts a monitor's wire spec into the domain spec.
@@ -23,8 +26,11 @@ pub fn monitor_spec(wire: &MonitorSpecWire) -> Result<MonitorSpec, BuildError> {
     })
 }
 
+/// A monitor with its name in the session.
+pub type NamedMonitors = Vec<(String, Box<dyn Monitor>)>;
+
 /// Builds every monitor of a stored session (used at creation and at restart).
-pub fn build_monitors(session: &StoredSession) -> Result<Vec<(String, Box<dyn Monitor>)>, ApiError> {
+pub fn build_monitors(session: &StoredSession) -> Result<NamedMonitors, ApiError> {
     session
         .monitors
         .iter()
@@ -42,13 +48,18 @@ pub fn build_monitors(session: &StoredSession) -> Result<Vec<(String, Box<dyn Mo
 fn build_error(index: usize, e: BuildError) -> ApiError {
     let prefix = format!("monitors[{index}]");
     match e {
-        BuildError::Config(c) if c.field.is_empty() => ApiError::invalid(format!("{prefix}.config"), c.reason),
-        BuildError::Config(c) => ApiError::invalid(format!("{prefix}.config.{}", c.field), c.reason),
+        BuildError::Config(c) if c.field.is_empty() => {
+            ApiError::invalid(format!("{prefix}.config"), c.reason)
+        }
+        BuildError::Config(c) => {
+            ApiError::invalid(format!("{prefix}.config.{}", c.field), c.reason)
+        }
         BuildError::Policy(p) => ApiError::invalid(format!("{prefix}.policy"), p.to_string()),
         BuildError::Threshold(t) => ApiError::invalid(prefix, t.to_string()),
-        BuildError::Unsupported(kind) => {
-            ApiError::invalid(format!("{prefix}.type"), format!("monitor type '{kind}' is not implemented yet"))
-        }
+        BuildError::Unsupported(kind) => ApiError::invalid(
+            format!("{prefix}.type"),
+            format!("monitor type '{kind}' is not implemented yet"),
+        ),
     }
 }
 
@@ -57,10 +68,16 @@ pub fn validate_session(req: &CreateSession, limits: &Limits) -> Result<(), ApiE
     if let Some(id) = &req.id
         && !valid_name(id)
     {
-        return Err(ApiError::invalid("id", "must be 1-64 characters of A-Z a-z 0-9 _ - ."));
+        return Err(ApiError::invalid(
+            "id",
+            "must be 1-64 characters of A-Z a-z 0-9 _ - .",
+        ));
     }
     if req.monitors.is_empty() {
-        return Err(ApiError::invalid("monitors", "a session needs at least one monitor"));
+        return Err(ApiError::invalid(
+            "monitors",
+            "a session needs at least one monitor",
+        ));
     }
     if req.monitors.len() > limits.max_monitors_per_session {
         return Err(ApiError::TooLarge(format!(
@@ -71,10 +88,16 @@ pub fn validate_session(req: &CreateSession, limits: &Limits) -> Result<(), ApiE
     }
     for (i, m) in req.monitors.iter().enumerate() {
         if !valid_name(&m.name) {
-            return Err(ApiError::invalid(format!("monitors[{i}].name"), "must be 1-64 characters of A-Z a-z 0-9 _ - ."));
+            return Err(ApiError::invalid(
+                format!("monitors[{i}].name"),
+                "must be 1-64 characters of A-Z a-z 0-9 _ - .",
+            ));
         }
         if req.monitors[..i].iter().any(|other| other.name == m.name) {
-            return Err(ApiError::invalid(format!("monitors[{i}].name"), format!("duplicate monitor name '{}'", m.name)));
+            return Err(ApiError::invalid(
+                format!("monitors[{i}].name"),
+                format!("duplicate monitor name '{}'", m.name),
+            ));
         }
     }
     Ok(())

@@ -157,7 +157,10 @@ pub struct SessionStats {
     pub last_t: Option<f64>,
     /// Wall-clock time of the last frame, Unix ms.
     pub last_frame_at_ms: Option<i64>,
-    /// Epochs per second over the last second of wall-clock time.
+    /// Server wall-clock time of this snapshot, Unix ms (to age `last_frame_at_ms`
+    /// without trusting the client's clock).
+    pub published_at_ms: i64,
+    /// Epochs per second over the last second of wall-clock time (0 when detached).
     pub epochs_per_s: f64,
     /// Per monitor.
     pub monitors: BTreeMap<String, MonitorStats>,
@@ -189,7 +192,14 @@ mod tests {
         assert_eq!(stats.state_since_t, Some(4.0));
         assert_eq!(stats.max, Some(30.0));
         assert!((stats.mean.unwrap() - 53.0 / 5.0).abs() < 1e-12);
-        assert_eq!(stats.time_in_state_s, TimeInState { healthy: 1.0, suspect: 1.0, isolated: 2.0 });
+        assert_eq!(
+            stats.time_in_state_s,
+            TimeInState {
+                healthy: 1.0,
+                suspect: 1.0,
+                isolated: 2.0
+            }
+        );
         assert_eq!(stats.last_alarm_delay_s, Some(1.0));
     }
 }

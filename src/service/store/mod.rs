@@ -6,7 +6,9 @@ use std::path::Path;
 use std::str::FromStr;
 
 use sqlx::Row;
-use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteSynchronous};
+use sqlx::sqlite::{
+    SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteSynchronous,
+};
 
 use crate::detect::Health;
 use crate::service::wire::{AlarmRecord, MonitorSpecWire};
@@ -48,6 +50,8 @@ pub struct AlarmQuery {
     pub until_ms: Option<i64>,
     /// Only alarms with an id below this (pagination cursor).
     pub before_id: Option<i64>,
+    /// Only alarms with an id above this (catching up after a reconnect).
+    pub after_id: Option<i64>,
     /// At most this many, newest first.
     pub limit: i64,
 }
@@ -93,7 +97,10 @@ impl Store {
             // only an OS crash or power loss can lose the last commits.
             .synchronous(SqliteSynchronous::Normal)
             .busy_timeout(std::time::Duration::from_secs(5));
-        let pool = SqlitePoolOptions::new().max_connections(4).connect_with(options).await?;
+        let pool = SqlitePoolOptions::new()
+            .max_connections(4)
+            .connect_with(options)
+            .await?;
         for statement in SCHEMA {
             sqlx::query(statement).execute(&pool).await?;
         }
@@ -102,13 +109,16 @@ impl Store {
 
     /// Flushes the WAL into the main file and closes every connection.
     pub async fn close(&self) {
-        let _ = sqlx::query("PRAGMA wal_checkpoint(TRUNCATE)").execute(&self.pool).await;
+        let _ = sqlx::query("PRAGMA wal_checkpoint(TRUNCATE)")
+            .execute(&self.pool)
+            .await;
         self.pool.close().await;
     }
 
     /// Inserts or replaces a session's spec.
     pub async fn put_session(&self, session: &StoredSession) -> Result<(), StoreError> {
-        let spec = serde_json::to_string(session).map_err(|e| StoreError::Corrupt(e.to_string()))?;
+        let spec =
+            serde_json::to_string(session).map_err(|e| StoreError::Corrupt(e.to_string()))?;
         sqlx::query("INSERT INTO sessions (id, spec, created_at_ms) VALUES (?, ?, ?) ON CONFLICT(id) DO UPDATE SET spec = excluded.spec")
             .bind(&session.id)
             .bind(spec)
@@ -120,13 +130,18 @@ impl Store {
 
     /// Deletes a session's spec (its alarms stay in the log).
     pub async fn delete_session(&self, id: &str) -> Result<bool, StoreError> {
-        let done = sqlx::query("DELETE FROM sessions WHERE id = ?").bind(id).execute(&self.pool).await?;
+        let done = sqlx::query("DELETE FROM sessions WHERE id = ?")
+            .bind(id)
+            .execute(&self.pool)
+            .await?;
         Ok(done.rows_affected() > 0)
     }
 
     /// Every stored session, oldest first.
     pub async fn sessions(&self) -> Result<Vec<StoredSession>, StoreError> {
-        let rows = sqlx::query("SELECT spec FROM sessions ORDER BY created_at_ms, id").fetch_all(&self.pool).await?;
+        let rows = sqlx::query("SELECT spec FROM sessions ORDER BY created_at_ms, id")
+            .fetch_all(&self.pool)
+            .await?;
         rows.iter()
             .map(|row| {
                 let spec: String = row.try_get("spec")?;
@@ -157,13 +172,30 @@ impl Store {
         Ok(alarm)
     }
 
-    /// Marks a test's open alarms as cleared at epoch time `t`.
-    pub async fn clear_alarms(&self, session: &str, monitor: &str, test: &str, t: f64) -> Result<(), StoreError> {
-        sqlx::query("UPDATE alarms SET cleared_t = ? WHERE session = ? AND monitor = ? AND test = ? AND cleared_t IS NULL")
+    /// Marks a test's open alarms as cleared at epoch time `t` (each alarm's
+    /// own `t` when unknown).
+    pub async fn clear_alarms(
+        &self,
+        session: &str,
+        monitor: &str,
+        test: &str,
+        t: Option<f64>,
+    ) -> Result<(), StoreError> {
+        sqlx::query("UPDATE alarms SET cleared_t = COALESCE(?, t) WHERE session = ? AND monitor = ? AND test = ? AND cleared_t IS NULL")
             .bind(t)
             .bind(session)
             .bind(monitor)
             .bind(test)
+            .execute(&self.pool)
+            .await?;
+        Ok(())
+    }
+
+    /// Closes every open alarm of a session whose stream restarted from scratch
+    /// (its filters were reset); `cleared_t` is set to the alarm's own `t`.
+    pub async fn clear_session_alarms(&self, session: &str) -> Result<(), StoreError> {
+        sqlx::query("UPDATE alarms SET cleared_t = t WHERE session = ? AND cleared_t IS NULL")
+            .bind(session)
             .execute(&self.pool)
             .await?;
         Ok(())
@@ -189,6 +221,9 @@ impl Store {
         if q.before_id.is_some() {
             sql.push_str(" AND id < ?");
         }
+        if q.after_id.is_some() {
+            sql.push_str(" AND id > ?");
+        }
         sql.push_str(" ORDER BY id DESC LIMIT ?");
         let mut query = sqlx::query(&sql);
         if let Some(s) = &q.session {
@@ -206,6 +241,9 @@ impl Store {
         if let Some(v) = q.before_id {
             query = query.bind(v);
         }
+        if let Some(v) = q.after_id {
+            query = query.bind(v);
+        }
         let rows = query.bind(q.limit).fetch_all(&self.pool).await?;
         rows.iter().map(alarm_from_row).collect()
     }
@@ -220,7 +258,8 @@ fn alarm_from_row(row: &sqlx::sqlite::SqliteRow) -> Result<AlarmRecord, StoreErr
         session: row.try_get("session")?,
         monitor: row.try_get("monitor")?,
         test: row.try_get("test")?,
-        state: Health::parse(&state).ok_or_else(|| StoreError::Corrupt(format!("alarm state '{state}'")))?,
+        state: Health::parse(&state)
+            .ok_or_else(|| StoreError::Corrupt(format!("alarm state '{state}'")))?,
         t: row.try_get("t")?,
         statistic,
         threshold,
@@ -261,23 +300,94 @@ mod tests {
         for (s, t) in [("a", 1.0), ("b", 2.0), ("a", 3.0)] {
             store.insert_alarm(alarm(s, t)).await.unwrap();
         }
-        let all = store.alarms(&AlarmQuery { limit: 10, ..Default::default() }).await.unwrap();
-        assert_eq!(all.iter().map(|a| a.t).collect::<Vec<_>>(), vec![3.0, 2.0, 1.0]);
-        let a = store.alarms(&AlarmQuery { session: Some("a".into()), limit: 10, ..Default::default() }).await.unwrap();
+        let all = store
+            .alarms(&AlarmQuery {
+                limit: 10,
+                ..Default::default()
+            })
+            .await
+            .unwrap();
+        assert_eq!(
+            all.iter().map(|a| a.t).collect::<Vec<_>>(),
+            vec![3.0, 2.0, 1.0]
+        );
+        let a = store
+            .alarms(&AlarmQuery {
+                session: Some("a".into()),
+                limit: 10,
+                ..Default::default()
+            })
+            .await
+            .unwrap();
         assert_eq!(a.len(), 2);
-        let page = store.alarms(&AlarmQuery { before_id: Some(all[0].id), limit: 1, ..Default::default() }).await.unwrap();
+        let page = store
+            .alarms(&AlarmQuery {
+                before_id: Some(all[0].id),
+                limit: 1,
+                ..Default::default()
+            })
+            .await
+            .unwrap();
         assert_eq!(page[0].t, 2.0);
-        store.clear_alarms("a", "m", "residual", 9.0).await.unwrap();
-        let a = store.alarms(&AlarmQuery { session: Some("a".into()), limit: 10, ..Default::default() }).await.unwrap();
+        store
+            .clear_alarms("a", "m", "residual", Some(9.0))
+            .await
+            .unwrap();
+        let newer = store
+            .alarms(&AlarmQuery {
+                after_id: Some(all[2].id),
+                limit: 10,
+                ..Default::default()
+            })
+            .await
+            .unwrap();
+        assert_eq!(
+            newer.iter().map(|a| a.t).collect::<Vec<_>>(),
+            vec![3.0, 2.0]
+        );
+        let a = store
+            .alarms(&AlarmQuery {
+                session: Some("a".into()),
+                limit: 10,
+                ..Default::default()
+            })
+            .await
+            .unwrap();
         assert!(a.iter().all(|x| x.cleared_t == Some(9.0)));
-        assert_eq!(a[0], AlarmRecord { id: a[0].id, cleared_t: Some(9.0), ..alarm("a", 3.0) });
+        store.insert_alarm(alarm("b", 4.0)).await.unwrap();
+        store.clear_session_alarms("b").await.unwrap();
+        let b = store
+            .alarms(&AlarmQuery {
+                session: Some("b".into()),
+                limit: 10,
+                ..Default::default()
+            })
+            .await
+            .unwrap();
+        assert_eq!(
+            b.iter().map(|a| a.cleared_t).collect::<Vec<_>>(),
+            vec![Some(4.0), Some(2.0)]
+        );
+        assert_eq!(
+            a[0],
+            AlarmRecord {
+                id: a[0].id,
+                cleared_t: Some(9.0),
+                ..alarm("a", 3.0)
+            }
+        );
     }
 
     #[tokio::test]
     async fn sessions_survive_reopening() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("t.db");
-        let s = StoredSession { id: "x".into(), echo: true, monitors: vec![], created_at_ms: 5 };
+        let s = StoredSession {
+            id: "x".into(),
+            echo: true,
+            monitors: vec![],
+            created_at_ms: 5,
+        };
         {
             let store = Store::open(&path).await.unwrap();
             store.put_session(&s).await.unwrap();

@@ -1,0 +1,1073 @@
+//! Keeps the OpenAPI contract (`openapi/openapi.yaml`) in step with the router:
+//! the spec names exactly the routes of `ROUTES`, the router answers exactly
+//! those, every `$ref` resolves, and real REST answers and socket messages
+//! validate against the schemas the spec gives them.
+
+use std::collections::BTreeSet;
+use std::path::Path;
+use std::sync::Arc;
+use std::time::Duration;
+
+use axum::Router;
+use axum::body::Body;
+use axum::http::{Request, header};
+use futures_util::{SinkExt, StreamExt};
+use navguard::service::ServiceConfig;
+use navguard::service::app::{AppState, ROUTES, app};
+use navguard::service::metrics::Metrics;
+use navguard::service::session::Registry;
+use navguard::service::store::Store;
+use serde_json::{Value, json};
+use tokio_tungstenite::tungstenite::{self, Message};
+use tower::ServiceExt;
+
+const SPEC: &str = include_str!("../openapi/openapi.yaml");
+
+/// The methods checked against every path (HEAD and OPTIONS are axum's business).
+const METHODS: [&str; 5] = ["GET", "POST", "PUT", "DELETE", "PATCH"];
+const SPEC_METHODS: [&str; 8] = [
+    "get", "put", "post", "delete", "options", "head", "patch", "trace",
+];
+
+fn spec() -> Value {
+    serde_yaml_ng::from_str(SPEC)
+        .expect("openapi.yaml parses, with string keys only (quote status codes)")
+}
+
+async fn state(dir: &Path, token: Option<&str>) -> AppState {
+    let mut config = ServiceConfig::new("127.0.0.1:0".parse().unwrap(), dir.join("t.db"));
+    config.token = token.map(str::to_owned);
+    AppState {
+        store: Store::open(&config.db_path).await.unwrap(),
+        registry: Arc::new(Registry::default()),
+        metrics: Arc::new(Metrics::default()),
+        config: Arc::new(config),
+        shutdown: tokio::sync::watch::channel(false).1,
+    }
+}
+
+/// `/api/v1/sessions/{id}` → `/api/v1/sessions/x`.
+fn concrete(template: &str, value: &str) -> String {
+    let mut out = String::new();
+    let mut in_param = false;
+    for c in template.chars() {
+        match c {
+            '{' => {
+                in_param = true;
+                out.push_str(value);
+            }
+            '}' => in_param = false,
+            _ if in_param => {}
+            _ => out.push(c),
+        }
+    }
+    out
+}
+
+struct Answer {
+    status: u16,
+    content_type: String,
+    www_authenticate: Option<String>,
+    body: Vec<u8>,
+}
+
+impl Answer {
+    fn json(&self) -> Option<Value> {
+        serde_json::from_slice(&self.body).ok()
+    }
+
+    /// `(code, message)` of a JSON error body.
+    fn error(&self) -> Option<(String, String)> {
+        let v = self.json()?;
+        Some((
+            v["error"]["code"].as_str()?.to_owned(),
+            v["error"]["message"].as_str()?.to_owned(),
+        ))
+    }
+
+    fn is_router_fallback(&self) -> bool {
+        self.status == 404 && self.error() == Some(("not_found".into(), "no such route".into()))
+    }
+}
+
+async fn send(
+    router: &Router,
+    method: &str,
+    uri: &str,
+    headers: &[(&str, &str)],
+    body: Option<String>,
+) -> Answer {
+    let mut request = Request::builder().method(method).uri(uri);
+    for (name, value) in headers {
+        request = request.header(*name, *value);
+    }
+    let request = request
+        .body(body.map_or_else(Body::empty, Body::from))
+        .unwrap();
+    let response = router.clone().oneshot(request).await.unwrap();
+    let text = |name| {
+        response
+            .headers()
+            .get(name)
+            .and_then(|v| v.to_str().ok())
+            .map(str::to_owned)
+    };
+    let content_type = text(header::CONTENT_TYPE).unwrap_or_default();
+    let www_authenticate = text(header::WWW_AUTHENTICATE);
+    let status = response.status().as_u16();
+    let body = axum::body::to_bytes(response.into_body(), usize::MAX)
+        .await
+        .unwrap()
+        .to_vec();
+    Answer {
+        status,
+        content_type,
+        www_authenticate,
+        body,
+    }
+}
+
+fn spec_routes(doc: &Value) -> BTreeSet<(String, String)> {
+    let paths = doc["paths"].as_object().expect("spec has paths");
+    paths
+        .iter()
+        .flat_map(|(path, item)| {
+            SPEC_METHODS
+                .iter()
+                .filter(|m| item.get(**m).is_some())
+                .map(move |m| (path.clone(), m.to_uppercase()))
+        })
+        .collect()
+}
+
+fn table_routes() -> BTreeSet<(String, String)> {
+    ROUTES
+        .iter()
+        .flat_map(|(path, methods)| {
+            methods
+                .iter()
+                .map(move |m| (path.to_string(), m.to_string()))
+        })
+        .collect()
+}
+
+fn operation<'a>(doc: &'a Value, template: &str, method: &str) -> &'a Value {
+    let op = &doc["paths"][template][method.to_lowercase()];
+    assert!(op.is_object(), "spec has no {method} {template}");
+    op
+}
+
+// ------------------------------------------------------------ a small JSON Schema checker
+
+/// Enough of JSON Schema 2020-12 for this spec: `$ref`, `type`, `const`, `enum`,
+/// numeric bounds, arrays, objects (`required`, `properties`,
+/// `additionalProperties`, `unevaluatedProperties`, `minProperties`) and the
+/// combinators (`allOf`, `anyOf`, `oneOf`, `not`, `if`/`then`). Not `pattern`.
+struct Checker<'a> {
+    doc: &'a Value,
+}
+
+impl<'a> Checker<'a> {
+    fn pointer(&self, reference: &str) -> &'a Value {
+        reference
+            .strip_prefix('#')
+            .and_then(|p| self.doc.pointer(p))
+            .unwrap_or_else(|| panic!("unresolved $ref {reference}"))
+    }
+
+    fn schema(&self, name: &str) -> &'a Value {
+        self.pointer(&format!("#/components/schemas/{name}"))
+    }
+
+    fn check(&self, schema: &'a Value, value: &Value) -> Vec<String> {
+        let mut errors = Vec::new();
+        self.errors(schema, value, "$", &mut errors);
+        errors
+    }
+
+    fn matches(&self, schema: &'a Value, value: &Value) -> bool {
+        self.check(schema, value).is_empty()
+    }
+
+    fn assert_valid(&self, schema: &'a Value, value: &Value, what: &str) {
+        let errors = self.check(schema, value);
+        assert!(
+            errors.is_empty(),
+            "{what} does not match its schema:\n  {}\nvalue: {value}",
+            errors.join("\n  ")
+        );
+    }
+
+    fn errors(&self, schema: &'a Value, value: &Value, at: &str, out: &mut Vec<String>) {
+        if let Some(reference) = schema.get("$ref").and_then(Value::as_str) {
+            self.errors(self.pointer(reference), value, at, out);
+        }
+        let Some(s) = schema.as_object() else { return };
+        if let Some(t) = s.get("type") {
+            let types: Vec<&str> = match t {
+                Value::String(t) => vec![t.as_str()],
+                Value::Array(a) => a.iter().filter_map(Value::as_str).collect(),
+                _ => vec![],
+            };
+            if !types.iter().any(|t| type_matches(t, value)) {
+                out.push(format!("{at}: expected {types:?}, got {}", short(value)));
+                return;
+            }
+        }
+        if let Some(c) = s.get("const").filter(|c| *c != value) {
+            out.push(format!("{at}: expected {c}, got {}", short(value)));
+        }
+        if let Some(Value::Array(options)) = s.get("enum")
+            && !options.contains(value)
+        {
+            out.push(format!("{at}: {} is not one of {options:?}", short(value)));
+        }
+        if let Some(x) = value.as_f64() {
+            let bound = |k: &str| s.get(k).and_then(Value::as_f64);
+            let broken = bound("minimum").is_some_and(|b| x < b)
+                || bound("maximum").is_some_and(|b| x > b)
+                || bound("exclusiveMinimum").is_some_and(|b| x <= b)
+                || bound("exclusiveMaximum").is_some_and(|b| x >= b);
+            if broken {
+                out.push(format!("{at}: {x} is out of bounds"));
+            }
+        }
+        if let Some(items) = value.as_array() {
+            let count = |k: &str| s.get(k).and_then(Value::as_u64).map(|n| n as usize);
+            if count("minItems").is_some_and(|n| items.len() < n)
+                || count("maxItems").is_some_and(|n| items.len() > n)
+            {
+                out.push(format!("{at}: {} items is out of bounds", items.len()));
+            }
+            if let Some(item_schema) = s.get("items") {
+                for (i, item) in items.iter().enumerate() {
+                    self.errors(item_schema, item, &format!("{at}[{i}]"), out);
+                }
+            }
+        }
+        if let Some(object) = value.as_object() {
+            self.object_errors(schema, object, at, out);
+        }
+        for sub in s
+            .get("allOf")
+            .and_then(Value::as_array)
+            .into_iter()
+            .flatten()
+        {
+            self.errors(sub, value, at, out);
+        }
+        if let Some(Value::Array(options)) = s.get("anyOf")
+            && !options.iter().any(|o| self.matches(o, value))
+        {
+            out.push(format!("{at}: matches none of anyOf"));
+        }
+        if let Some(Value::Array(options)) = s.get("oneOf") {
+            let n = options.iter().filter(|o| self.matches(o, value)).count();
+            if n != 1 {
+                out.push(format!("{at}: matches {n} of oneOf, not exactly one"));
+            }
+        }
+        if let Some(not) = s.get("not")
+            && self.matches(not, value)
+        {
+            out.push(format!("{at}: matches `not`"));
+        }
+        if let Some(condition) = s.get("if") {
+            let branch = if self.matches(condition, value) {
+                s.get("then")
+            } else {
+                s.get("else")
+            };
+            if let Some(branch) = branch {
+                self.errors(branch, value, at, out);
+            }
+        }
+    }
+
+    fn object_errors(
+        &self,
+        schema: &'a Value,
+        object: &serde_json::Map<String, Value>,
+        at: &str,
+        out: &mut Vec<String>,
+    ) {
+        let empty = serde_json::Map::new();
+        let properties = schema
+            .get("properties")
+            .and_then(Value::as_object)
+            .unwrap_or(&empty);
+        for key in schema
+            .get("required")
+            .and_then(Value::as_array)
+            .into_iter()
+            .flatten()
+            .filter_map(Value::as_str)
+        {
+            if !object.contains_key(key) {
+                out.push(format!("{at}: missing required `{key}`"));
+            }
+        }
+        if schema
+            .get("minProperties")
+            .and_then(Value::as_u64)
+            .is_some_and(|n| (object.len() as u64) < n)
+        {
+            out.push(format!("{at}: too few properties"));
+        }
+        for (key, v) in object {
+            let here = format!("{at}.{key}");
+            match (properties.get(key), schema.get("additionalProperties")) {
+                (Some(sub), _) => self.errors(sub, v, &here, out),
+                (None, Some(Value::Bool(false))) => out.push(format!("{here}: not allowed")),
+                (None, Some(extra)) if extra.is_object() => self.errors(extra, v, &here, out),
+                _ => {}
+            }
+        }
+        if schema.get("unevaluatedProperties") == Some(&Value::Bool(false)) {
+            let value = Value::Object(object.clone());
+            let known = self.evaluated(schema, &value);
+            for key in object.keys().filter(|k| !known.contains(*k)) {
+                out.push(format!("{at}.{key}: not allowed (unevaluated)"));
+            }
+        }
+    }
+
+    /// Property names a schema and its applicable subschemas evaluate.
+    fn evaluated(&self, schema: &'a Value, value: &Value) -> BTreeSet<String> {
+        let mut names = BTreeSet::new();
+        if let Some(reference) = schema.get("$ref").and_then(Value::as_str) {
+            names.extend(self.evaluated(self.pointer(reference), value));
+        }
+        if let Some(p) = schema.get("properties").and_then(Value::as_object) {
+            names.extend(p.keys().cloned());
+        }
+        for sub in schema
+            .get("allOf")
+            .and_then(Value::as_array)
+            .into_iter()
+            .flatten()
+        {
+            names.extend(self.evaluated(sub, value));
+        }
+        for key in ["anyOf", "oneOf"] {
+            for sub in schema
+                .get(key)
+                .and_then(Value::as_array)
+                .into_iter()
+                .flatten()
+            {
+                if self.matches(sub, value) {
+                    names.extend(self.evaluated(sub, value));
+                }
+            }
+        }
+        names
+    }
+}
+
+fn type_matches(t: &str, v: &Value) -> bool {
+    match t {
+        "object" => v.is_object(),
+        "array" => v.is_array(),
+        "string" => v.is_string(),
+        "number" => v.is_number(),
+        "integer" => v.is_i64() || v.is_u64(),
+        "boolean" => v.is_boolean(),
+        "null" => v.is_null(),
+        _ => false,
+    }
+}
+
+fn short(v: &Value) -> String {
+    let s = v.to_string();
+    if s.len() > 80 {
+        format!(
+            "{}…",
+            &s[..s.char_indices().nth(80).map_or(s.len(), |(i, _)| i)]
+        )
+    } else {
+        s
+    }
+}
+
+// ------------------------------------------------------------ REST against the spec
+
+/// A router plus the spec: every call asserts that its status is declared for
+/// the operation and that its body matches the declared schema.
+struct Contract {
+    router: Router,
+    doc: Value,
+}
+
+impl Contract {
+    async fn call(&self, method: &str, template: &str, uri: &str, body: Option<&Value>) -> Value {
+        let headers: &[(&str, &str)] = if body.is_some() {
+            &[("content-type", "application/json")]
+        } else {
+            &[]
+        };
+        let answer = send(
+            &self.router,
+            method,
+            uri,
+            headers,
+            body.map(Value::to_string),
+        )
+        .await;
+        self.verify(method, template, uri, &answer)
+    }
+
+    fn verify(&self, method: &str, template: &str, uri: &str, answer: &Answer) -> Value {
+        let checker = Checker { doc: &self.doc };
+        let op = operation(&self.doc, template, method);
+        let status = answer.status.to_string();
+        let declared = op["responses"].get(&status).unwrap_or_else(|| {
+            panic!(
+                "{method} {uri} answered {status}, not declared for {method} {template}: {}",
+                answer_text(answer)
+            )
+        });
+        let response = match declared.get("$ref").and_then(Value::as_str) {
+            Some(r) => checker.pointer(r),
+            None => declared,
+        };
+        let Some(content) = response.get("content").and_then(Value::as_object) else {
+            assert!(
+                answer.body.is_empty(),
+                "{method} {uri} {status}: the spec declares no body"
+            );
+            return Value::Null;
+        };
+        let media = answer
+            .content_type
+            .split(';')
+            .next()
+            .unwrap_or_default()
+            .trim();
+        let declared_media = content.get(media).unwrap_or_else(|| {
+            panic!(
+                "{method} {uri} {status}: content type {media:?} not among {:?}",
+                content.keys().collect::<Vec<_>>()
+            )
+        });
+        if media != "application/json" {
+            return Value::Null;
+        }
+        let value = answer.json().expect("a JSON body");
+        checker.assert_valid(
+            &declared_media["schema"],
+            &value,
+            &format!("{method} {uri} {status}"),
+        );
+        value
+    }
+}
+
+fn answer_text(answer: &Answer) -> String {
+    String::from_utf8_lossy(&answer.body).into_owned()
+}
+
+fn linear_config() -> Value {
+    json!({
+        "f": [[1.0, 1.0], [0.0, 1.0]],
+        "h": [[1.0, 0.0]],
+        "q": [[0.25, 0.5], [0.5, 1.0]],
+        "r": [[1.0]],
+        "x0": [0.0, 0.0],
+        "p0": [[10.0, 0.0], [0.0, 10.0]]
+    })
+}
+
+fn session_body(id: &str, echo: bool) -> Value {
+    let monitor = json!({"name": "cv", "type": "linear", "config": linear_config()});
+    json!({"id": id, "echo": echo, "monitors": [monitor]})
+}
+
+// ------------------------------------------------------------ the tests
+
+#[test]
+fn spec_declares_openapi_3_1() {
+    let doc = spec();
+    let version = doc["openapi"].as_str().expect("`openapi` is a string");
+    assert!(version.starts_with("3.1."), "openapi: {version}");
+    assert!(doc["info"]["title"].is_string() && doc["info"]["version"].is_string());
+}
+
+#[test]
+fn spec_lists_exactly_the_routes_in_the_table() {
+    let (spec, table) = (spec_routes(&spec()), table_routes());
+    let missing: Vec<_> = table.difference(&spec).collect();
+    let extra: Vec<_> = spec.difference(&table).collect();
+    assert!(
+        missing.is_empty(),
+        "routes in ROUTES missing from openapi.yaml: {missing:?}"
+    );
+    assert!(
+        extra.is_empty(),
+        "routes in openapi.yaml the router lacks: {extra:?}"
+    );
+}
+
+#[test]
+fn every_ref_in_the_spec_resolves() {
+    fn walk(doc: &Value, v: &Value, at: &str, bad: &mut Vec<String>) {
+        match v {
+            Value::Object(map) => {
+                for (k, child) in map {
+                    let here = format!("{at}/{k}");
+                    let is_mapping = at.ends_with("/mapping");
+                    if let (true, Value::String(r)) = (k == "$ref" || is_mapping, child)
+                        && r.strip_prefix('#').and_then(|p| doc.pointer(p)).is_none()
+                    {
+                        bad.push(format!("{here}: {r}"));
+                    }
+                    walk(doc, child, &here, bad);
+                }
+            }
+            Value::Array(items) => {
+                for (i, child) in items.iter().enumerate() {
+                    walk(doc, child, &format!("{at}/{i}"), bad);
+                }
+            }
+            _ => {}
+        }
+    }
+    let doc = spec();
+    let mut bad = Vec::new();
+    walk(&doc, &doc, "#", &mut bad);
+    assert!(bad.is_empty(), "unresolved references:\n{}", bad.join("\n"));
+}
+
+#[test]
+fn every_path_parameter_is_declared_and_required() {
+    let doc = spec();
+    let checker = Checker { doc: &doc };
+    for (path, item) in doc["paths"].as_object().unwrap() {
+        let names: BTreeSet<&str> = path
+            .split('{')
+            .skip(1)
+            .filter_map(|s| s.split('}').next())
+            .collect();
+        for method in SPEC_METHODS.iter().filter(|m| item.get(**m).is_some()) {
+            let declared: Vec<&Value> = [&item["parameters"], &item[*method]["parameters"]]
+                .into_iter()
+                .filter_map(Value::as_array)
+                .flatten()
+                .map(|p| {
+                    p.get("$ref")
+                        .and_then(Value::as_str)
+                        .map_or(p, |r| checker.pointer(r))
+                })
+                .filter(|p| p["in"] == "path")
+                .collect();
+            let got: BTreeSet<&str> = declared.iter().filter_map(|p| p["name"].as_str()).collect();
+            assert_eq!(got, names, "{method} {path}: path parameters");
+            assert!(
+                declared.iter().all(|p| p["required"] == true),
+                "{method} {path}: path parameters must be required"
+            );
+        }
+    }
+}
+
+#[tokio::test]
+async fn an_unknown_path_gets_the_router_fallback() {
+    let dir = tempfile::tempdir().unwrap();
+    let router = app(state(dir.path(), None).await);
+    let answer = send(&router, "GET", "/api/v1/nothing-here", &[], None).await;
+    assert!(
+        answer.is_router_fallback(),
+        "{} {}",
+        answer.status,
+        answer_text(&answer)
+    );
+}
+
+#[tokio::test]
+async fn router_answers_every_route_in_the_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let router = app(state(dir.path(), None).await);
+    let contract = Contract {
+        router: router.clone(),
+        doc: spec(),
+    };
+    for (path, methods) in ROUTES {
+        for method in *methods {
+            let uri = concrete(path, "x");
+            let answer = send(&router, method, &uri, &[], None).await;
+            assert_ne!(
+                answer.status,
+                405,
+                "{method} {uri}: {}",
+                answer_text(&answer)
+            );
+            assert!(
+                !answer.is_router_fallback(),
+                "{method} {uri} fell through to the router's fallback"
+            );
+            // Whatever a bare request gets (a socket route: 400, not an upgrade) is declared too.
+            contract.verify(method, path, &uri, &answer);
+        }
+    }
+}
+
+#[tokio::test]
+async fn router_refuses_every_method_the_table_does_not_list() {
+    let dir = tempfile::tempdir().unwrap();
+    let router = app(state(dir.path(), None).await);
+    for (path, methods) in ROUTES {
+        for method in METHODS.iter().filter(|m| !methods.contains(m)) {
+            let uri = concrete(path, "x");
+            let answer = send(&router, method, &uri, &[], None).await;
+            assert_eq!(
+                answer.status,
+                405,
+                "{method} {uri}: {}",
+                answer_text(&answer)
+            );
+            assert_eq!(
+                answer.error().map(|e| e.0).as_deref(),
+                Some("method_not_allowed"),
+                "{method} {uri}"
+            );
+        }
+    }
+}
+
+#[tokio::test]
+async fn token_guards_exactly_the_operations_the_spec_secures() {
+    let doc = spec();
+    let dir = tempfile::tempdir().unwrap();
+    let router = app(state(dir.path(), Some("s3cret")).await);
+    let contract = Contract {
+        router: router.clone(),
+        doc: doc.clone(),
+    };
+    for (path, methods) in ROUTES {
+        for method in *methods {
+            let op = operation(&doc, path, method);
+            let public = op
+                .get("security")
+                .and_then(Value::as_array)
+                .is_some_and(Vec::is_empty);
+            let uri = concrete(path, "x");
+            let anonymous = send(&router, method, &uri, &[], None).await;
+            if public {
+                assert_ne!(
+                    anonymous.status, 401,
+                    "{method} {path} is public in the spec"
+                );
+                continue;
+            }
+            assert_eq!(
+                anonymous.status, 401,
+                "{method} {path} is secured in the spec"
+            );
+            assert_eq!(anonymous.www_authenticate.as_deref(), Some("Bearer"));
+            contract.verify(method, path, &uri, &anonymous);
+            let bearer = send(
+                &router,
+                method,
+                &uri,
+                &[("authorization", "Bearer s3cret")],
+                None,
+            )
+            .await;
+            assert_ne!(bearer.status, 401, "{method} {path} with the token");
+        }
+    }
+}
+
+#[tokio::test]
+async fn rest_answers_match_their_schemas() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = Contract {
+        router: app(state(dir.path(), None).await),
+        doc: spec(),
+    };
+    let sessions = "/api/v1/sessions";
+    let session = "/api/v1/sessions/{id}";
+    let threshold = "/api/v1/sessions/{id}/monitors/{name}/threshold";
+
+    c.call("GET", "/", "/", None).await;
+    c.call("GET", "/metrics", "/metrics", None).await;
+    c.call("GET", "/healthz", "/healthz", None).await;
+
+    let created = c
+        .call("POST", sessions, sessions, Some(&session_body("s1", false)))
+        .await;
+    assert_eq!(created["id"], "s1");
+    let conflict = c
+        .call("POST", sessions, sessions, Some(&session_body("s1", false)))
+        .await;
+    assert_eq!(conflict["error"]["code"], "conflict");
+    let mut bad = session_body("s2", false);
+    bad["monitors"][0]["config"]["r"] = json!([[0.0]]);
+    let invalid = c.call("POST", sessions, sessions, Some(&bad)).await;
+    assert_eq!(invalid["error"]["field"], "monitors[0].config.r");
+    bad = session_body("s2", false);
+    bad["monitors"][0]["type"] = json!("federated");
+    let unsupported = c.call("POST", sessions, sessions, Some(&bad)).await;
+    assert_eq!(unsupported["error"]["field"], "monitors[0].type");
+    let no_type = send(
+        &c.router,
+        "POST",
+        sessions,
+        &[],
+        Some(session_body("s2", false).to_string()),
+    )
+    .await;
+    assert_eq!(
+        c.verify("POST", sessions, sessions, &no_type)["error"]["code"],
+        "unsupported_media_type"
+    );
+    let syntax = send(
+        &c.router,
+        "POST",
+        sessions,
+        &[("content-type", "application/json")],
+        Some("{".into()),
+    )
+    .await;
+    assert_eq!(
+        c.verify("POST", sessions, sessions, &syntax)["error"]["code"],
+        "bad_request"
+    );
+
+    c.call("GET", sessions, sessions, None).await;
+    c.call("GET", session, "/api/v1/sessions/s1", None).await;
+    c.call("GET", session, "/api/v1/sessions/nope", None).await;
+    c.call(
+        "GET",
+        "/api/v1/sessions/{id}/stats",
+        "/api/v1/sessions/s1/stats",
+        None,
+    )
+    .await;
+
+    let uri = "/api/v1/sessions/s1/monitors/cv/threshold";
+    let view = c.call("GET", threshold, uri, None).await;
+    assert!(
+        view["threshold"].is_null() && view["p_fa"] == 0.002,
+        "{view}"
+    );
+    c.call(
+        "GET",
+        threshold,
+        "/api/v1/sessions/s1/monitors/nope/threshold",
+        None,
+    )
+    .await;
+    let view = c
+        .call(
+            "PUT",
+            threshold,
+            uri,
+            Some(&json!({"threshold": 20.0, "policy": {"kind": "counters"}})),
+        )
+        .await;
+    assert_eq!(
+        view["policy"],
+        json!({"kind": "counters", "n1": 10, "n2": 5})
+    );
+    c.call("PUT", threshold, uri, Some(&json!({}))).await;
+    c.call(
+        "PUT",
+        threshold,
+        uri,
+        Some(&json!({"p_fa": 0.01, "threshold": 3.0})),
+    )
+    .await;
+    let stored = c.call("GET", session, "/api/v1/sessions/s1", None).await;
+    assert_eq!(stored["monitors"][0]["threshold"], 20.0);
+
+    let chi2 = "/api/v1/chi2/threshold";
+    c.call("GET", chi2, "/api/v1/chi2/threshold?dof=1&p_fa=0.002", None)
+        .await;
+    c.call("GET", chi2, "/api/v1/chi2/threshold?dof=0&p_fa=0.002", None)
+        .await;
+    c.call("GET", chi2, "/api/v1/chi2/threshold?p_fa=0.002", None)
+        .await;
+    let md = "/api/v1/chi2/missed-detection";
+    c.call(
+        "GET",
+        md,
+        "/api/v1/chi2/missed-detection?dof=2&p_fa=0.01&noncentrality=10",
+        None,
+    )
+    .await;
+    c.call(
+        "GET",
+        md,
+        "/api/v1/chi2/missed-detection?dof=2&threshold=13&p_md=0.1",
+        None,
+    )
+    .await;
+    c.call(
+        "GET",
+        md,
+        "/api/v1/chi2/missed-detection?dof=2&noncentrality=10",
+        None,
+    )
+    .await;
+
+    c.call(
+        "GET",
+        "/api/v1/alarms",
+        "/api/v1/alarms?session=s1&limit=10",
+        None,
+    )
+    .await;
+    c.call("GET", "/api/v1/alarms", "/api/v1/alarms?limit=0", None)
+        .await;
+    c.call("GET", "/api/v1/alarms", "/api/v1/alarms?since=soon", None)
+        .await;
+
+    c.call("DELETE", session, "/api/v1/sessions/s1", None).await;
+    c.call("DELETE", session, "/api/v1/sessions/s1", None).await;
+}
+
+#[tokio::test]
+async fn spec_examples_are_accepted_by_the_server() {
+    let doc = spec();
+    let checker = Checker { doc: &doc };
+    let dir = tempfile::tempdir().unwrap();
+    let c = Contract {
+        router: app(state(dir.path(), None).await),
+        doc: doc.clone(),
+    };
+
+    let create =
+        &operation(&doc, "/api/v1/sessions", "POST")["requestBody"]["content"]["application/json"];
+    for (name, example) in create["examples"].as_object().unwrap() {
+        checker.assert_valid(checker.schema("CreateSession"), &example["value"], name);
+        let created = c
+            .call(
+                "POST",
+                "/api/v1/sessions",
+                "/api/v1/sessions",
+                Some(&example["value"]),
+            )
+            .await;
+        assert!(
+            created["id"].is_string(),
+            "example {name} was refused: {created}"
+        );
+    }
+    let id = doc["paths"]["/api/v1/sessions"]["post"]["requestBody"]["content"]["application/json"]
+        ["examples"]["constantVelocity"]["value"]["id"]
+        .as_str()
+        .unwrap();
+    let template = "/api/v1/sessions/{id}/monitors/{name}/threshold";
+    let put = &operation(&doc, template, "PUT")["requestBody"]["content"]["application/json"];
+    for (name, example) in put["examples"].as_object().unwrap() {
+        checker.assert_valid(checker.schema("ThresholdUpdate"), &example["value"], name);
+        let uri = format!("/api/v1/sessions/{id}/monitors/cv/threshold");
+        let view = c.call("PUT", template, &uri, Some(&example["value"])).await;
+        assert_eq!(view["monitor"], "cv", "example {name} was refused: {view}");
+    }
+    for example in checker.schema("Epoch")["examples"].as_array().unwrap() {
+        checker.assert_valid(checker.schema("IngestFrame"), example, "Epoch example");
+        navguard::service::wire::parse_frame(&example.to_string(), 10)
+            .expect("the Epoch example parses");
+    }
+}
+
+#[test]
+fn schema_checker_rejects_what_the_spec_forbids() {
+    let doc = spec();
+    let c = Checker { doc: &doc };
+    let alarm = json!({
+        "type": "alarm", "id": 1, "session": "s", "monitor": "m", "test": "residual",
+        "state": "isolated", "t": 1.0, "statistic": 30.0, "threshold": 9.5, "dof": 1,
+        "test_ratio": 3.1, "delay_s": 0.0, "raised_at_ms": 1, "cleared_t": null
+    });
+    let mut alarm_plus = alarm.clone();
+    alarm_plus["surprise"] = json!(1);
+    let mut both = json!({"name": "m", "type": "linear", "config": linear_config()});
+    both["p_fa"] = json!(0.1);
+    both["threshold"] = json!(3.0);
+    let bad_ins = json!({"lat": 0, "lon": 0, "h": 0, "vel": [1, 2], "att": [0, 0, 0]});
+    let cases = [
+        (
+            "Error",
+            json!({"error": {"code": "invalid", "message": "m", "field": "f"}}),
+            true,
+        ),
+        (
+            "Error",
+            json!({"error": {"code": "nope", "message": "m"}}),
+            false,
+        ),
+        ("Error", json!({"error": {"code": "invalid"}}), false),
+        (
+            "Error",
+            json!({"error": {"code": "invalid", "message": "m", "extra": 1}}),
+            false,
+        ),
+        (
+            "MonitorSpec",
+            json!({"name": "m", "type": "linear", "config": linear_config()}),
+            true,
+        ),
+        (
+            "MonitorSpec",
+            json!({"name": "m", "type": "linear", "config": {"f": [[1.0]]}}),
+            false,
+        ),
+        ("MonitorSpec", both, false),
+        ("Policy", json!({"kind": "counters", "n1": 0}), false),
+        ("Policy", json!({"kind": "counters"}), true),
+        ("IngestFrame", json!([]), false),
+        ("Epoch", json!({"t": 0, "ins": bad_ins}), false),
+        ("AlarmMessage", alarm.clone(), true),
+        ("AlarmMessage", alarm_plus, false),
+        ("AlarmRecord", alarm, false),
+    ];
+    for (name, value, valid) in cases {
+        assert_eq!(
+            c.matches(c.schema(name), &value),
+            valid,
+            "{name} on {value}"
+        );
+    }
+}
+
+async fn next_json<S>(socket: &mut S) -> Value
+where
+    S: futures_util::Stream<Item = Result<Message, tungstenite::Error>> + Unpin,
+{
+    loop {
+        let message = tokio::time::timeout(Duration::from_secs(10), socket.next())
+            .await
+            .expect("a message within 10 s")
+            .expect("the socket is open")
+            .expect("a valid message");
+        if let Message::Text(text) = message {
+            return serde_json::from_str(&text).expect("server messages are JSON");
+        }
+    }
+}
+
+#[tokio::test]
+async fn socket_messages_match_their_schemas() {
+    let doc = spec();
+    let checker = Checker { doc: &doc };
+    let x_websocket = |path: &str, side: &str| &operation(&doc, path, "GET")["x-websocket"][side];
+    let ingest_path = "/api/v1/sessions/{id}/ingest";
+    let events_path = "/api/v1/sessions/{id}/events";
+    let (ingest_schema, events_schema) = (
+        x_websocket(ingest_path, "server"),
+        x_websocket(events_path, "server"),
+    );
+    let client_schema = x_websocket(ingest_path, "client");
+    assert!(ingest_schema.is_object() && events_schema.is_object() && client_schema.is_object());
+
+    let dir = tempfile::tempdir().unwrap();
+    let server = navguard::service::start(ServiceConfig::new(
+        "127.0.0.1:0".parse().unwrap(),
+        dir.path().join("t.db"),
+    ))
+    .await
+    .unwrap();
+    let addr = server.addr;
+    let created = reqwest::Client::new()
+        .post(format!("http://{addr}/api/v1/sessions"))
+        .json(&session_body("ws", true))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(created.status(), 201);
+
+    // Events first, and wait for its first `stats` so it is subscribed before any alarm.
+    let (mut events, _) =
+        tokio_tungstenite::connect_async(format!("ws://{addr}/api/v1/sessions/ws/events"))
+            .await
+            .unwrap();
+    let first = next_json(&mut events).await;
+    assert_eq!(first["type"], "stats");
+    checker.assert_valid(events_schema, &first, "first events message");
+
+    let (mut ingest, _) =
+        tokio_tungstenite::connect_async(format!("ws://{addr}/api/v1/sessions/ws/ingest"))
+            .await
+            .unwrap();
+    // (frame, whether it fits the client schema, messages it yields): an outlier
+    // isolates, bad frames are refused, a quiet epoch heals.
+    let script: [(Value, bool, usize); 5] = [
+        (
+            json!([{"t": 0.0, "z": [0.1]}, {"t": 1.0, "z": [100.0]}]),
+            true,
+            4,
+        ),
+        (json!({"t": 0.5, "z": [0.0]}), true, 1),
+        (json!([{"t": 2.0}, {"t": 3.0, "lidar": 1}]), false, 1),
+        (json!({"t": 2.0, "z": [1.0, 2.0]}), true, 1),
+        (json!({"t": 2.0, "z": [0.0]}), true, 2),
+    ];
+    let mut seen = vec![next_json(&mut ingest).await];
+    for (frame, fits, replies) in &script {
+        assert_eq!(
+            checker.matches(client_schema, frame),
+            *fits,
+            "client schema on {frame}"
+        );
+        ingest
+            .send(Message::Text(frame.to_string().into()))
+            .await
+            .unwrap();
+        for _ in 0..*replies {
+            seen.push(next_json(&mut ingest).await);
+        }
+    }
+    for message in &seen {
+        checker.assert_valid(ingest_schema, message, "ingest message");
+    }
+    let types: Vec<&str> = seen.iter().filter_map(|m| m["type"].as_str()).collect();
+    assert_eq!(
+        types,
+        [
+            "ready", "result", "result", "state", "alarm", "error", "error", "error", "result",
+            "state"
+        ]
+    );
+    let codes: Vec<&str> = seen
+        .iter()
+        .filter(|m| m["type"] == "error")
+        .filter_map(|m| m["code"].as_str())
+        .collect();
+    assert_eq!(codes, ["time_backwards", "unknown_input", "wrong_length"]);
+
+    let mut observed = BTreeSet::new();
+    while !(observed.contains("alarm") && observed.contains("state")) {
+        let message = next_json(&mut events).await;
+        checker.assert_valid(events_schema, &message, "events message");
+        observed.insert(message["type"].as_str().unwrap_or_default().to_owned());
+    }
+
+    // Handshake refusals are declared too.
+    let refusal = |uri: String| async move {
+        match tokio_tungstenite::connect_async(uri).await {
+            Err(tungstenite::Error::Http(response)) => response.status().as_u16().to_string(),
+            other => panic!("expected an HTTP refusal, got {:?}", other.map(|_| ())),
+        }
+    };
+    let second = refusal(format!("ws://{addr}/api/v1/sessions/ws/ingest")).await;
+    assert_eq!(second, "409");
+    assert!(
+        operation(&doc, ingest_path, "GET")["responses"]
+            .get(&second)
+            .is_some()
+    );
+    let missing = refusal(format!("ws://{addr}/api/v1/sessions/nope/events")).await;
+    assert_eq!(missing, "404");
+    assert!(
+        operation(&doc, events_path, "GET")["responses"]
+            .get(&missing)
+            .is_some()
+    );
+
+    let _ = ingest.close(None).await;
+    let _ = events.close(None).await;
+    server.shutdown().await;
+}
