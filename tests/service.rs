@@ -486,6 +486,8 @@ async fn every_bad_frame_gets_an_error_event_and_leaves_the_session_untouched() 
         ("frame_too_large", oversize),
         ("batch_too_large", too_many),
         ("invalid_epoch", r#"{"z": [1.0]}"#.to_owned()),
+        // Parses, fits, but overflows λ: refused by the filter, nothing committed.
+        ("numerical", r#"{"t": 500, "z": [1e300]}"#.to_owned()),
     ];
     for (i, (code, text)) in cases.iter().enumerate() {
         send_text(&mut bad, text).await;
@@ -526,7 +528,7 @@ async fn every_bad_frame_gets_an_error_event_and_leaves_the_session_untouched() 
     );
     // Frames that parse but do not fit the session are counted by it; the rest
     // are refused at the edge before reaching it.
-    assert_eq!(stats_bad["frame_errors"], 4);
+    assert_eq!(stats_bad["frame_errors"], 5);
     assert_eq!(stats_ref["frame_errors"], 0);
     server.shutdown().await;
 }
@@ -905,5 +907,101 @@ async fn chi2_health_metrics_and_unknown_routes_answer_in_json() {
         .await
         .unwrap();
     assert!(html.contains("navguard"));
+    server.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_new_stream_resets_the_filters_and_closes_what_the_old_one_left_open() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = start(&dir.path().join("r.db"), None, Limits::default()).await;
+    let base = http(&server);
+    let policy = json!({"kind": "counters", "n1": 10, "n2": 1});
+    create_session(
+        &client(),
+        &server,
+        &cv_session("re", &MODEL, policy, json!({"p_fa": 1e-5}), true),
+    )
+    .await;
+    let mut events = connect(&format!("{}/api/v1/sessions/re/events", ws(&server))).await;
+    let mut socket = ingest(&server, "re").await;
+    // A second ingest stream while one is attached: 409.
+    let second =
+        tokio_tungstenite::connect_async(format!("{}/api/v1/sessions/re/ingest", ws(&server)))
+            .await;
+    assert!(second.is_err(), "only one ingest stream at a time");
+    let z = MODEL.measurements(60, 5, |k| if k >= 50 { 30.0 } else { 0.0 });
+    stream(&mut socket, &epochs(&z, 0), 60).await;
+    let (last, _) = recv_until(&mut socket, |v| v["type"] == "result" && v["t"] == 59.0).await;
+    assert_eq!(
+        last["monitors"]["cv"]["tests"]["residual"]["state"],
+        "isolated"
+    );
+    drop(socket);
+
+    // Reconnect: filters start afresh (t may restart), the test is announced
+    // healthy, and the open alarms are closed in the log.
+    let mut socket = ingest(&server, "re").await;
+    let (change, _) = recv_until(&mut events, |v| {
+        v["type"] == "state" && v["to"] == "healthy"
+    })
+    .await;
+    assert_eq!(
+        (change["from"].as_str(), change["t"].as_f64()),
+        (Some("isolated"), Some(59.0))
+    );
+    let (_, log) = get_json(&format!("{base}/api/v1/alarms?session=re")).await;
+    let alarms = log["alarms"].as_array().unwrap();
+    assert_eq!(alarms.len(), 2, "suspect then isolated: {log}");
+    assert!(alarms.iter().all(|a| a["cleared_t"] == 59.0), "{log}");
+    send(&mut socket, &json!({"t": 0.0, "z": [z[0]]})).await;
+    let (first, _) = recv_until(&mut socket, |v| v["type"] == "result").await;
+    // Same first result as the first stream had: the prior is x0, P0 again.
+    let x = first["monitors"]["cv"]["x"].as_array().unwrap();
+    let gain = (MODEL.p0 * 2.0 + MODEL.q / 3.0) / (MODEL.p0 * 2.0 + MODEL.q / 3.0 + 1.0);
+    assert!(
+        (x[0].as_f64().unwrap() - gain * z[0]).abs() < 1e-12,
+        "{first}"
+    );
+    server.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn socket_routes_answer_plain_requests_with_json_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = start(&dir.path().join("u.db"), None, Limits::default()).await;
+    let base = http(&server);
+    create_session(
+        &client(),
+        &server,
+        &cv_session("up", &MODEL, json!({"kind": "classic"}), json!({}), false),
+    )
+    .await;
+    let resp = client()
+        .get(format!("{base}/api/v1/sessions/up/ingest"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), 426);
+    assert_eq!(resp.headers()["upgrade"], "websocket");
+    let body: Value = resp.json().await.unwrap();
+    assert_eq!(body["error"]["code"], "upgrade_required");
+    let (status, body) = get_json(&format!("{base}/api/v1/sessions/none/events")).await;
+    assert_eq!(
+        (status, body["error"]["code"].as_str()),
+        (404, Some("not_found"))
+    );
+    let resp = client()
+        .delete(format!("{base}/api/v1/alarms"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), 405);
+    assert_eq!(resp.headers()["allow"], "GET");
+    let resp = client()
+        .post(format!("{base}/api/v1/sessions/up"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.headers()["allow"], "GET, DELETE");
     server.shutdown().await;
 }

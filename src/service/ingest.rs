@@ -58,10 +58,12 @@ pub async fn ingest(
 /// malformed handshake) instead of axum's plain text.
 pub fn upgrade_rejection(rejection: WebSocketUpgradeRejection) -> ApiError {
     let text = format!("this route is a WebSocket: {}", rejection.body_text());
-    if rejection.status() == axum::http::StatusCode::UPGRADE_REQUIRED {
-        ApiError::UpgradeRequired(text)
-    } else {
-        ApiError::BadRequest(text)
+    match rejection {
+        // A plain HTTP request (no Connection/Upgrade headers, or a proxy stripped them).
+        WebSocketUpgradeRejection::InvalidConnectionHeader(_)
+        | WebSocketUpgradeRejection::InvalidUpgradeHeader(_)
+        | WebSocketUpgradeRejection::ConnectionNotUpgradable(_) => ApiError::UpgradeRequired(text),
+        _ => ApiError::BadRequest(text),
     }
 }
 
