@@ -1005,3 +1005,77 @@ async fn socket_routes_answer_plain_requests_with_json_errors() {
     assert_eq!(resp.headers()["allow"], "GET, DELETE");
     server.shutdown().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_slow_subscriber_gets_every_alarm_and_stats_stay_decimated() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = start(&dir.path().join("v.db"), None, Limits::default()).await;
+    // An outlier on every tenth measurement: under the classic policy each is
+    // rejected (an alarm) and the next epoch is healthy again.
+    create_session(
+        &client(),
+        &server,
+        &cv_session(
+            "many",
+            &MODEL,
+            json!({"kind": "classic"}),
+            json!({"p_fa": 1e-5}),
+            false,
+        ),
+    )
+    .await;
+    let mut slow = connect(&format!("{}/api/v1/sessions/many/events", ws(&server))).await;
+    let mut socket = ingest(&server, "many").await;
+    let z = MODEL.measurements(3000, 11, |k| if k % 10 == 9 { 50.0 } else { 0.0 });
+    let frames = epochs(&z, 0);
+    let started = std::time::Instant::now();
+    let writer = tokio::spawn(async move {
+        for chunk in frames.chunks(30) {
+            send(&mut socket, &Value::Array(chunk.to_vec())).await;
+            tokio::time::sleep(Duration::from_millis(5)).await;
+        }
+        socket
+    });
+    let stats = wait_for_epochs(&server, "many", 3000).await;
+    let elapsed = started.elapsed().as_secs_f64();
+    drop(writer.await.unwrap());
+    let alarms = stats["monitors"]["cv"]["tests"]["residual"]["alarms"]
+        .as_u64()
+        .unwrap();
+    assert_eq!(alarms, 300, "one alarm per outlier: {stats}");
+    // Only now does the subscriber read: every alarm is still there, in order.
+    let mut seen = Vec::new();
+    let mut stats_messages = 0;
+    while (seen.len() as u64) < alarms {
+        let v = recv(&mut slow).await;
+        match v["type"].as_str() {
+            Some("alarm") => seen.push(v["id"].as_i64().unwrap()),
+            Some("stats") => stats_messages += 1,
+            _ => {}
+        }
+    }
+    assert!(
+        seen.windows(2).all(|w| w[0] < w[1]),
+        "alarms arrive in order, none twice"
+    );
+    let (_, log) = get_json(&format!(
+        "{}/api/v1/alarms?session=many&limit=1000",
+        http(&server)
+    ))
+    .await;
+    let mut logged: Vec<i64> = log["alarms"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a["id"].as_i64().unwrap())
+        .collect();
+    logged.reverse();
+    assert_eq!(seen, logged, "the subscriber saw exactly the logged alarms");
+    // Stats are decimated to at most 20 per second (plus the immediate first one).
+    let bound = (20.0 * (elapsed + started.elapsed().as_secs_f64())).ceil() as u64 + 2;
+    assert!(
+        stats_messages <= bound,
+        "{stats_messages} stats messages, at most {bound} allowed"
+    );
+    server.shutdown().await;
+}
