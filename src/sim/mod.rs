@@ -1,2 +1,4 @@
 //! Simulation: trajectories, sensor models, fault injection, the papers'
-//! scenarios and experiment scorecards. Filled in with the federated monitor.
+//! scenarios and experiment scorecards. Pure: produces epochs and truth.
+
+pub mod experiment;

@@ -1,0 +1,1 @@
+//! Experiments: the papers' experiments end to end, their scorecards and plots.
