@@ -246,15 +246,16 @@ impl Actor {
         let (tx, rx) = mpsc::channel(INGEST_QUEUE);
         self.ingest = Some(tx);
         self.stats.connected = true;
-        for (m, monitor_stats) in self.monitors.iter().zip(self.stats.monitors.values_mut()) {
-            for (slot, test) in m
-                .monitor
-                .tests()
-                .slots()
-                .iter()
-                .zip(monitor_stats.tests.values_mut())
-            {
-                test.state = slot.policy.health();
+        // Stats are keyed by name (sorted), monitors and slots are in session
+        // order: match them by name, never by position.
+        for m in &self.monitors {
+            let Some(monitor_stats) = self.stats.monitors.get_mut(&m.name) else {
+                continue;
+            };
+            for slot in m.monitor.tests().slots() {
+                if let Some(test) = monitor_stats.tests.get_mut(slot.name) {
+                    test.state = slot.policy.health();
+                }
             }
         }
         self.publish(true);
@@ -333,10 +334,13 @@ impl Actor {
             bank.set_policy(policy);
         }
         let (spec, policy) = (bank.spec(), bank.policy());
-        let thresholds: Vec<f64> = bank.slots().iter().map(|s| s.threshold).collect();
+        let thresholds: Vec<(&'static str, f64)> =
+            bank.slots().iter().map(|s| (s.name, s.threshold)).collect();
         if let Some(stats) = self.stats.monitors.get_mut(name) {
-            for (test, threshold) in stats.tests.values_mut().zip(thresholds) {
-                test.threshold = threshold;
+            for (test, threshold) in thresholds {
+                if let Some(t) = stats.tests.get_mut(test) {
+                    t.threshold = threshold;
+                }
             }
         }
         let stored = {
