@@ -1,1 +1,132 @@
-fn main() {}
+//! Criterion bench: one epoch of the federated INS/GNSS/DVL/CNS filter (DESIGN §5 target:
+//! ≥ 200,000 epochs/s on one core) — INS plus all three aids on every epoch (GNSS with
+//! velocity: 6 + 3 + 2 measurements), the counters policy, 15 error states. A ship at 30° N
+//! sails north-east at 5 m/s; the INS runs at 10 Hz. Epochs are built in memory as the bench
+//! runs (a few arithmetic operations each), so the figure is the monitor's own cost.
+//!
+//! - `federated_monitor/step_ins_gnss_dvl_cns`: the whole `federated` monitor step (aid
+//!   models, the filter, the policies, the HPL, the corrected solution, the report);
+//! - `federated_filter/step_ins_gnss_dvl_cns`: the filter step alone (transition, tests,
+//!   fusion), decisions always healthy.
+//!
+//! Run: `cargo bench --bench federated_step`
+
+use std::hint::black_box;
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use nalgebra::Vector3;
+use navguard::detect::{Decision, Health, PolicyConfig, ThresholdSpec};
+use navguard::filter::aiding;
+use navguard::filter::federated::{FederatedFilter, Observation, equal_betas, ins_transition};
+use navguard::filter::ins::{ImuErrors, NavSolution};
+use navguard::geo::{self, Lla};
+use navguard::monitor::epoch::{CnsBlock, GnssBlock, InsBlock};
+use navguard::monitor::federated::{FederatedConfig, FederatedMonitor};
+use navguard::monitor::{Epoch, Monitor};
+use serde_json::json;
+
+const DT: f64 = 0.1;
+
+/// The ship's epoch `k`: an error-free INS and aids off by a few centimetres.
+fn epoch(start: &Lla, k: u64) -> Epoch {
+    let t = k as f64 * DT;
+    let v = 5.0 * std::f64::consts::FRAC_1_SQRT_2;
+    let vel = [v, v, 0.0];
+    let at = geo::apply_offset(start, &Vector3::new(v * t, v * t, 0.0));
+    let wiggle = 0.05 * ((k % 7) as f64 - 3.0);
+    let fix = geo::apply_offset(&at, &Vector3::new(wiggle, -wiggle, 0.5 * wiggle));
+    let yaw = 45f64.to_radians();
+    Epoch {
+        t,
+        ins: Some(InsBlock {
+            lat: at.lat,
+            lon: at.lon,
+            h: at.h,
+            vel,
+            att: [0.0, 0.0, yaw],
+            f_b: None,
+        }),
+        gnss: Some(GnssBlock {
+            lat: fix.lat,
+            lon: fix.lon,
+            h: fix.h,
+            vel: Some([v + 0.01 * wiggle, v, 0.0]),
+        }),
+        dvl_vel_b: Some([0.01 * wiggle, 5.0, 0.0]),
+        cns: Some(CnsBlock {
+            lat: fix.lat,
+            lon: fix.lon,
+        }),
+        ..Default::default()
+    }
+}
+
+fn bench(c: &mut Criterion) {
+    let start = Lla {
+        lat: 30f64.to_radians(),
+        lon: 120f64.to_radians(),
+        h: 0.0,
+    };
+    let config =
+        FederatedConfig::from_json(&json!({"aids": ["gnss", "dvl", "cns"]})).expect("config");
+
+    let mut monitor = FederatedMonitor::new(
+        config.clone(),
+        PolicyConfig::counters_default(),
+        ThresholdSpec::Threshold(20.0),
+    )
+    .expect("monitor");
+    let mut k = 0;
+    let mut group = c.benchmark_group("federated_monitor");
+    group.throughput(Throughput::Elements(1));
+    group.bench_function("step_ins_gnss_dvl_cns", |b| {
+        b.iter(|| {
+            k += 1;
+            let e = epoch(&start, k);
+            black_box(monitor.step(black_box(&e)).expect("step"))
+        })
+    });
+    group.finish();
+
+    let mut filter =
+        FederatedFilter::new(&equal_betas(3), config.initial_estimate()).expect("filter");
+    let imu = ImuErrors::default();
+    let healthy = Decision {
+        health: Health::Healthy,
+        update: true,
+        fuse: true,
+        reset: false,
+    };
+    let mut k = 0;
+    let mut group = c.benchmark_group("federated_filter");
+    group.throughput(Throughput::Elements(1));
+    group.bench_function("step_ins_gnss_dvl_cns", |b| {
+        b.iter(|| {
+            k += 1;
+            let e = epoch(&start, k);
+            let (Some(ins), Some(g), Some(d), Some(cns)) = (&e.ins, &e.gnss, e.dvl_vel_b, &e.cns)
+            else {
+                unreachable!("every bench epoch carries all blocks")
+            };
+            let nav = NavSolution::from_ins(ins);
+            let fix = Lla {
+                lat: g.lat,
+                lon: g.lon,
+                h: g.h,
+            };
+            let vel = Vector3::from(g.vel.unwrap_or_default());
+            let obs: [Option<Observation>; 3] = [
+                Some(aiding::gnss_velocity_position(&nav, &fix, &vel, 10.0, 0.1).into()),
+                Some(aiding::dvl_velocity(&nav, &Vector3::from(d), 0.1).into()),
+                Some(aiding::cns_position(&nav, cns.lat, cns.lon, 450.0).into()),
+            ];
+            let trans = ins_transition(&nav, &imu, DT).expect("transition");
+            black_box(filter.step(&trans, &obs, |_, _| healthy).expect("step"));
+            filter.commit();
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

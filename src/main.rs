@@ -1,5 +1,8 @@
 //! The `navguard` binary: parses flags, opens the store and serves (thin; the
-//! service lives in the library). `anyhow` is used only here and in `cli/`.
+//! service lives in the library), or runs one of the tools in [`cli`]
+//! (`simulate`, `replay`, `experiment`). `anyhow` is used only here and in `cli/`.
+
+mod cli;
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -22,6 +25,13 @@ struct Cli {
 enum Command {
     /// Serve the API, sockets and dashboard (the default).
     Serve(ServeArgs),
+    /// Write a simulated scenario as ingest frames, one epoch per JSON line.
+    Simulate(cli::simulate::SimulateArgs),
+    /// Stream a JSON-lines file of epochs into a session of a running server.
+    Replay(cli::replay::ReplayArgs),
+    /// Rerun a paper's experiment in-process: print its table, write its figures.
+    #[command(subcommand)]
+    Experiment(cli::experiment::ExperimentCommand),
 }
 
 #[derive(Debug, Args)]
@@ -86,7 +96,27 @@ async fn serve(args: ServeArgs) -> anyhow::Result<()> {
 }
 
 #[tokio::main]
-async fn main() -> anyhow::Result<()> {
+async fn main() -> std::process::ExitCode {
+    match run().await {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            // One line with the cause chain (whatever RUST_BACKTRACE says),
+            // skipping causes the message already quotes.
+            let mut message = e.to_string();
+            for cause in e.chain().skip(1) {
+                let cause = cause.to_string();
+                if !message.contains(&cause) {
+                    message.push_str(": ");
+                    message.push_str(&cause);
+                }
+            }
+            eprintln!("error: {message}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+async fn run() -> anyhow::Result<()> {
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()
@@ -96,6 +126,9 @@ async fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
         Some(Command::Serve(args)) => serve(args).await,
+        Some(Command::Simulate(args)) => cli::simulate::run(args),
+        Some(Command::Replay(args)) => cli::replay::run(args).await,
+        Some(Command::Experiment(command)) => cli::experiment::run(command),
         None => serve(cli.serve).await,
     }
 }

@@ -706,7 +706,7 @@ async fn rest_answers_match_their_schemas() {
     let invalid = c.call("POST", sessions, sessions, Some(&bad)).await;
     assert_eq!(invalid["error"]["field"], "monitors[0].config.r");
     bad = session_body("s2", false);
-    bad["monitors"][0]["type"] = json!("federated");
+    bad["monitors"][0]["type"] = json!("channel");
     let unsupported = c.call("POST", sessions, sessions, Some(&bad)).await;
     assert_eq!(unsupported["error"]["field"], "monitors[0].type");
     let no_type = send(

@@ -776,7 +776,7 @@ async fn sessions_are_validated_listed_and_deleted() {
             .unwrap()
             .contains("symmetric")
     );
-    let (status, err) = post(json!({"monitors": [{"name": "f", "type": "federated"}]})).await;
+    let (status, err) = post(json!({"monitors": [{"name": "g", "type": "rimu"}]})).await;
     assert_eq!(
         (status, err["error"]["field"].as_str()),
         (422, Some("monitors[0].type"))

@@ -3,6 +3,7 @@
 //! innovations) and the monitors (which wire filters and detectors together).
 
 pub mod chi2;
+pub mod hpl;
 pub mod policy;
 pub mod statistic;
 

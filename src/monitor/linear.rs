@@ -435,7 +435,9 @@ mod tests {
             .unwrap();
         let lambda = 4.0 / 21.25;
         assert!((report.tests[0].statistic.value - lambda).abs() < 1e-12);
-        let Outputs::Linear { x, innovation } = report.outputs;
+        let Outputs::Linear { x, innovation } = report.outputs else {
+            panic!("linear outputs")
+        };
         assert_eq!(innovation, Some(vec![2.0]));
         assert!((x[0] - 20.25 / 21.25 * 2.0).abs() < 1e-12);
         assert!((x[1] - 10.5 / 21.25 * 2.0).abs() < 1e-12);
@@ -458,7 +460,9 @@ mod tests {
             })
             .unwrap();
         assert_eq!(report.tests[0].decision.health, Health::Suspect);
-        let Outputs::Linear { x, .. } = report.outputs;
+        let Outputs::Linear { x, .. } = report.outputs else {
+            panic!("linear outputs")
+        };
         assert_eq!(
             x,
             vec![0.0, 0.0],

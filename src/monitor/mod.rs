@@ -3,6 +3,7 @@
 //! Pure and synchronous; the session actor in `service/session` drives them.
 
 pub mod epoch;
+pub mod federated;
 pub mod linear;
 pub mod tests_bank;
 
@@ -105,6 +106,16 @@ pub enum Outputs {
         /// Posterior state estimate.
         x: Vec<f64>,
     },
+    /// `federated`: the corrected solution and the HPL (both absent before the first INS
+    /// epoch) and the aids whose tests are isolated.
+    Federated {
+        /// INS minus the fused error: lat, lon in degrees, h in m, vel ENU in m/s.
+        solution: Option<federated::FederatedSolution>,
+        /// Horizontal protection level, m (DESIGN §3.6).
+        hpl: Option<f64>,
+        /// Names of the aids currently isolated.
+        isolated: Vec<&'static str>,
+    },
 }
 
 /// What one monitor yields for one epoch.
@@ -177,6 +188,14 @@ pub fn build(spec: &MonitorSpec) -> Result<Box<dyn Monitor>, BuildError> {
         MonitorKind::Linear => {
             let config = linear::LinearConfig::from_json(&spec.config)?;
             Ok(Box::new(linear::LinearMonitor::new(
+                config,
+                spec.policy,
+                spec.threshold,
+            )?))
+        }
+        MonitorKind::Federated => {
+            let config = federated::FederatedConfig::from_json(&spec.config)?;
+            Ok(Box::new(federated::FederatedMonitor::new(
                 config,
                 spec.policy,
                 spec.threshold,

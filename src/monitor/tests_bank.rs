@@ -1,5 +1,13 @@
 //! The tests of one monitor: names, dof, thresholds and policy states, shared
 //! by every monitor kind so thresholds and policies behave the same everywhere.
+//!
+//! Two extensions serve the federated monitor: a test whose statistic's dof changes
+//! from epoch to epoch (GNSS: 6 with velocity, 3 without) keeps one threshold per dof,
+//! resolved when the spec is set, never per epoch ([`TestBank::add_dofs`],
+//! [`TestBank::preview`]); and a test with a fixed threshold and its own policy that the
+//! monitor-wide spec and policy do not touch (the HPL against the HAL,
+//! [`TestBank::add_fixed`]). [`TestBank::preview`] and [`TestBank::commit`] split an
+//! evaluation so a monitor can decide, finish its numerical step, and only then commit.
 
 use crate::detect::{
     Decision, Health, PolicyConfig, PolicyState, Statistic, ThresholdError, ThresholdSpec,
@@ -16,6 +24,24 @@ pub struct TestSlot {
     pub threshold: f64,
     /// Decision policy and counters.
     pub policy: PolicyState,
+    /// Other dofs the statistic may have on some epochs, each with its resolved threshold.
+    pub alt_dofs: Vec<(u32, f64)>,
+    /// The threshold and policy are the test's own (e.g. the HAL of the `hpl` test):
+    /// monitor-wide spec and policy changes leave them alone.
+    pub fixed: bool,
+}
+
+impl TestSlot {
+    /// The cached threshold for `dof`: the primary one or one of [`TestSlot::alt_dofs`].
+    pub fn threshold_for(&self, dof: u32) -> Option<f64> {
+        if dof == self.dof || self.fixed {
+            return Some(self.threshold);
+        }
+        self.alt_dofs
+            .iter()
+            .find(|&&(d, _)| d == dof)
+            .map(|&(_, t)| t)
+    }
 }
 
 /// The outcome of one test for one epoch.
@@ -57,6 +83,8 @@ impl TestBank {
                     dof,
                     threshold: spec.resolve(dof)?,
                     policy: PolicyState::new(policy),
+                    alt_dofs: Vec::new(),
+                    fixed: false,
                 })
             })
             .collect::<Result<Vec<_>, ThresholdError>>()?;
@@ -65,6 +93,39 @@ impl TestBank {
             policy,
             slots,
         })
+    }
+
+    /// Lets test `index` also run with the statistic dofs `dofs`, resolving their thresholds
+    /// now under the spec in force (and again on every [`TestBank::set_spec`]).
+    pub fn add_dofs(&mut self, index: usize, dofs: &[u32]) -> Result<(), ThresholdError> {
+        let slot = &mut self.slots[index];
+        for &dof in dofs {
+            if dof != slot.dof && slot.alt_dofs.iter().all(|&(d, _)| d != dof) {
+                let threshold = self.spec.resolve(dof)?;
+                slot.alt_dofs.push((dof, threshold));
+            }
+        }
+        Ok(())
+    }
+
+    /// Adds a test with a fixed `threshold` and its own `policy`, which later spec and
+    /// policy changes of the monitor do not touch. Returns its index.
+    pub fn add_fixed(
+        &mut self,
+        name: &'static str,
+        dof: u32,
+        threshold: f64,
+        policy: PolicyConfig,
+    ) -> usize {
+        self.slots.push(TestSlot {
+            name,
+            dof,
+            threshold,
+            policy: PolicyState::new(policy),
+            alt_dofs: Vec::new(),
+            fixed: true,
+        });
+        self.slots.len() - 1
     }
 
     /// The tests.
@@ -82,32 +143,45 @@ impl TestBank {
         self.policy
     }
 
-    /// Applies a new threshold spec to every test; on error nothing changes.
+    /// Applies a new threshold spec to every test but the fixed ones (primary and
+    /// alternative dofs); on error nothing changes.
     pub fn set_spec(&mut self, spec: ThresholdSpec) -> Result<(), ThresholdError> {
-        let thresholds = self
+        let resolved = self
             .slots
             .iter()
-            .map(|s| spec.resolve(s.dof))
-            .collect::<Result<Vec<_>, _>>()?;
-        for (slot, threshold) in self.slots.iter_mut().zip(thresholds) {
+            .map(|s| {
+                if s.fixed {
+                    return Ok((s.threshold, s.alt_dofs.clone()));
+                }
+                let alt = s
+                    .alt_dofs
+                    .iter()
+                    .map(|&(d, _)| Ok((d, spec.resolve(d)?)))
+                    .collect::<Result<Vec<_>, ThresholdError>>()?;
+                Ok((spec.resolve(s.dof)?, alt))
+            })
+            .collect::<Result<Vec<_>, ThresholdError>>()?;
+        for (slot, (threshold, alt)) in self.slots.iter_mut().zip(resolved) {
             slot.threshold = threshold;
+            slot.alt_dofs = alt;
         }
         self.spec = spec;
         Ok(())
     }
 
-    /// Applies a new policy to every test (counters restart, health kept).
+    /// Applies a new policy to every test but the fixed ones (counters restart, health kept).
     pub fn set_policy(&mut self, policy: PolicyConfig) {
-        for slot in &mut self.slots {
+        for slot in self.slots.iter_mut().filter(|s| !s.fixed) {
             slot.policy.set_config(policy);
         }
         self.policy = policy;
     }
 
-    /// Restarts every policy from its initial counters, healthy.
+    /// Restarts every policy (each under its own configuration) from its initial
+    /// counters, healthy.
     pub fn reset(&mut self) {
         for slot in &mut self.slots {
-            slot.policy = PolicyState::new(self.policy);
+            slot.policy = PolicyState::new(slot.policy.config());
         }
     }
 
@@ -128,6 +202,45 @@ impl TestBank {
             decision,
             previous,
         }
+    }
+
+    /// Evaluates test `index` with a statistic of `dof` degrees of freedom against the
+    /// threshold cached for that dof, without changing the bank: returns the outcome and the
+    /// policy state to [`TestBank::commit`] once the monitor's step has succeeded. A dof with
+    /// no cached threshold (not declared with [`TestBank::add_dofs`]) is resolved on the spot.
+    pub fn preview(
+        &self,
+        index: usize,
+        value: f64,
+        dof: u32,
+    ) -> Result<(TestOutcome, PolicyState), ThresholdError> {
+        let slot = &self.slots[index];
+        let threshold = match slot.threshold_for(dof) {
+            Some(t) => t,
+            None => self.spec.resolve(dof)?,
+        };
+        let statistic = Statistic {
+            value,
+            threshold,
+            dof,
+        };
+        let mut policy = slot.policy.clone();
+        let decision = policy.step(statistic.exceeds());
+        Ok((
+            TestOutcome {
+                index,
+                name: slot.name,
+                statistic,
+                decision,
+                previous: slot.policy.health(),
+            },
+            policy,
+        ))
+    }
+
+    /// Commits a policy state computed by [`TestBank::preview`] for test `index`.
+    pub fn commit(&mut self, index: usize, policy: PolicyState) {
+        self.slots[index].policy = policy;
     }
 
     /// The decision for test `index` on an epoch where it does not run.
@@ -165,6 +278,74 @@ mod tests {
         assert!(bank.set_spec(ThresholdSpec::PFa(2.0)).is_err());
         assert_eq!(bank.slots()[0].threshold, 20.0);
         assert_eq!(bank.spec(), ThresholdSpec::Threshold(20.0));
+    }
+
+    #[test]
+    fn alternative_dofs_keep_their_own_thresholds_through_spec_changes() {
+        let mut bank = TestBank::new(
+            &[("gnss", 6)],
+            ThresholdSpec::PFa(0.002),
+            PolicyConfig::Classic,
+        )
+        .unwrap();
+        bank.add_dofs(0, &[3, 6]).unwrap();
+        assert_eq!(
+            bank.slots()[0].alt_dofs.len(),
+            1,
+            "the primary dof is not duplicated"
+        );
+        let (o, _) = bank.preview(0, 15.0, 3).unwrap();
+        // dof 3 at p_fa 0.002: 14.7955 (seed 000 Table 1), so 15 exceeds; at dof 6 it does not.
+        assert!((o.statistic.threshold - 14.7955).abs() < 1e-4);
+        assert_eq!(o.statistic.dof, 3);
+        assert!(o.statistic.exceeds());
+        let (o, _) = bank.preview(0, 15.0, 6).unwrap();
+        assert!((o.statistic.threshold - 20.7912).abs() < 1e-4);
+        bank.set_spec(ThresholdSpec::PFa(1e-5)).unwrap();
+        assert!((bank.slots()[0].threshold_for(3).unwrap() - 25.9017).abs() < 1e-4);
+        // An undeclared dof is resolved on the spot: dof 2 at 1e-5 is 23.0259.
+        let (o, _) = bank.preview(0, 1.0, 2).unwrap();
+        assert!((o.statistic.threshold - 23.0259).abs() < 1e-4);
+    }
+
+    #[test]
+    fn preview_changes_nothing_until_committed() {
+        let mut bank = TestBank::new(
+            &[("a", 2)],
+            ThresholdSpec::Threshold(5.0),
+            PolicyConfig::Classic,
+        )
+        .unwrap();
+        let (o, state) = bank.preview(0, 7.0, 2).unwrap();
+        assert_eq!(o.decision.health, Health::Isolated);
+        assert_eq!(bank.slots()[0].policy.health(), Health::Healthy);
+        bank.commit(0, state);
+        assert_eq!(bank.slots()[0].policy.health(), Health::Isolated);
+    }
+
+    #[test]
+    fn fixed_tests_ignore_monitor_wide_spec_and_policy_changes() {
+        let mut bank = TestBank::new(
+            &[("gnss", 3)],
+            ThresholdSpec::Threshold(20.0),
+            PolicyConfig::counters_default(),
+        )
+        .unwrap();
+        let hpl = bank.add_fixed("hpl", 2, 40.0, PolicyConfig::Classic);
+        assert_eq!(hpl, 1);
+        bank.set_spec(ThresholdSpec::Threshold(13.0)).unwrap();
+        bank.set_policy(PolicyConfig::Counters { n1: 3, n2: 1 });
+        assert_eq!(bank.slots()[0].threshold, 13.0);
+        assert_eq!(bank.slots()[1].threshold, 40.0);
+        assert_eq!(bank.slots()[1].policy.config(), PolicyConfig::Classic);
+        // Whatever dof is asked, a fixed test compares with its own threshold.
+        let (o, _) = bank.preview(hpl, 41.0, 2).unwrap();
+        assert_eq!(o.statistic.threshold, 40.0);
+        assert_eq!(o.decision.health, Health::Isolated);
+        bank.evaluate(hpl, 41.0);
+        bank.reset();
+        assert_eq!(bank.slots()[1].policy.health(), Health::Healthy);
+        assert_eq!(bank.slots()[1].policy.config(), PolicyConfig::Classic);
     }
 
     #[test]

@@ -586,6 +586,264 @@ pub fn tagged<T: Serialize>(kind: &'static str, body: &T) -> String {
     })
 }
 
+// ------------------------------------------------------- epochs back to the wire
+
+#[derive(Debug, Serialize)]
+struct OutIns {
+    lat: f64,
+    lon: f64,
+    h: f64,
+    vel: [f64; 3],
+    att: [f64; 3],
+    #[serde(skip_serializing_if = "Option::is_none")]
+    f_b: Option<[f64; 3]>,
+}
+
+#[derive(Debug, Serialize)]
+struct OutGnss {
+    lat: f64,
+    lon: f64,
+    h: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    vel: Option<[f64; 3]>,
+}
+
+#[derive(Debug, Serialize)]
+struct OutDvl {
+    vel_b: [f64; 3],
+}
+
+#[derive(Debug, Serialize)]
+struct OutCns {
+    lat: f64,
+    lon: f64,
+}
+
+#[derive(Debug, Serialize)]
+struct OutAds {
+    baro_h: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    tas: Option<f64>,
+}
+
+#[derive(Debug, Serialize)]
+struct OutTacan {
+    range_m: f64,
+}
+
+#[derive(Debug, Serialize)]
+#[serde(untagged)]
+enum OutChannel<'a> {
+    Scalar(f64),
+    Vector(&'a [f64]),
+}
+
+/// One epoch in the ingest wire format, fields in the order DESIGN §4.2 lists them.
+#[derive(Debug, Serialize)]
+struct OutEpoch<'a> {
+    t: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    ins: Option<OutIns>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    gnss: Option<OutGnss>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    dvl: Option<OutDvl>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    cns: Option<OutCns>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    ads: Option<OutAds>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    tacan: Option<OutTacan>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    gyros: Option<&'a [f64]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    channels: Option<BTreeMap<&'a str, OutChannel<'a>>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    z: Option<&'a [f64]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    u: Option<&'a [f64]>,
+}
+
+/// Serialises a domain `Epoch` to one ingest frame (a JSON object, degrees on
+/// the wire): the inverse of [`parse_frame`] for one epoch, used by
+/// `navguard simulate` to write JSON lines. A one-element channel is written as
+/// a scalar, which parses back to the same one-element vector. Refuses (code
+/// `non_finite`) an epoch holding a non-finite number, which JSON cannot carry.
+pub fn epoch_to_wire(epoch: &Epoch) -> Result<String, FrameError> {
+    let mut numbers: Vec<f64> = vec![epoch.t];
+    if let Some(i) = &epoch.ins {
+        numbers.extend([i.lat, i.lon, i.h]);
+        numbers.extend(i.vel.iter().chain(&i.att).chain(i.f_b.iter().flatten()));
+    }
+    if let Some(g) = &epoch.gnss {
+        numbers.extend([g.lat, g.lon, g.h]);
+        numbers.extend(g.vel.iter().flatten());
+    }
+    numbers.extend(epoch.dvl_vel_b.iter().flatten());
+    if let Some(c) = &epoch.cns {
+        numbers.extend([c.lat, c.lon]);
+    }
+    if let Some(a) = &epoch.ads {
+        numbers.push(a.baro_h);
+        numbers.extend(a.tas);
+    }
+    numbers.extend(epoch.tacan_range_m);
+    for v in [&epoch.gyros, &epoch.z, &epoch.u].into_iter().flatten() {
+        numbers.extend(v);
+    }
+    for (_, v) in epoch.channels.iter().flatten() {
+        numbers.extend(v);
+    }
+    finite("epoch", &numbers)?;
+    let out = OutEpoch {
+        t: epoch.t,
+        ins: epoch.ins.as_ref().map(|i| OutIns {
+            lat: i.lat.to_degrees(),
+            lon: i.lon.to_degrees(),
+            h: i.h,
+            vel: i.vel,
+            att: i.att.map(f64::to_degrees),
+            f_b: i.f_b,
+        }),
+        gnss: epoch.gnss.as_ref().map(|g| OutGnss {
+            lat: g.lat.to_degrees(),
+            lon: g.lon.to_degrees(),
+            h: g.h,
+            vel: g.vel,
+        }),
+        dvl: epoch.dvl_vel_b.map(|vel_b| OutDvl { vel_b }),
+        cns: epoch.cns.as_ref().map(|c| OutCns {
+            lat: c.lat.to_degrees(),
+            lon: c.lon.to_degrees(),
+        }),
+        ads: epoch.ads.as_ref().map(|a| OutAds {
+            baro_h: a.baro_h,
+            tas: a.tas,
+        }),
+        tacan: epoch.tacan_range_m.map(|range_m| OutTacan { range_m }),
+        gyros: epoch.gyros.as_deref(),
+        channels: epoch.channels.as_ref().map(|channels| {
+            channels
+                .iter()
+                .map(|(name, v)| {
+                    let value = match v.as_slice() {
+                        [x] => OutChannel::Scalar(*x),
+                        v => OutChannel::Vector(v),
+                    };
+                    (name.as_str(), value)
+                })
+                .collect()
+        }),
+        z: epoch.z.as_deref(),
+        u: epoch.u.as_deref(),
+    };
+    serde_json::to_string(&out).map_err(|e| FrameError::new("invalid_epoch", e.to_string()))
+}
+
+#[cfg(test)]
+mod epoch_to_wire_tests {
+    use super::*;
+
+    fn full_epoch() -> Epoch {
+        Epoch {
+            t: 1080.25,
+            ins: Some(InsBlock {
+                lat: 30.5f64.to_radians(),
+                lon: 114.25f64.to_radians(),
+                h: 12.5,
+                vel: [3.0, -4.0, 0.01],
+                att: [
+                    0.5f64.to_radians(),
+                    -1.0f64.to_radians(),
+                    359.0f64.to_radians(),
+                ],
+                f_b: Some([0.01, 0.02, 9.79]),
+            }),
+            gnss: Some(GnssBlock {
+                lat: 30.500_01f64.to_radians(),
+                lon: 114.25f64.to_radians(),
+                h: 11.0,
+                vel: Some([3.1, -3.9, 0.0]),
+            }),
+            dvl_vel_b: Some([0.0, 5.0, 0.0]),
+            cns: Some(CnsBlock {
+                lat: 30.49f64.to_radians(),
+                lon: -114.25f64.to_radians(),
+            }),
+            ads: Some(AdsBlock {
+                baro_h: 1200.0,
+                tas: None,
+            }),
+            tacan_range_m: Some(12_345.6),
+            gyros: Some(vec![1e-3, -2e-3, 0.0, 5e-4]),
+            channels: Some(vec![
+                ("baro_minus_gnss".to_owned(), vec![0.25]),
+                ("innov".to_owned(), vec![1.0, 2.0]),
+            ]),
+            z: Some(vec![1.5]),
+            u: Some(vec![-0.5]),
+        }
+    }
+
+    fn assert_close(a: &[f64], b: &[f64]) {
+        assert_eq!(a.len(), b.len());
+        for (x, y) in a.iter().zip(b) {
+            assert!((x - y).abs() <= 1e-15 * x.abs().max(1.0), "{x} vs {y}");
+        }
+    }
+
+    #[test]
+    fn an_epoch_survives_the_round_trip_through_the_wire() {
+        let epoch = full_epoch();
+        let text = epoch_to_wire(&epoch).unwrap();
+        let back = parse_frame(&text, 1).unwrap().remove(0);
+        assert_eq!(back.t, epoch.t);
+        let (a, b) = (back.ins.as_ref().unwrap(), epoch.ins.as_ref().unwrap());
+        assert_close(&[a.lat, a.lon, a.h], &[b.lat, b.lon, b.h]);
+        assert_close(&a.att, &b.att);
+        assert_eq!((a.vel, a.f_b), (b.vel, b.f_b));
+        let (a, b) = (back.gnss.as_ref().unwrap(), epoch.gnss.as_ref().unwrap());
+        assert_close(&[a.lat, a.lon, a.h], &[b.lat, b.lon, b.h]);
+        assert_eq!(a.vel, b.vel);
+        let (a, b) = (back.cns.as_ref().unwrap(), epoch.cns.as_ref().unwrap());
+        assert_close(&[a.lat, a.lon], &[b.lat, b.lon]);
+        assert_eq!(back.dvl_vel_b, epoch.dvl_vel_b);
+        assert_eq!(back.ads, epoch.ads);
+        assert_eq!(back.tacan_range_m, epoch.tacan_range_m);
+        assert_eq!(back.gyros, epoch.gyros);
+        assert_eq!(back.channels, epoch.channels);
+        assert_eq!((back.z, back.u), (epoch.z, epoch.u));
+    }
+
+    #[test]
+    fn the_wire_carries_degrees_and_omits_absent_blocks() {
+        let epoch = Epoch {
+            t: 2.0,
+            cns: Some(CnsBlock {
+                lat: std::f64::consts::FRAC_PI_4,
+                lon: -std::f64::consts::FRAC_PI_2,
+            }),
+            ..Epoch::default()
+        };
+        let text = epoch_to_wire(&epoch).unwrap();
+        let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+        assert_eq!(v["cns"]["lat"], 45.0);
+        assert_eq!(v["cns"]["lon"], -90.0);
+        assert_eq!(v.as_object().unwrap().len(), 2, "{text}");
+        assert!(text.starts_with(r#"{"t":2.0"#), "{text}");
+    }
+
+    #[test]
+    fn non_finite_epochs_are_refused() {
+        let epoch = Epoch {
+            t: 0.0,
+            z: Some(vec![f64::NAN]),
+            ..Epoch::default()
+        };
+        assert_eq!(epoch_to_wire(&epoch).unwrap_err().code, "non_finite");
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,1 +1,297 @@
 //! Experiments: the papers' experiments end to end, their scorecards and plots.
+//! Sits at the end of the core's flow: a scenario from [`crate::sim`] runs
+//! through a monitor in-process ([`run_monitor`]); the result structs carry the
+//! figures, the renderers turn them into the text tables and SVG plots the CLI
+//! writes. No I/O here.
+//!
+//! - [`seed004`]: seed 004's comparison of the classic and counter policies at
+//!   thresholds 13 and 20 on the `ship` scenario (its Tables 1–3, Figs. 3–10).
+//! - [`ramp`]: DESIGN §3.9's slow GNSS drift benchmark.
+//! - [`scorecard`]: the per-detector figures every experiment ends with.
+//! - [`plot`]: the SVG line charts.
+
+pub mod plot;
+pub mod ramp;
+pub mod scorecard;
+pub mod seed004;
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use serde_json::Value;
+
+use super::{Aid, Fault, Scenario, SimError};
+use crate::detect::Health;
+use crate::geo::{self, Lla};
+use crate::monitor::{self, BuildError, MonitorSpec, StepError};
+use scorecard::FaultWindow;
+
+/// Why an experiment could not run.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ExperimentError {
+    /// The scenario could not be built.
+    #[error("scenario: {0}")]
+    Sim(#[from] SimError),
+    /// The monitor could not be built from its spec.
+    #[error("monitor: {0}")]
+    Build(#[from] BuildError),
+    /// The monitor failed on an epoch.
+    #[error("monitor failed at t = {t} s: {source}")]
+    Step {
+        /// Epoch time, s.
+        t: f64,
+        /// The failure.
+        source: StepError,
+    },
+    /// The monitor's outputs carry no corrected solution.
+    #[error("the monitor reports no corrected `solution` (t = {0} s)")]
+    NoSolution(f64),
+}
+
+/// The corrected solution's error against the truth at one epoch.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NavError {
+    /// Epoch time, s.
+    pub t: f64,
+    /// Latitude error as metres north (solution − truth).
+    pub north_m: f64,
+    /// Longitude error as metres east.
+    pub east_m: f64,
+    /// Height error, m.
+    pub up_m: f64,
+    /// East velocity error, m/s.
+    pub ve_mps: f64,
+    /// North velocity error, m/s.
+    pub vn_mps: f64,
+}
+
+impl NavError {
+    /// Horizontal position error, m.
+    pub fn horizontal_m(&self) -> f64 {
+        self.east_m.hypot(self.north_m)
+    }
+}
+
+/// One test's outcome at one epoch.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TestSample {
+    /// Epoch time, s.
+    pub t: f64,
+    /// The statistic (λ).
+    pub statistic: f64,
+    /// The threshold it was compared with.
+    pub threshold: f64,
+    /// Health after this epoch.
+    pub health: Health,
+}
+
+/// What one monitor did over one scenario.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MonitorRun {
+    /// Solution error at every epoch.
+    pub errors: Vec<NavError>,
+    /// Per test, every epoch on which it ran.
+    pub tests: BTreeMap<String, Vec<TestSample>>,
+    /// HPL at every epoch that reports one, `(t, m)`.
+    pub hpl: Vec<(f64, f64)>,
+    /// Mean wall-clock time of one monitor step, s.
+    pub time_per_epoch_s: f64,
+}
+
+impl MonitorRun {
+    /// The `(t, health)` trace of a test, for [`scorecard::score`].
+    pub fn health_trace(&self, test: &str) -> Vec<(f64, Health)> {
+        self.tests
+            .get(test)
+            .map(|s| s.iter().map(|x| (x.t, x.health)).collect())
+            .unwrap_or_default()
+    }
+
+    /// The first epoch at or after `from` on which `test` is not healthy.
+    pub fn first_alarm(&self, test: &str, from: f64) -> Option<f64> {
+        self.tests
+            .get(test)?
+            .iter()
+            .find(|s| s.t >= from && s.health != Health::Healthy)
+            .map(|s| s.t)
+    }
+}
+
+/// Reads `solution {lat, lon, h (°, °, m), vel [e, n, u]}` and `hpl` from a
+/// monitor's outputs in their wire form (DESIGN §4.2), so the experiments rely
+/// on the documented output shape only.
+fn solution(outputs: &Value) -> Option<(Lla, [f64; 3], Option<f64>)> {
+    let s = &outputs["solution"];
+    let lla = Lla {
+        lat: s["lat"].as_f64()?.to_radians(),
+        lon: s["lon"].as_f64()?.to_radians(),
+        h: s["h"].as_f64()?,
+    };
+    let v = s["vel"].as_array()?;
+    let vel = [
+        v.first()?.as_f64()?,
+        v.get(1)?.as_f64()?,
+        v.get(2)?.as_f64()?,
+    ];
+    Some((lla, vel, outputs["hpl"].as_f64()))
+}
+
+/// Runs `scenario` through the monitor `spec` describes, epoch by epoch, and
+/// records the corrected solution's error against the truth and every test.
+pub fn run_monitor(scenario: &Scenario, spec: &MonitorSpec) -> Result<MonitorRun, ExperimentError> {
+    let mut monitor = monitor::build(spec)?;
+    let mut run = MonitorRun {
+        errors: Vec::with_capacity(scenario.epochs.len()),
+        tests: BTreeMap::new(),
+        hpl: Vec::new(),
+        time_per_epoch_s: 0.0,
+    };
+    let mut busy = std::time::Duration::ZERO;
+    for e in &scenario.epochs {
+        let t = e.epoch.t;
+        let started = Instant::now();
+        let report = monitor
+            .step(&e.epoch)
+            .map_err(|source| ExperimentError::Step { t, source })?;
+        busy += started.elapsed();
+        for o in &report.tests {
+            run.tests
+                .entry(o.name.to_owned())
+                .or_default()
+                .push(TestSample {
+                    t,
+                    statistic: o.statistic.value,
+                    threshold: o.statistic.threshold,
+                    health: o.decision.health,
+                });
+        }
+        let outputs = serde_json::to_value(&report.outputs).unwrap_or(Value::Null);
+        let (lla, vel, hpl) = solution(&outputs).ok_or(ExperimentError::NoSolution(t))?;
+        if let Some(hpl) = hpl {
+            run.hpl.push((t, hpl));
+        }
+        // ENU metres of solution − truth at the truth (small-offset form).
+        let d = geo::local_offset(&lla, &e.truth.lla);
+        run.errors.push(NavError {
+            t,
+            north_m: d.y,
+            east_m: d.x,
+            up_m: d.z,
+            ve_mps: vel[0] - e.truth.vel.x,
+            vn_mps: vel[1] - e.truth.vel.y,
+        });
+    }
+    let n = scenario.epochs.len().max(1) as f64;
+    run.time_per_epoch_s = busy.as_secs_f64() / n;
+    Ok(run)
+}
+
+/// The fault windows of a scenario that concern one aid's test, merged where
+/// they overlap (e.g. seed 004's latitude and longitude jumps are one window).
+pub fn fault_windows(faults: &[Fault], aid: Aid) -> Vec<FaultWindow> {
+    let mut windows: Vec<FaultWindow> = faults
+        .iter()
+        .filter(|f| f.aid == aid)
+        .map(|f| FaultWindow {
+            start: f.start_s,
+            end: f.end_s.unwrap_or(f64::INFINITY),
+        })
+        .collect();
+    windows.sort_by(|a, b| a.start.total_cmp(&b.start));
+    let mut merged: Vec<FaultWindow> = Vec::new();
+    for w in windows {
+        match merged.last_mut() {
+            Some(last) if w.start <= last.end => last.end = last.end.max(w.end),
+            _ => merged.push(w),
+        }
+    }
+    merged
+}
+
+/// Mean, standard deviation and maximum of an error series.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ErrorStats {
+    /// Mean of the absolute error (seed 004 Table 1, "precision").
+    pub mean: f64,
+    /// Standard deviation of the signed error (Table 2, "stability": its fluctuation).
+    pub std: f64,
+    /// Largest absolute error (Table 3, "maximum").
+    pub max: f64,
+}
+
+impl ErrorStats {
+    /// The statistics of `values` (all zero for an empty series).
+    pub fn of(values: impl IntoIterator<Item = f64>) -> Self {
+        let (mut n, mut sum_abs, mut sum, mut sum_sq, mut max) = (0usize, 0.0, 0.0, 0.0, 0.0f64);
+        for v in values {
+            n += 1;
+            sum_abs += v.abs();
+            sum += v;
+            sum_sq += v * v;
+            max = max.max(v.abs());
+        }
+        if n == 0 {
+            return ErrorStats {
+                mean: 0.0,
+                std: 0.0,
+                max: 0.0,
+            };
+        }
+        let nf = n as f64;
+        let mean_signed = sum / nf;
+        ErrorStats {
+            mean: sum_abs / nf,
+            std: (sum_sq / nf - mean_signed * mean_signed).max(0.0).sqrt(),
+            max,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    #[test]
+    fn error_stats_are_mean_abs_std_signed_and_max_abs() {
+        let s = ErrorStats::of([1.0, -1.0, 3.0, -3.0]);
+        assert_eq!(s.mean, 2.0);
+        // Signed mean 0, mean square 5.
+        assert!((s.std - 5f64.sqrt()).abs() < 1e-15);
+        assert_eq!(s.max, 3.0);
+        let s = ErrorStats::of([2.0, 2.0]);
+        assert_eq!((s.mean, s.std, s.max), (2.0, 0.0, 2.0));
+        assert_eq!(ErrorStats::of([]).max, 0.0);
+    }
+
+    #[test]
+    fn ship_faults_make_two_gnss_windows_and_none_elsewhere() {
+        let faults = crate::sim::ship_faults();
+        let w = fault_windows(&faults, Aid::Gnss);
+        assert_eq!(
+            w,
+            vec![
+                FaultWindow {
+                    start: 1080.0,
+                    end: 1200.0
+                },
+                FaultWindow {
+                    start: 1800.0,
+                    end: f64::INFINITY
+                },
+            ]
+        );
+        assert!(fault_windows(&faults, Aid::Dvl).is_empty());
+    }
+
+    #[test]
+    fn solution_is_read_from_the_wire_shape_in_degrees() {
+        let v = json!({"solution": {"lat": 30.0, "lon": -114.5, "h": 3.0, "vel": [1.0, 2.0, 0.5]},
+                       "hpl": 12.5, "isolated": []});
+        let (lla, vel, hpl) = solution(&v).unwrap();
+        assert!((lla.lat - 30f64.to_radians()).abs() < 1e-15);
+        assert!((lla.lon + 114.5f64.to_radians()).abs() < 1e-15);
+        assert_eq!((lla.h, vel, hpl), (3.0, [1.0, 2.0, 0.5], Some(12.5)));
+        assert!(solution(&json!({"x": [1.0]})).is_none());
+    }
+}

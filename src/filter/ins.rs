@@ -1,0 +1,374 @@
+//! The 15-state INS error model (DESIGN §3.4, seed 004 §1.1): sits between
+//! `geo` (radii, Earth and transport rates) and the federated filter, which
+//! predicts every local filter with the Φ and Q_d built here; the simulator
+//! propagates its true INS errors with the same model.
+//!
+//! Error state, ENU navigation frame (contract of issue 3):
+//! `φ` (0..3, rad; `C̃_bⁿ = (I − [φ×]) C_bⁿ`), `δv` (3..6, m/s, INS − true),
+//! `δp` (6..9, m, local level ENU, INS − true), `ε` gyro bias (9..12, rad/s, body),
+//! `∇` accelerometer bias (12..15, m/s², body). Continuous model:
+//!
+//! - `φ̇ = −ω_in × φ − C_bⁿ ε − C_bⁿ w_g`, with `ω_in = ω_ie + ω_en`;
+//! - `δv̇ = fⁿ × φ − (2ω_ie + ω_en) × δv + C_bⁿ ∇ + C_bⁿ w_a`;
+//! - `δṗ = δv`; `ε̇ = 0`, `∇̇ = 0` (random constants).
+//!
+//! `fⁿ × φ` follows from `f̃ⁿ = C̃_bⁿ f_b = fⁿ − φ × fⁿ`. The terms of `δω_in` and of
+//! gravity in `δp` are left out, as DESIGN §3.4 states the model (over the
+//! seed's 3,000 s they are below the aid noise).
+
+use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
+use serde::{Deserialize, Serialize};
+
+use crate::geo::{self, Lla};
+use crate::monitor::epoch::InsBlock;
+
+/// Number of error states.
+pub const N: usize = 15;
+/// Offset of the misalignment angles φ (rad).
+pub const ATT: usize = 0;
+/// Offset of the velocity errors δv (m/s, ENU).
+pub const VEL: usize = 3;
+/// Offset of the position errors δp (m, ENU local level).
+pub const POS: usize = 6;
+/// Offset of the gyro biases ε (rad/s, body).
+pub const GYRO: usize = 9;
+/// Offset of the accelerometer biases ∇ (m/s², body).
+pub const ACC: usize = 12;
+
+/// A 15-element error vector.
+pub type ErrorVector = SVector<f64, N>;
+/// A 15 × 15 matrix over the error state (F, Φ, P, Q).
+pub type ErrorMatrix = SMatrix<f64, N, N>;
+/// The noise input matrix G: 15 states × (3 gyro + 3 accelerometer) white noises.
+pub type NoiseInput = SMatrix<f64, N, 6>;
+
+/// Degrees per hour → rad/s.
+const DPH_TO_RPS: f64 = std::f64::consts::PI / 180.0 / 3600.0;
+/// One micro-g, m/s² (standard gravity 9.80665 m/s²).
+const MICRO_G: f64 = 9.806_65e-6;
+
+/// The INS solution an error model is linearised about.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NavSolution {
+    /// Position (rad, rad, m).
+    pub lla: Lla,
+    /// Velocity ENU, m/s.
+    pub vel: Vector3<f64>,
+    /// Body (RFU) to navigation (ENU) direction cosine matrix `C_bⁿ`.
+    pub c_bn: Matrix3<f64>,
+    /// Specific force in the navigation frame, m/s².
+    pub f_n: Vector3<f64>,
+}
+
+impl NavSolution {
+    /// Builds the solution from an epoch's INS block. `fⁿ = C_bⁿ f_b`, or `[0, 0, g]`
+    /// (normal gravity, the specific force of unaccelerated motion) when `f_b` is absent.
+    pub fn from_ins(ins: &InsBlock) -> Self {
+        let lla = Lla {
+            lat: ins.lat,
+            lon: ins.lon,
+            h: ins.h,
+        };
+        let c_bn = geo::dcm_body_to_nav(ins.att[0], ins.att[1], ins.att[2]);
+        let f_n = match ins.f_b {
+            Some(f_b) => c_bn * Vector3::from(f_b),
+            None => Vector3::new(0.0, 0.0, geo::normal_gravity(ins.lat, ins.h)),
+        };
+        NavSolution {
+            lla,
+            vel: Vector3::from(ins.vel),
+            c_bn,
+            f_n,
+        }
+    }
+}
+
+/// IMU error parameters (DESIGN §3.4 and §3.9, seed 004 §3).
+///
+/// Defaults: gyro bias 0.002 °/h and accelerometer bias 10 µg (seed 004), and — the seed gives
+/// no white-noise figures — angle random walk 0.001 °/√h and velocity random walk
+/// 0.001 m/s/√h, typical of the navigation-grade marine INS the seed's biases describe.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ImuErrors {
+    /// Gyro bias (1σ of the random constant), °/h.
+    pub gyro_bias_dph: f64,
+    /// Accelerometer bias (1σ of the random constant), µg.
+    pub accel_bias_ug: f64,
+    /// Gyro angle random walk, °/√h.
+    pub arw_deg_rthr: f64,
+    /// Accelerometer velocity random walk, m/s/√h.
+    pub vrw_mps_rthr: f64,
+}
+
+impl Default for ImuErrors {
+    fn default() -> Self {
+        ImuErrors {
+            gyro_bias_dph: 0.002,
+            accel_bias_ug: 10.0,
+            arw_deg_rthr: 0.001,
+            vrw_mps_rthr: 0.001,
+        }
+    }
+}
+
+impl ImuErrors {
+    /// Gyro bias in rad/s.
+    pub fn gyro_bias_rps(&self) -> f64 {
+        self.gyro_bias_dph * DPH_TO_RPS
+    }
+
+    /// Accelerometer bias in m/s².
+    pub fn accel_bias_mps2(&self) -> f64 {
+        self.accel_bias_ug * MICRO_G
+    }
+
+    /// Gyro white-noise power spectral density, (rad/s)²/Hz = rad²/s:
+    /// ARW °/√h → rad/√s is `× π/180 / 60`, squared.
+    pub fn gyro_noise_psd(&self) -> f64 {
+        let arw = self.arw_deg_rthr.to_radians() / 60.0;
+        arw * arw
+    }
+
+    /// Accelerometer white-noise power spectral density, (m/s²)²/Hz = m²/s³:
+    /// VRW m/s/√h → m/s/√s is `/ 60`, squared.
+    pub fn accel_noise_psd(&self) -> f64 {
+        let vrw = self.vrw_mps_rthr / 60.0;
+        vrw * vrw
+    }
+}
+
+/// The continuous error dynamics F of DESIGN §3.4 (see the module doc), linearised about `nav`.
+pub fn error_dynamics(nav: &NavSolution) -> ErrorMatrix {
+    let w_ie = geo::earth_rate_enu(nav.lla.lat);
+    let w_en = geo::transport_rate_enu(nav.lla.lat, nav.lla.h, &nav.vel);
+    let mut f = ErrorMatrix::zeros();
+    // φ̇ = −ω_in × φ − C_bⁿ ε
+    f.fixed_view_mut::<3, 3>(ATT, ATT)
+        .copy_from(&-geo::skew(&(w_ie + w_en)));
+    f.fixed_view_mut::<3, 3>(ATT, GYRO).copy_from(&-nav.c_bn);
+    // δv̇ = fⁿ × φ − (2ω_ie + ω_en) × δv + C_bⁿ ∇
+    f.fixed_view_mut::<3, 3>(VEL, ATT)
+        .copy_from(&geo::skew(&nav.f_n));
+    f.fixed_view_mut::<3, 3>(VEL, VEL)
+        .copy_from(&-geo::skew(&(2.0 * w_ie + w_en)));
+    f.fixed_view_mut::<3, 3>(VEL, ACC).copy_from(&nav.c_bn);
+    // δṗ = δv
+    f.fixed_view_mut::<3, 3>(POS, VEL)
+        .copy_from(&Matrix3::identity());
+    f
+}
+
+/// The noise input G: gyro white noise drives φ through `−C_bⁿ`, accelerometer white noise
+/// drives δv through `C_bⁿ` (columns 0..3 gyro, 3..6 accelerometer).
+pub fn noise_input(nav: &NavSolution) -> NoiseInput {
+    let mut g = NoiseInput::zeros();
+    g.fixed_view_mut::<3, 3>(ATT, 0).copy_from(&-nav.c_bn);
+    g.fixed_view_mut::<3, 3>(VEL, 3).copy_from(&nav.c_bn);
+    g
+}
+
+/// Discretises over `dt` seconds: `Φ = I + FΔt + (FΔt)²/2` and `Q_d = G Q Gᵀ Δt` with
+/// `Q = diag(gyro PSD ×3, accelerometer PSD ×3)` (DESIGN §3.4). `Q_d` is exactly symmetric.
+pub fn discretize(
+    f: &ErrorMatrix,
+    g: &NoiseInput,
+    imu: &ImuErrors,
+    dt: f64,
+) -> (ErrorMatrix, ErrorMatrix) {
+    let fdt = f * dt;
+    let phi = ErrorMatrix::identity() + fdt + fdt * fdt * 0.5;
+    let q = SVector::<f64, 6>::from_fn(|i, _| {
+        if i < 3 {
+            imu.gyro_noise_psd()
+        } else {
+            imu.accel_noise_psd()
+        }
+    });
+    // G Q Gᵀ with diagonal Q: scale G's columns by Q, then multiply by Gᵀ.
+    let gq = SMatrix::<f64, N, 6>::from_fn(|r, c| g[(r, c)] * q[c] * dt);
+    let qd = gq * g.transpose();
+    let qd = (qd + qd.transpose()) * 0.5;
+    (phi, qd)
+}
+
+/// `Φ` and `Q_d` of [`discretize`] for `F = error_dynamics(nav)` and `G = noise_input(nav)`,
+/// computed from F's 3 × 3 blocks instead of 15 × 15 products (the federated filter's hot
+/// path). With `A = −[ω_in×]`, `V = −[(2ω_ie + ω_en)×]`, `B = [fⁿ×]`, `C = C_bⁿ`, the nonzero
+/// blocks of F² are: `(φ,φ) A²`, `(φ,ε) −AC`, `(δv,φ) BA + VB`, `(δv,δv) V²`, `(δv,ε) −BC`,
+/// `(δv,∇) VC`, `(δp,φ) B`, `(δp,δv) V`, `(δp,∇) C`; and `Q_d` has the blocks
+/// `C diag(q_g) Cᵀ Δt` on φ and `C diag(q_a) Cᵀ Δt` on δv.
+pub fn transition(nav: &NavSolution, imu: &ImuErrors, dt: f64) -> (ErrorMatrix, ErrorMatrix) {
+    let w_ie = geo::earth_rate_enu(nav.lla.lat);
+    let w_en = geo::transport_rate_enu(nav.lla.lat, nav.lla.h, &nav.vel);
+    let a = -geo::skew(&(w_ie + w_en));
+    let v = -geo::skew(&(2.0 * w_ie + w_en));
+    let b = geo::skew(&nav.f_n);
+    let c = nav.c_bn;
+    let (h1, h2) = (dt, 0.5 * dt * dt);
+    let mut phi = ErrorMatrix::identity();
+    let mut put = |row: usize, col: usize, m: Matrix3<f64>| {
+        let mut blk = phi.fixed_view_mut::<3, 3>(row, col);
+        blk += m;
+    };
+    put(ATT, ATT, a * h1 + a * a * h2);
+    put(ATT, GYRO, -c * h1 - a * c * h2);
+    put(VEL, ATT, b * h1 + (b * a + v * b) * h2);
+    put(VEL, VEL, v * h1 + v * v * h2);
+    put(VEL, GYRO, -(b * c) * h2);
+    put(VEL, ACC, c * h1 + v * c * h2);
+    put(POS, ATT, b * h2);
+    put(POS, VEL, Matrix3::identity() * h1 + v * h2);
+    put(POS, ACC, c * h2);
+    let mut q = ErrorMatrix::zeros();
+    let block = |psd: f64| {
+        let m = c * Matrix3::from_diagonal_element(psd * dt) * c.transpose();
+        (m + m.transpose()) * 0.5
+    };
+    q.fixed_view_mut::<3, 3>(ATT, ATT)
+        .copy_from(&block(imu.gyro_noise_psd()));
+    q.fixed_view_mut::<3, 3>(VEL, VEL)
+        .copy_from(&block(imu.accel_noise_psd()));
+    (phi, q)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    fn ship_at_30n() -> NavSolution {
+        NavSolution::from_ins(&InsBlock {
+            lat: 30f64.to_radians(),
+            lon: 120f64.to_radians(),
+            h: 0.0,
+            vel: [5.0, 8.0, 0.0],
+            att: [0.01, -0.02, 0.5],
+            f_b: None,
+        })
+    }
+
+    #[test]
+    fn default_imu_errors_convert_to_si_units() {
+        let imu = ImuErrors::default();
+        assert_relative_eq!(
+            imu.gyro_bias_rps(),
+            0.002 * std::f64::consts::PI / 180.0 / 3600.0,
+            max_relative = 1e-15
+        );
+        assert_relative_eq!(imu.accel_bias_mps2(), 9.806_65e-5, max_relative = 1e-15);
+        // 0.001 °/√h = 1.745e-5 rad / 60 √s = 2.909e-7 rad/√s.
+        assert_relative_eq!(
+            imu.gyro_noise_psd().sqrt(),
+            2.908_882_086_657_216e-7,
+            max_relative = 1e-12
+        );
+        assert_relative_eq!(imu.accel_noise_psd().sqrt(), 0.001 / 60.0);
+    }
+
+    #[test]
+    fn missing_specific_force_means_gravity_straight_up() {
+        let nav = ship_at_30n();
+        assert_eq!(nav.f_n.x, 0.0);
+        assert_eq!(nav.f_n.y, 0.0);
+        assert_relative_eq!(nav.f_n.z, geo::normal_gravity(nav.lla.lat, 0.0));
+    }
+
+    #[test]
+    fn specific_force_error_from_misalignment_matches_the_perturbed_dcm() {
+        // δf = C̃ f_b − C f_b with C̃ = (I − [φ×]) C must equal F's block fⁿ × φ.
+        let ins = InsBlock {
+            lat: 0.5,
+            lon: 2.0,
+            h: 10.0,
+            vel: [1.0, 2.0, 0.1],
+            att: [0.1, 0.2, 1.0],
+            f_b: Some([0.3, -0.4, 9.8]),
+        };
+        let nav = NavSolution::from_ins(&ins);
+        let phi = Vector3::new(1e-6, -2e-6, 3e-6);
+        let c_tilde = (Matrix3::identity() - geo::skew(&phi)) * nav.c_bn;
+        let f_b = Vector3::from(ins.f_b.unwrap_or_default());
+        let df = c_tilde * f_b - nav.c_bn * f_b;
+        let f = error_dynamics(&nav);
+        let mut x = ErrorVector::zeros();
+        x.fixed_rows_mut::<3>(ATT).copy_from(&phi);
+        let dv_dot = (f * x).fixed_rows::<3>(VEL).into_owned();
+        // Exact in φ (C̃ is linear in φ); the tolerance covers the cancellation in C̃ f − C f.
+        assert_relative_eq!(dv_dot, df, max_relative = 1e-9);
+    }
+
+    #[test]
+    fn dynamics_blocks_are_the_design_model() {
+        let nav = ship_at_30n();
+        let f = error_dynamics(&nav);
+        let w_ie = geo::earth_rate_enu(nav.lla.lat);
+        let w_en = geo::transport_rate_enu(nav.lla.lat, nav.lla.h, &nav.vel);
+        let w_in = w_ie + w_en;
+        // −ω_in × φ: the (0, 1) entry of −[ω×] is +ω_z.
+        assert_relative_eq!(f[(ATT, ATT + 1)], w_in.z, max_relative = 1e-15);
+        assert_relative_eq!(f[(ATT + 1, ATT)], -w_in.z, max_relative = 1e-15);
+        for i in 0..3 {
+            for j in 0..3 {
+                assert_eq!(f[(ATT + i, GYRO + j)], -nav.c_bn[(i, j)]);
+                assert_eq!(f[(VEL + i, ACC + j)], nav.c_bn[(i, j)]);
+                assert_eq!(f[(POS + i, VEL + j)], if i == j { 1.0 } else { 0.0 });
+            }
+        }
+        // Biases are random constants: their rows are zero.
+        assert!(f.rows(GYRO, 6).iter().all(|&v| v == 0.0));
+    }
+
+    #[test]
+    fn block_transition_equals_the_full_discretisation() {
+        let ins = InsBlock {
+            lat: -0.7,
+            lon: 2.0,
+            h: 150.0,
+            vel: [12.0, -7.0, 0.5],
+            att: [0.05, -0.1, 4.0],
+            f_b: Some([0.4, 1.5, 9.7]),
+        };
+        let nav = NavSolution::from_ins(&ins);
+        let imu = ImuErrors::default();
+        for dt in [0.0, 0.01, 0.1, 1.0] {
+            let (phi, q) = discretize(&error_dynamics(&nav), &noise_input(&nav), &imu, dt);
+            let (phi_b, q_b) = transition(&nav, &imu, dt);
+            assert_relative_eq!(phi_b, phi, epsilon = 1e-15, max_relative = 1e-13);
+            // Off-diagonal entries are rounding-level (C Cᵀ = I): compare on Q's scale.
+            assert_relative_eq!(q_b, q, epsilon = 1e-13 * q.amax(), max_relative = 1e-13);
+            assert_eq!(q_b, q_b.transpose());
+        }
+    }
+
+    #[test]
+    fn discretisation_is_the_second_order_series_and_integrates_noise() {
+        let nav = ship_at_30n();
+        let f = error_dynamics(&nav);
+        let g = noise_input(&nav);
+        let imu = ImuErrors::default();
+        let dt = 0.1;
+        let (phi, qd) = discretize(&f, &g, &imu, dt);
+        assert_relative_eq!(
+            phi,
+            ErrorMatrix::identity() + f * dt + f * f * (dt * dt / 2.0)
+        );
+        // An accelerometer bias of 1 m/s² along body x shows in position after dt as ≈ dt²/2.
+        let mut x = ErrorVector::zeros();
+        x[ACC] = 1.0;
+        let dp = (phi * x).fixed_rows::<3>(POS).into_owned();
+        assert_relative_eq!(dp, nav.c_bn.column(0) * dt * dt / 2.0, epsilon = 1e-12);
+        // C_bⁿ is orthogonal, so the velocity block of Q_d is PSD·dt·I and likewise φ.
+        assert_relative_eq!(
+            qd.fixed_view::<3, 3>(VEL, VEL).into_owned(),
+            Matrix3::identity() * imu.accel_noise_psd() * dt,
+            max_relative = 1e-12
+        );
+        assert_relative_eq!(
+            qd.fixed_view::<3, 3>(ATT, ATT).into_owned(),
+            Matrix3::identity() * imu.gyro_noise_psd() * dt,
+            max_relative = 1e-12
+        );
+        assert_eq!(qd, qd.transpose());
+        assert!(qd.fixed_view::<3, 3>(ATT, VEL).iter().all(|&v| v == 0.0));
+    }
+}

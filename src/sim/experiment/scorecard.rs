@@ -1,0 +1,327 @@
+//! The scorecard every experiment ends with (DESIGN §3.9): per detector (test)
+//! and policy, the true-positive, false-alarm and missed-detection rates, mean
+//! and max detection delay, time to recover after the fault ends, and time per
+//! epoch. Computed from the per-epoch health trace of one test and the known
+//! fault windows, after the run; pure.
+//!
+//! Definitions (chosen here; the papers only name the figures):
+//! - An epoch *alarms* when the test's health is not `healthy` (suspect or
+//!   isolated: under either policy the measurement is not used).
+//! - *Fault epochs* lie in some fault window `[start, end)`. The true-positive
+//!   rate is the share of fault epochs that alarm; the missed-detection rate is
+//!   its complement (epoch-wise, as seed 000 Table 2 counts missed detections).
+//! - *Clear epochs* lie in no fault window and in no recovery tail (from a
+//!   fault's end until the test is first healthy again, so a slow recovery is
+//!   scored as recovery time, not as false alarms). The false-alarm rate is the
+//!   share of clear epochs that alarm.
+//! - A fault's detection delay is the time from its onset to the first alarming
+//!   epoch inside its window; a fault with no alarming epoch is missed.
+//! - A fault's recovery time is the time from its end to the first healthy epoch
+//!   at or after the end (before the next fault starts); `None` when the test
+//!   never recovers in the run (or the fault lasts past the run's end).
+
+use std::fmt::Write as _;
+
+use crate::detect::Health;
+
+/// A fault interval `[start, end)` in epoch time, s.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FaultWindow {
+    /// Onset, s.
+    pub start: f64,
+    /// End (exclusive), s; `f64::INFINITY` for a fault that lasts to the end.
+    pub end: f64,
+}
+
+impl FaultWindow {
+    /// True when `t` lies in the window.
+    pub fn contains(&self, t: f64) -> bool {
+        t >= self.start && t < self.end
+    }
+}
+
+/// The figures of one test under one policy.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scorecard {
+    /// Detector (test) name, e.g. `gnss`.
+    pub detector: String,
+    /// Policy label, e.g. `counters T=20`.
+    pub policy: String,
+    /// Epochs on which the test ran.
+    pub epochs: usize,
+    /// Of those, epochs inside a fault window.
+    pub fault_epochs: usize,
+    /// Of those, epochs outside every fault window and recovery tail.
+    pub clear_epochs: usize,
+    /// Alarming fault epochs / fault epochs (`None` without fault epochs).
+    pub true_positive_rate: Option<f64>,
+    /// Alarming clear epochs / clear epochs (`None` without clear epochs).
+    pub false_alarm_rate: Option<f64>,
+    /// 1 − true-positive rate.
+    pub missed_detection_rate: Option<f64>,
+    /// Number of fault windows that intersect the run.
+    pub faults: usize,
+    /// Faults with at least one alarming epoch in their window.
+    pub detected: usize,
+    /// Mean detection delay over detected faults, s.
+    pub mean_delay_s: Option<f64>,
+    /// Largest detection delay over detected faults, s.
+    pub max_delay_s: Option<f64>,
+    /// Recovery time of each fault that ended inside the run (`None`: never recovered).
+    pub recovery_s: Vec<Option<f64>>,
+    /// Wall-clock time per epoch of the monitor that produced the trace, s.
+    pub time_per_epoch_s: Option<f64>,
+}
+
+impl Scorecard {
+    /// Largest recovery time, or `None` when no fault ended or one never recovered.
+    pub fn max_recovery_s(&self) -> Option<f64> {
+        if self.recovery_s.is_empty() || self.recovery_s.iter().any(Option::is_none) {
+            return None;
+        }
+        self.recovery_s.iter().flatten().copied().reduce(f64::max)
+    }
+}
+
+/// Scores one test's health trace `(t, health)` (in time order) against the
+/// fault windows that concern it.
+pub fn score(
+    detector: &str,
+    policy: &str,
+    trace: &[(f64, Health)],
+    faults: &[FaultWindow],
+    time_per_epoch_s: Option<f64>,
+) -> Scorecard {
+    let alarms = |h: Health| h != Health::Healthy;
+    let mut faults: Vec<FaultWindow> = faults.iter().copied().filter(|f| f.end > f.start).collect();
+    faults.sort_by(|a, b| a.start.total_cmp(&b.start));
+    let (t_first, t_last) = match (trace.first(), trace.last()) {
+        (Some(a), Some(b)) => (a.0, b.0),
+        _ => (f64::NAN, f64::NAN),
+    };
+    faults.retain(|f| f.start <= t_last && f.end > t_first);
+
+    // Recovery tails: from each fault's end to the first healthy epoch after it.
+    let mut tails: Vec<FaultWindow> = Vec::new();
+    let mut recovery_s = Vec::new();
+    let mut delays = Vec::new();
+    for (i, f) in faults.iter().enumerate() {
+        if let Some(&(t, _)) = trace.iter().find(|(t, h)| f.contains(*t) && alarms(*h)) {
+            delays.push(t - f.start);
+        }
+        if f.end > t_last {
+            continue;
+        }
+        let next_start = faults.get(i + 1).map_or(f64::INFINITY, |n| n.start);
+        let back = trace
+            .iter()
+            .find(|(t, h)| *t >= f.end && *t < next_start && !alarms(*h));
+        match back {
+            Some(&(t, _)) => {
+                recovery_s.push(Some(t - f.end));
+                tails.push(FaultWindow {
+                    start: f.end,
+                    end: t,
+                });
+            }
+            None => {
+                recovery_s.push(None);
+                tails.push(FaultWindow {
+                    start: f.end,
+                    end: next_start,
+                });
+            }
+        }
+    }
+
+    let (mut fault_epochs, mut fault_alarms, mut clear_epochs, mut clear_alarms) = (0, 0, 0, 0);
+    for &(t, h) in trace {
+        if faults.iter().any(|f| f.contains(t)) {
+            fault_epochs += 1;
+            fault_alarms += usize::from(alarms(h));
+        } else if !tails.iter().any(|f| f.contains(t)) {
+            clear_epochs += 1;
+            clear_alarms += usize::from(alarms(h));
+        }
+    }
+    let ratio = |a: usize, n: usize| (n > 0).then(|| a as f64 / n as f64);
+    let true_positive_rate = ratio(fault_alarms, fault_epochs);
+    Scorecard {
+        detector: detector.to_owned(),
+        policy: policy.to_owned(),
+        epochs: trace.len(),
+        fault_epochs,
+        clear_epochs,
+        true_positive_rate,
+        false_alarm_rate: ratio(clear_alarms, clear_epochs),
+        missed_detection_rate: true_positive_rate.map(|r| 1.0 - r),
+        faults: faults.len(),
+        detected: delays.len(),
+        mean_delay_s: (!delays.is_empty())
+            .then(|| delays.iter().sum::<f64>() / delays.len() as f64),
+        max_delay_s: delays.iter().copied().reduce(f64::max),
+        recovery_s,
+        time_per_epoch_s,
+    }
+}
+
+fn pct(v: Option<f64>) -> String {
+    v.map_or_else(|| "—".to_owned(), |v| format!("{:.2} %", 100.0 * v))
+}
+
+fn secs(v: Option<f64>) -> String {
+    v.map_or_else(|| "—".to_owned(), |v| format!("{v:.1}"))
+}
+
+/// Renders scorecards as a fixed-width text table.
+pub fn render(cards: &[Scorecard]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "{:<8} {:<16} {:>9} {:>9} {:>9} {:>8} {:>10} {:>9} {:>12} {:>9}",
+        "test",
+        "policy",
+        "TPR",
+        "FAR",
+        "MDR",
+        "detected",
+        "delay mean",
+        "delay max",
+        "recover s",
+        "µs/epoch"
+    );
+    for c in cards {
+        let recover = if c.recovery_s.is_empty() {
+            "—".to_owned()
+        } else {
+            c.recovery_s
+                .iter()
+                .map(|r| r.map_or_else(|| "never".to_owned(), |r| format!("{r:.0}")))
+                .collect::<Vec<_>>()
+                .join("/")
+        };
+        let _ = writeln!(
+            s,
+            "{:<8} {:<16} {:>9} {:>9} {:>9} {:>8} {:>10} {:>9} {:>12} {:>9}",
+            c.detector,
+            c.policy,
+            pct(c.true_positive_rate),
+            pct(c.false_alarm_rate),
+            pct(c.missed_detection_rate),
+            format!("{}/{}", c.detected, c.faults),
+            secs(c.mean_delay_s),
+            secs(c.max_delay_s),
+            recover,
+            c.time_per_epoch_s
+                .map_or_else(|| "—".to_owned(), |v| format!("{:.2}", v * 1e6)),
+        );
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use Health::{Healthy as H, Isolated as I, Suspect as S};
+
+    /// Epochs at t = 0..20 s with the given health letters.
+    fn trace(states: &str) -> Vec<(f64, Health)> {
+        states
+            .chars()
+            .enumerate()
+            .map(|(i, c)| {
+                let h = match c {
+                    's' => S,
+                    'i' => I,
+                    _ => H,
+                };
+                (i as f64, h)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn hand_made_trace_gives_the_counted_figures() {
+        //          0123456789012345678901
+        let tr = trace("..i.....ssii..s.......");
+        // Fault [7, 12): alarms at 8..=11 (4 of 5 epochs); ends at 12, healthy at 12.
+        let c = score(
+            "gnss",
+            "counters",
+            &tr,
+            &[FaultWindow {
+                start: 7.0,
+                end: 12.0,
+            }],
+            Some(2e-6),
+        );
+        assert_eq!(c.epochs, 22);
+        assert_eq!(c.fault_epochs, 5);
+        assert_eq!(c.clear_epochs, 17);
+        assert!((c.true_positive_rate.unwrap() - 0.8).abs() < 1e-12);
+        assert!((c.missed_detection_rate.unwrap() - 0.2).abs() < 1e-12);
+        // Clear alarms at t = 2 and t = 14.
+        assert!((c.false_alarm_rate.unwrap() - 2.0 / 17.0).abs() < 1e-12);
+        assert_eq!((c.faults, c.detected), (1, 1));
+        assert_eq!(c.mean_delay_s, Some(1.0));
+        assert_eq!(c.max_delay_s, Some(1.0));
+        assert_eq!(c.recovery_s, vec![Some(0.0)]);
+    }
+
+    #[test]
+    fn slow_recovery_is_time_not_false_alarms() {
+        //          0123456789012345
+        let tr = trace("...iiiiiiii.....");
+        let c = score(
+            "gnss",
+            "classic",
+            &tr,
+            &[FaultWindow {
+                start: 3.0,
+                end: 6.0,
+            }],
+            None,
+        );
+        // Fault epochs 3,4,5 all alarm; the tail 6..=10 alarms, healthy again at 11.
+        assert_eq!(c.true_positive_rate, Some(1.0));
+        assert_eq!(c.recovery_s, vec![Some(5.0)]);
+        assert_eq!(c.max_recovery_s(), Some(5.0));
+        assert_eq!(c.clear_epochs, 16 - 3 - 5);
+        assert_eq!(c.false_alarm_rate, Some(0.0));
+        assert_eq!(c.mean_delay_s, Some(0.0));
+    }
+
+    #[test]
+    fn missed_and_unfinished_faults_are_reported_as_such() {
+        let tr = trace("..........iiiiii");
+        let faults = [
+            FaultWindow {
+                start: 2.0,
+                end: 5.0,
+            },
+            FaultWindow {
+                start: 9.0,
+                end: f64::INFINITY,
+            },
+        ];
+        let c = score("dvl", "classic", &tr, &faults, None);
+        assert_eq!((c.faults, c.detected), (2, 1));
+        assert_eq!(c.mean_delay_s, Some(1.0));
+        // The first fault ended (healthy at once); the second never ends in the run.
+        assert_eq!(c.recovery_s, vec![Some(0.0)]);
+        assert_eq!(c.fault_epochs, 3 + 7);
+        assert!((c.true_positive_rate.unwrap() - 6.0 / 10.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn fault_free_run_has_only_a_false_alarm_rate() {
+        let tr = trace("....i...........................................s...");
+        let c = score("cns", "counters", &tr, &[], None);
+        assert_eq!(c.true_positive_rate, None);
+        assert_eq!(c.missed_detection_rate, None);
+        assert!((c.false_alarm_rate.unwrap() - 2.0 / tr.len() as f64).abs() < 1e-12);
+        assert_eq!(c.max_recovery_s(), None);
+        let text = render(&[c]);
+        assert!(text.lines().count() == 2 && text.contains("cns"), "{text}");
+    }
+}

@@ -1,0 +1,500 @@
+//! Integration tests of the federated INS/GNSS/DVL/CNS monitor on the simulated
+//! ship (issue 3 item 9): the counter policy's walk on seed 004's GNSS jump,
+//! false isolations without faults, a DVL fault against the fused covariance,
+//! the counters' advantage on several seeds, NEES/NIS consistency, and the
+//! whole pipeline (simulate → JSON lines → `navguard replay` → real server)
+//! against the in-process run.
+//!
+//! Speed: tests build in debug, where one federated step costs about a
+//! millisecond. The long runs therefore use the ship at a 1 Hz INS rate
+//! ([`ship_1hz`]: the same route, sensors, aid rates and faults as the 10 Hz
+//! scenario, one prediction per second), which leaves every asserted property
+//! (aid epochs, χ² statistics, covariances) as it is.
+
+mod common;
+
+use std::sync::OnceLock;
+
+use nalgebra::{SMatrix, SVector};
+use navguard::detect::{Health, PolicyConfig, ThresholdSpec};
+use navguard::filter::ins::{POS, VEL};
+use navguard::geo::{self, Lla};
+use navguard::monitor::federated::{FederatedConfig, FederatedMonitor};
+use navguard::monitor::{Monitor, MonitorSpec};
+use navguard::service::Limits;
+use navguard::service::wire::{epoch_to_wire, parse_frame};
+use navguard::sim::experiment::{run_monitor, seed004};
+use navguard::sim::scenario::{ScenarioParams, ship_params};
+use navguard::sim::{self, Aid, Channel, Fault, FaultKind, Scenario};
+use serde_json::{Value, json};
+use statrs::distribution::{Binomial, ChiSquared, ContinuousCDF, DiscreteCDF};
+
+/// Seed 004's counters.
+const N1: u32 = 10;
+const N2: u32 = 5;
+const COUNTERS: PolicyConfig = PolicyConfig::Counters { n1: N1, n2: N2 };
+
+/// The ship at a 1 Hz INS rate (module doc).
+fn ship_1hz(seed: u64, faults: Vec<Fault>, duration_s: f64) -> Scenario {
+    let truth = sim::ship_trajectory()
+        .unwrap()
+        .sample(1.0, duration_s)
+        .unwrap();
+    let params = ScenarioParams {
+        ins_rate_hz: 1.0,
+        ..ship_params(seed, faults)
+    };
+    sim::simulate(params, truth).unwrap()
+}
+
+/// One fault-free 3000 s run shared by the tests that need one.
+fn fault_free() -> &'static Scenario {
+    static SCENARIO: OnceLock<Scenario> = OnceLock::new();
+    SCENARIO.get_or_init(|| ship_1hz(7, Vec::new(), 3000.0))
+}
+
+/// Seed 004's GNSS position jump (0.02′ in latitude and longitude on [1080, 1200) s).
+fn position_jump() -> Vec<Fault> {
+    sim::ship_faults()
+        .into_iter()
+        .filter(|f| f.channel == Channel::Position)
+        .collect()
+}
+
+fn monitor(scenario: &Scenario, policy: PolicyConfig, spec: ThresholdSpec) -> FederatedMonitor {
+    let config = FederatedConfig::from_json(&scenario.default_monitor_config()).unwrap();
+    FederatedMonitor::new(config, policy, spec).unwrap()
+}
+
+#[test]
+fn counters_suspect_a_gnss_jump_at_once_isolate_it_within_n2_plus_2_and_readmit_it_after() {
+    let scenario = ship_1hz(1, position_jump(), 1400.0);
+    let spec = seed004::spec(&scenario, COUNTERS, 20.0);
+    let run = run_monitor(&scenario, &spec).unwrap();
+    let gnss = &run.tests["gnss"];
+    let onset = gnss.iter().position(|s| s.t >= 1080.0).unwrap();
+    assert!(
+        gnss[..onset]
+            .iter()
+            .rev()
+            .take(20)
+            .all(|s| s.health == Health::Healthy),
+        "healthy before the jump"
+    );
+    // Out of updating (suspect) within 2 GNSS epochs of onset.
+    let first = gnss[onset..]
+        .iter()
+        .position(|s| s.health != Health::Healthy)
+        .unwrap();
+    assert!(
+        first < 2,
+        "first non-healthy GNSS epoch {first} after onset"
+    );
+    // Isolated within N2 + 2 GNSS epochs of onset.
+    let isolated = gnss[onset..]
+        .iter()
+        .position(|s| s.health == Health::Isolated)
+        .unwrap();
+    assert!(
+        isolated < (N2 + 2) as usize,
+        "isolated {isolated} epochs after onset"
+    );
+    // Not readmitted while the fault lasts; readmitted after it ends (t2 times out after N1).
+    let back = gnss[onset + first..]
+        .iter()
+        .find(|s| s.health == Health::Healthy)
+        .unwrap();
+    assert!(
+        back.t >= 1200.0,
+        "readmitted at {} s, before the fault ends",
+        back.t
+    );
+    assert!(
+        back.t <= 1200.0 + f64::from(N1) + 5.0,
+        "readmitted only at {} s",
+        back.t
+    );
+    // Back for good: isolation needs N2 + 1 exceedances within N1 epochs, which the
+    // nominal false-alarm rate at T = 20 (0.3 % per epoch) does not produce.
+    assert!(
+        gnss.iter()
+            .filter(|s| s.t >= back.t)
+            .all(|s| s.health != Health::Isolated)
+    );
+}
+
+/// The smallest count `k` with `P(X > k) < 1e-3` for `X ~ Binomial(n, p)`: more
+/// than `k` false isolations is too many for the nominal false-alarm rate.
+fn binomial_bound(n: u64, p: f64) -> u64 {
+    let b = Binomial::new(p, n).unwrap();
+    (0..=n).find(|&k| 1.0 - b.cdf(k) < 1e-3).unwrap()
+}
+
+#[test]
+fn no_aid_is_isolated_without_faults_at_p_fa_1e_5() {
+    let scenario = fault_free();
+    let spec = |policy| MonitorSpec {
+        kind: navguard::monitor::MonitorKind::Federated,
+        config: scenario.default_monitor_config(),
+        policy,
+        threshold: ThresholdSpec::PFa(1e-5),
+    };
+    // Classic: each exceedance isolates its aid for one epoch; the count is binomial.
+    let run = run_monitor(scenario, &spec(PolicyConfig::Classic)).unwrap();
+    for aid in ["gnss", "dvl", "cns"] {
+        let samples = &run.tests[aid];
+        let isolated = samples
+            .iter()
+            .filter(|s| s.health == Health::Isolated)
+            .count() as u64;
+        let bound = binomial_bound(samples.len() as u64, 1e-5);
+        assert!(
+            isolated <= bound,
+            "{aid}: {isolated} isolated epochs of {}, bound {bound}",
+            samples.len()
+        );
+    }
+    // Counters: isolation needs N2 + 1 = 6 exceedances within N1 epochs of each
+    // other, probability ~ C(10, 6)·(1e-5)⁶ per epoch: none at all.
+    let run = run_monitor(scenario, &spec(COUNTERS)).unwrap();
+    for aid in ["gnss", "dvl", "cns"] {
+        assert!(
+            run.tests[aid].iter().all(|s| s.health != Health::Isolated),
+            "{aid} isolated under counters"
+        );
+    }
+}
+
+/// Solution error (solution − truth) east and north, m, and its 1σ from `P_g`.
+fn horizontal_error_and_sigma(
+    monitor: &FederatedMonitor,
+    outputs: &Value,
+    truth: &Lla,
+) -> ([f64; 2], [f64; 2]) {
+    let s = &outputs["solution"];
+    let lla = Lla {
+        lat: s["lat"].as_f64().unwrap().to_radians(),
+        lon: s["lon"].as_f64().unwrap().to_radians(),
+        h: s["h"].as_f64().unwrap(),
+    };
+    let d = geo::local_offset(&lla, truth);
+    let p = &monitor.filter().master().p;
+    (
+        [d.x, d.y],
+        [p[(POS, POS)].sqrt(), p[(POS + 1, POS + 1)].sqrt()],
+    )
+}
+
+/// A DVL fault from 600 s to 1000 s on the forward axis.
+fn dvl_fault(kind: FaultKind) -> Fault {
+    Fault {
+        aid: Aid::Dvl,
+        channel: Channel::Velocity,
+        component: 1,
+        kind,
+        start_s: 600.0,
+        end_s: Some(1000.0),
+    }
+}
+
+/// The fused solution's error east and north and its σ from `P_g`, every epoch.
+fn errors_and_sigmas(faults: Vec<Fault>) -> Vec<([f64; 2], [f64; 2])> {
+    let scenario = ship_1hz(3, faults, 1300.0);
+    let mut m = monitor(&scenario, COUNTERS, ThresholdSpec::Threshold(20.0));
+    scenario
+        .epochs
+        .iter()
+        .map(|e| {
+            let report = m.step(&e.epoch).unwrap();
+            let outputs = serde_json::to_value(&report.outputs).unwrap();
+            horizontal_error_and_sigma(&m, &outputs, &e.truth.lla)
+        })
+        .collect()
+}
+
+/// "Pull" is the fault's own effect: the faulty run's solution minus the
+/// fault-free run's (same seed, so the same noise everywhere but the DVL's
+/// faulty component), against the faulty run's σ of `P_g`. The faults here are
+/// the detectable ones: a step of 0.5 m/s has non-centrality (0.5/0.1)² = 25
+/// against T = 20 (dof 3). An undetectable persistent bias (0.1–0.3 m/s, slow
+/// ramps) does contaminate the fusion: the filter takes it for white noise, and
+/// no test can see it; that is a limit of residual χ² testing, not of the policy.
+#[test]
+fn a_detectable_dvl_fault_never_pulls_the_fused_solution_outside_three_sigma_of_p_g() {
+    let clean = errors_and_sigmas(Vec::new());
+    for kind in [
+        FaultKind::Step { value: 0.5 },
+        FaultKind::Step { value: 1.0 },
+        FaultKind::Step { value: -2.0 },
+        FaultKind::Failure,
+    ] {
+        let faulty = errors_and_sigmas(vec![dvl_fault(kind)]);
+        let mut worst: f64 = 0.0;
+        for ((err, sigma), (clean_err, _)) in faulty.iter().zip(&clean) {
+            for axis in 0..2 {
+                worst = worst.max((err[axis] - clean_err[axis]).abs() / sigma[axis]);
+            }
+        }
+        assert!(
+            worst <= 3.0,
+            "DVL {kind:?}: pulled the solution {worst:.2} σ"
+        );
+    }
+}
+
+#[test]
+fn the_counters_advantage_at_threshold_20_holds_on_three_seeds() {
+    for seed in [2, 3, 4] {
+        let scenario = ship_1hz(seed, sim::ship_faults(), sim::SHIP_DURATION_S);
+        let params = seed004::Seed004Params {
+            seed,
+            thresholds: vec![20.0],
+            ..seed004::Seed004Params::default()
+        };
+        let r = seed004::run_on(&scenario, params).unwrap();
+        let (k, c) = (r.case(true, 20.0).unwrap(), r.case(false, 20.0).unwrap());
+        assert!(
+            r.counters_beat_classic(20.0),
+            "seed {seed}: counters lat {:?} lon {:?}, classic lat {:?} lon {:?}",
+            k.lat,
+            k.lon,
+            c.lat,
+            c.lon
+        );
+    }
+}
+
+/// Two-sided 99 % interval of the mean of `n` independent χ²(dof) samples.
+fn chi2_mean_interval(n: usize, dof: u32) -> (f64, f64) {
+    let total = ChiSquared::new((n as u32 * dof) as f64).unwrap();
+    (
+        total.inverse_cdf(0.005) / n as f64,
+        total.inverse_cdf(0.995) / n as f64,
+    )
+}
+
+/// The mean and variance of one aid's local NIS `λ = rᵀ S_i⁻¹ r` when the
+/// innovation really has the fused filter's covariance `S_g = H P_g⁻ Hᵀ + R`
+/// while the test uses the local prior `S_i = H (P_g⁻/β_i) Hᵀ + R` (fusion-reset:
+/// the locals' covariance is inflated by 1/β_i on purpose, so their NIS sits
+/// a little below the dof): `E λ = tr(M)`, `Var λ = 2 tr(M²)`, `M = S_i⁻¹ S_g`.
+/// `H` picks the error states the aid measures (the DVL's attitude coupling
+/// `−[v×]φ` is left out: 30″ × 12 m/s is 2e-3 m/s against its 0.1 m/s noise).
+fn local_nis_moments(
+    aid: &str,
+    p: &SMatrix<f64, 15, 15>,
+    config: &FederatedConfig,
+    beta: f64,
+) -> (f64, f64) {
+    let (states, r): (Vec<usize>, Vec<f64>) = match aid {
+        "gnss" => (
+            (VEL..VEL + 3).chain(POS..POS + 3).collect(),
+            [[config.gnss_vel_sigma_mps; 3], [config.gnss_pos_sigma_m; 3]].concat(),
+        ),
+        "dvl" => ((VEL..VEL + 3).collect(), vec![config.dvl_vel_sigma_mps; 3]),
+        "cns" => ((POS..POS + 2).collect(), vec![config.cns_pos_sigma_m; 2]),
+        other => panic!("no model for {other}"),
+    };
+    let m = states.len();
+    let hph = nalgebra::DMatrix::from_fn(m, m, |i, j| p[(states[i], states[j])]);
+    let r = nalgebra::DMatrix::from_diagonal(&nalgebra::DVector::from_iterator(
+        m,
+        r.iter().map(|s| s * s),
+    ));
+    let s_g = &hph + &r;
+    let s_i = &hph / beta + &r;
+    let mat = s_i.cholesky().unwrap().solve(&s_g);
+    (mat.trace(), 2.0 * (&mat * &mat).trace())
+}
+
+#[test]
+fn a_fault_free_3000_s_run_is_consistent_in_nees_and_nis() {
+    let scenario = fault_free();
+    let mut m = monitor(scenario, COUNTERS, ThresholdSpec::PFa(1e-5));
+    let config = m.config().clone();
+    let betas = m.filter().betas().to_vec();
+    // Per aid: Σλ, Σ E λ, Σ Var λ, count.
+    let mut nis: std::collections::BTreeMap<&str, [f64; 4]> = Default::default();
+    let (mut nees_fused, mut nees_local, mut samples) = (0.0, vec![0.0; betas.len()], 0usize);
+    for e in &scenario.epochs {
+        // The prior P_g⁻ ≈ the last posterior (one second of INS noise is negligible).
+        let prior = m.filter().master().p;
+        let report = m.step(&e.epoch).unwrap();
+        for o in &report.tests {
+            let Some(i) = config.aids.iter().position(|a| a.as_str() == o.name) else {
+                continue; // the hpl test
+            };
+            let (mean, var) = local_nis_moments(o.name, &prior, &config, betas[i]);
+            let acc = nis.entry(o.name).or_default();
+            acc[0] += o.statistic.value;
+            acc[1] += mean;
+            acc[2] += var;
+            acc[3] += 1.0;
+        }
+        // NEES every 100 s (samples far enough apart to be nearly independent),
+        // after the 300 s initial convergence, on velocity and position (the
+        // states whose truth the simulator gives: INS minus truth).
+        let t = e.epoch.t;
+        if t < 300.0 || (t % 100.0).abs() > 1e-9 {
+            continue;
+        }
+        let ins = e.epoch.ins.as_ref().unwrap();
+        let ins_lla = Lla {
+            lat: ins.lat,
+            lon: ins.lon,
+            h: ins.h,
+        };
+        let dp = geo::local_offset(&ins_lla, &e.truth.lla);
+        let truth_err = SVector::<f64, 6>::from_column_slice(&[
+            ins.vel[0] - e.truth.vel.x,
+            ins.vel[1] - e.truth.vel.y,
+            ins.vel[2] - e.truth.vel.z,
+            dp.x,
+            dp.y,
+            dp.z,
+        ]);
+        let nees = |x: &SVector<f64, 15>, p: &SMatrix<f64, 15, 15>| {
+            let err = x.fixed_rows::<6>(VEL).into_owned() - truth_err;
+            let cov = p.fixed_view::<6, 6>(VEL, VEL).into_owned();
+            let inv = cov.cholesky().unwrap().inverse();
+            (err.transpose() * inv * err)[(0, 0)]
+        };
+        let master = m.filter().master();
+        nees_fused += nees(&master.x, &master.p);
+        for (i, acc) in nees_local.iter_mut().enumerate() {
+            let local = m.filter().local(i);
+            *acc += nees(&local.x, &local.p);
+        }
+        samples += 1;
+    }
+    assert_eq!(POS, VEL + 3, "velocity and position are adjacent states");
+    let (lo, hi) = chi2_mean_interval(samples, 6);
+    let fused = nees_fused / samples as f64;
+    assert!(
+        (lo..=hi).contains(&fused),
+        "fused NEES {fused:.2} outside [{lo:.2}, {hi:.2}] over {samples} samples"
+    );
+    // Fusion-reset shares the information: each local filter holds (x_g, P_g/β_i), so
+    // its NEES is β_i times the fused one: conservative, never above the bound.
+    for (i, acc) in nees_local.iter().enumerate() {
+        let local = acc / samples as f64;
+        assert!(
+            local <= hi,
+            "local filter {i}: NEES {local:.2} above {hi:.2}"
+        );
+    }
+    // NIS: each aid's λ sums, over independent epochs (innovations are white),
+    // to its expected total within 2.576 standard deviations (99 %, normal
+    // approximation of a sum of thousands of terms).
+    for (aid, [sum, mean, var, n]) in nis {
+        let z = (sum - mean) / var.sqrt();
+        assert!(
+            z.abs() < 2.576,
+            "{aid}: mean NIS {:.3}, expected {:.3} (deflated by the sharing), z = {z:.2} over {n} epochs",
+            sum / n,
+            mean / n
+        );
+    }
+}
+
+/// Alarms as the server raises them: transitions of a test into suspect or isolated.
+fn in_process_alarms(
+    epochs: &[navguard::monitor::Epoch],
+    spec: &MonitorSpec,
+) -> Vec<(String, String, f64)> {
+    let mut m = navguard::monitor::build(spec).unwrap();
+    let mut alarms = Vec::new();
+    for e in epochs {
+        for o in m.step(e).unwrap().tests {
+            if o.previous != o.decision.health && o.decision.health != Health::Healthy {
+                alarms.push((
+                    o.name.to_owned(),
+                    o.decision.health.as_str().to_owned(),
+                    e.t,
+                ));
+            }
+        }
+    }
+    alarms
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn replay_through_the_real_server_raises_the_in_process_alarms() {
+    // 300 s of the 10 Hz ship with seed 004's GNSS jump moved to [100, 160) s.
+    let faults: Vec<Fault> = position_jump()
+        .into_iter()
+        .map(|f| Fault {
+            start_s: 100.0,
+            end_s: Some(160.0),
+            ..f
+        })
+        .collect();
+    let scenario = sim::ship_with(5, faults, 300.0).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let lines: Vec<String> = scenario
+        .epochs
+        .iter()
+        .map(|e| epoch_to_wire(&e.epoch).unwrap())
+        .collect();
+    let file = dir.path().join("ship.jsonl");
+    std::fs::write(&file, lines.join("\n") + "\n").unwrap();
+    let spec = seed004::spec(&scenario, COUNTERS, 20.0);
+    let body = json!({"monitors": [{
+        "name": "federated", "type": "federated", "config": spec.config,
+        "policy": {"kind": "counters", "n1": 10, "n2": 5}, "threshold": 20.0
+    }]});
+    let spec_file = dir.path().join("session.json");
+    std::fs::write(&spec_file, body.to_string()).unwrap();
+
+    // In-process, on the epochs as the server parses them (the wire is degrees).
+    let parsed: Vec<_> = lines
+        .iter()
+        .map(|l| parse_frame(l, 1).unwrap().remove(0))
+        .collect();
+    let expected = in_process_alarms(&parsed, &spec);
+    assert!(
+        expected.iter().any(|a| a.0 == "gnss" && a.1 == "isolated"),
+        "the jump is isolated in-process: {expected:?}"
+    );
+
+    let server = common::start(&dir.path().join("db.sqlite"), None, Limits::default()).await;
+    let summary = dir.path().join("summary.json");
+    let status = tokio::process::Command::new(env!("CARGO_BIN_EXE_navguard"))
+        .arg("replay")
+        .arg(&file)
+        .args([
+            "--url",
+            &common::ws(&server),
+            "--session",
+            "ship5",
+            "--quiet",
+        ])
+        .arg("--session-spec")
+        .arg(&spec_file)
+        .arg("--summary-json")
+        .arg(&summary)
+        .stdout(std::process::Stdio::null())
+        .status()
+        .await
+        .unwrap();
+    assert!(status.success());
+    let summary: Value = serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
+    assert_eq!(summary["epochs_sent"], scenario.epochs.len());
+    assert_eq!(summary["errors"], json!({}));
+    let got: Vec<(String, String, f64)> = summary["alarms"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| {
+            assert_eq!(a["monitor"], "federated");
+            (
+                a["test"].as_str().unwrap().to_owned(),
+                a["state"].as_str().unwrap().to_owned(),
+                a["t"].as_f64().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(got, expected);
+    assert_eq!(summary["stats"]["epochs"], scenario.epochs.len());
+    server.shutdown().await;
+}
