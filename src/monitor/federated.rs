@@ -65,8 +65,9 @@ pub const MAX_GAP_S: f64 = 3600.0;
 /// the fault-free HPL is a few metres; it reaches 25 m after a long loss of GNSS.
 pub const DEFAULT_HAL_M: f64 = 25.0;
 
-/// An aid of the federated filter.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+/// An aid of the federated filter (also the simulator's aid sensors).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Aid {
     /// GNSS position (and velocity when reported).
     Gnss,

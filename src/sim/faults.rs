@@ -25,28 +25,8 @@ use serde::{Deserialize, Serialize};
 use super::SimError;
 use crate::geo;
 
-/// The aiding sensors.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Aid {
-    /// GNSS receiver (position and velocity).
-    Gnss,
-    /// Doppler velocity log (body velocity).
-    Dvl,
-    /// Celestial navigation (latitude and longitude).
-    Cns,
-}
-
-impl Aid {
-    /// The aid's name on the wire and in monitor configs.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Aid::Gnss => "gnss",
-            Aid::Dvl => "dvl",
-            Aid::Cns => "cns",
-        }
-    }
-}
+/// The aiding sensors: the federated monitor's aids.
+pub use crate::monitor::federated::Aid;
 
 /// A channel of an aid.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
