@@ -1,19 +1,14 @@
-//! A minimal HTTP/1.1 client for the few REST calls `navguard replay` makes
-//! (get or create a session, read its stats): one request per connection
-//! (`Connection: close`), JSON bodies, bounded in time and size. The crate has
-//! no HTTP client dependency and needs none for this.
+//! The REST side of `navguard replay` (get or create a session, read its
+//! stats) through reqwest, bounded in time, and the URL handling shared with
+//! the socket side.
 
 use std::time::Duration;
 
 use anyhow::{Context, bail};
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
-use tokio::net::TcpStream;
 use tokio_tungstenite::tungstenite::http::Uri;
 
 /// Longest a REST call may take, connect to last byte.
 const TIMEOUT: Duration = Duration::from_secs(15);
-/// Largest response body read.
-const MAX_RESPONSE_BYTES: usize = 32 << 20;
 
 /// The navguard server `replay` talks to, derived from the `--url` it was given.
 #[derive(Debug, Clone, PartialEq)]
@@ -84,119 +79,31 @@ impl Endpoint {
         path: &str,
         body: Option<&serde_json::Value>,
     ) -> anyhow::Result<(u16, String)> {
-        tokio::time::timeout(TIMEOUT, self.request_inner(method, path, body))
-            .await
-            .with_context(|| {
-                format!(
-                    "{method} {}{path}: no answer within {} s",
-                    self.http_base(),
-                    TIMEOUT.as_secs()
-                )
-            })?
-    }
-
-    async fn request_inner(
-        &self,
-        method: &str,
-        path: &str,
-        body: Option<&serde_json::Value>,
-    ) -> anyhow::Result<(u16, String)> {
-        let mut stream = TcpStream::connect((self.host.as_str(), self.port))
+        let url = format!("{}{path}", self.http_base());
+        let method = reqwest::Method::from_bytes(method.as_bytes())
+            .with_context(|| format!("bad HTTP method {method:?}"))?;
+        let client = reqwest::Client::builder()
+            .timeout(TIMEOUT)
+            .user_agent("navguard-replay")
+            .build()
+            .context("building the HTTP client")?;
+        let mut request = client.request(method.clone(), &url);
+        if let Some(token) = &self.token {
+            request = request.bearer_auth(token);
+        }
+        if let Some(body) = body {
+            request = request.json(body);
+        }
+        let response = request
+            .send()
             .await
             .with_context(|| format!("cannot reach navguard at {}", self.http_base()))?;
-        let body = body.map(|b| b.to_string()).unwrap_or_default();
-        let mut head = format!(
-            "{method} {}{path} HTTP/1.1\r\nHost: {}\r\nConnection: close\r\nAccept: application/json\r\nUser-Agent: navguard-replay\r\n",
-            self.prefix,
-            self.authority()
-        );
-        if let Some(token) = &self.token {
-            head.push_str(&format!("Authorization: Bearer {token}\r\n"));
-        }
-        if method != "GET" {
-            head.push_str(&format!(
-                "Content-Type: application/json\r\nContent-Length: {}\r\n",
-                body.len()
-            ));
-        }
-        head.push_str("\r\n");
-        stream.write_all(head.as_bytes()).await?;
-        stream.write_all(body.as_bytes()).await?;
-        stream.flush().await?;
-        let mut raw = Vec::new();
-        let mut chunk = [0u8; 16 * 1024];
-        loop {
-            let n = stream.read(&mut chunk).await?;
-            if n == 0 {
-                break;
-            }
-            raw.extend_from_slice(&chunk[..n]);
-            if raw.len() > MAX_RESPONSE_BYTES {
-                bail!("{method} {path}: response larger than {MAX_RESPONSE_BYTES} bytes");
-            }
-        }
-        parse_response(&raw).with_context(|| format!("{method} {path}: bad HTTP response"))
-    }
-}
-
-/// Splits a full HTTP/1.1 response into status and body (content-length,
-/// chunked, or read-to-close).
-fn parse_response(raw: &[u8]) -> anyhow::Result<(u16, String)> {
-    let split = raw
-        .windows(4)
-        .position(|w| w == b"\r\n\r\n")
-        .context("no end of headers")?;
-    let head = std::str::from_utf8(&raw[..split]).context("headers are not UTF-8")?;
-    let rest = &raw[split + 4..];
-    let mut lines = head.split("\r\n");
-    let status_line = lines.next().context("no status line")?;
-    let status: u16 = status_line
-        .split_whitespace()
-        .nth(1)
-        .and_then(|s| s.parse().ok())
-        .with_context(|| format!("bad status line {status_line:?}"))?;
-    let mut chunked = false;
-    let mut length = None;
-    for line in lines {
-        if let Some((name, value)) = line.split_once(':') {
-            let value = value.trim();
-            if name.eq_ignore_ascii_case("transfer-encoding") {
-                chunked = value.eq_ignore_ascii_case("chunked");
-            } else if name.eq_ignore_ascii_case("content-length") {
-                length = value.parse::<usize>().ok();
-            }
-        }
-    }
-    let body = if chunked {
-        dechunk(rest)?
-    } else if let Some(n) = length {
-        rest.get(..n)
-            .context("body shorter than its Content-Length")?
-            .to_vec()
-    } else {
-        rest.to_vec()
-    };
-    Ok((status, String::from_utf8_lossy(&body).into_owned()))
-}
-
-/// Decodes a chunked body (RFC 9112 §7.1), ignoring extensions and trailers.
-fn dechunk(mut data: &[u8]) -> anyhow::Result<Vec<u8>> {
-    let mut out = Vec::new();
-    loop {
-        let eol = data
-            .windows(2)
-            .position(|w| w == b"\r\n")
-            .context("chunk size line not terminated")?;
-        let line = std::str::from_utf8(&data[..eol])?;
-        let size_text = line.split(';').next().unwrap_or("").trim();
-        let size = usize::from_str_radix(size_text, 16)
-            .with_context(|| format!("bad chunk size {size_text:?}"))?;
-        data = &data[eol + 2..];
-        if size == 0 {
-            return Ok(out);
-        }
-        out.extend_from_slice(data.get(..size).context("chunk truncated")?);
-        data = data.get(size + 2..).context("chunk not terminated")?;
+        let status = response.status().as_u16();
+        let text = response
+            .text()
+            .await
+            .with_context(|| format!("{method} {url}: reading the answer"))?;
+        Ok((status, text))
     }
 }
 
@@ -220,16 +127,5 @@ mod tests {
         assert_eq!(e.http_base(), "http://[::1]:9/nav");
         assert!(Endpoint::parse("wss://x:1", None).is_err());
         assert!(Endpoint::parse("127.0.0.1:8080", None).is_err());
-    }
-
-    #[test]
-    fn responses_parse_with_length_chunked_or_close() {
-        let r = b"HTTP/1.1 201 Created\r\ncontent-length: 2\r\n\r\n{}extra";
-        assert_eq!(parse_response(r).unwrap(), (201, "{}".to_owned()));
-        let r = b"HTTP/1.1 200 OK\r\nTransfer-Encoding: chunked\r\n\r\n4\r\n{\"a\"\r\n3;x=y\r\n:1}\r\n0\r\n\r\n";
-        assert_eq!(parse_response(r).unwrap(), (200, "{\"a\":1}".to_owned()));
-        let r = b"HTTP/1.1 404 Not Found\r\n\r\nnope";
-        assert_eq!(parse_response(r).unwrap(), (404, "nope".to_owned()));
-        assert!(parse_response(b"garbage").is_err());
     }
 }
