@@ -402,7 +402,7 @@ fn in_process_alarms(
     epochs: &[navguard::monitor::Epoch],
     spec: &MonitorSpec,
 ) -> Vec<(String, String, f64)> {
-    let mut m = navguard::monitor::build(spec).unwrap();
+    let mut m = navguard::monitor::build(spec, &navguard::monitor::NoModels).unwrap();
     let mut alarms = Vec::new();
     for e in epochs {
         for o in m.step(e).unwrap().tests {

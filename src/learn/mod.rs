@@ -1,3 +1,97 @@
-//! Learning: kernels, LS-SVM (batch, locally weighted, online), SVM and
-//! one-class SVM by SMO, cross-validation. Used by the channel, rimu and tacan
-//! monitors and by model training. Filled in with the LS-SVM and SVM monitors.
+//! Learning: kernels, LS-SVM regression (batch, locally weighted, online),
+//! C-SVC and one-class SVM by SMO, cross-validation. Sits beside `detect/` in
+//! the flow: the channel, rimu and tacan monitors predict with these models, and
+//! the service trains them on its blocking pool ([`model::train`]). Pure: no I/O,
+//! no async.
+//!
+//! Every algorithm has linfa's shape (STYLE.md 10): `XParams` (what a REST body
+//! deserialises into) → `check()` → `fit(&Dataset)` → `XModel` (serde, with a
+//! format version) → `predict`.
+
+pub mod cv;
+pub mod dataset;
+pub mod kernel;
+pub mod local;
+pub mod lssvm;
+pub mod model;
+pub mod online;
+pub mod outlier;
+pub mod scale;
+pub mod svm;
+
+pub use dataset::Dataset;
+pub use kernel::Kernel;
+pub use model::{AnyModel, ModelKind, ModelParams, Prediction, Trained, TrainingMetrics, train};
+pub use scale::Standardizer;
+
+/// Why a model could not be trained or used. `InvalidParams` and `InvalidData` are the
+/// user's to fix (the service answers 422 naming `field`); the others are reported as
+/// the reason a training job failed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum LearnError {
+    /// A parameter is out of range or of the wrong type. `field` is its name inside
+    /// `params` (or `cv.…` for the cross-validation block).
+    #[error("{field}: {reason}")]
+    InvalidParams {
+        /// Dotted path, e.g. `sigma2`, `cv.folds`.
+        field: String,
+        /// Why it was refused.
+        reason: String,
+    },
+    /// The training or prediction data cannot be used. `field` is its path inside
+    /// `data` (e.g. `x[3]`, `y`).
+    #[error("{field}: {reason}")]
+    InvalidData {
+        /// Dotted path, e.g. `x[3][1]`, `y`.
+        field: String,
+        /// Why it was refused.
+        reason: String,
+    },
+    /// A numerical step failed (e.g. a Cholesky factorisation of an indefinite matrix,
+    /// or a solver that did not converge within its iteration limit).
+    #[error("numerical failure: {0}")]
+    Numerical(String),
+    /// The job was cancelled (the model was deleted while training).
+    #[error("training cancelled")]
+    Cancelled,
+}
+
+impl LearnError {
+    /// An [`LearnError::InvalidParams`] for `field`.
+    pub fn params(field: impl Into<String>, reason: impl Into<String>) -> Self {
+        LearnError::InvalidParams {
+            field: field.into(),
+            reason: reason.into(),
+        }
+    }
+
+    /// An [`LearnError::InvalidData`] for `field`.
+    pub fn data(field: impl Into<String>, reason: impl Into<String>) -> Self {
+        LearnError::InvalidData {
+            field: field.into(),
+            reason: reason.into(),
+        }
+    }
+}
+
+/// Where a training job reports its progress, and learns that it should stop.
+/// Implemented by the service's job record; [`NoProgress`] for library use.
+pub trait Progress: Sync {
+    /// Reports the fraction done in `[0, 1]` and the current stage, e.g.
+    /// `"cv fold 3/5"` or `"smo"`. Called at most every few milliseconds.
+    fn report(&self, fraction: f64, stage: &str);
+
+    /// True when the job should stop; long loops check it and return
+    /// [`LearnError::Cancelled`].
+    fn cancelled(&self) -> bool {
+        false
+    }
+}
+
+/// A [`Progress`] that ignores reports and never cancels.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct NoProgress;
+
+impl Progress for NoProgress {
+    fn report(&self, _fraction: f64, _stage: &str) {}
+}

@@ -745,12 +745,15 @@ mod tests {
 
     impl MonitorSpecForTest {
         fn build(config: Value) -> Result<Box<dyn Monitor>, super::super::BuildError> {
-            super::super::build(&super::super::MonitorSpec {
-                kind: MonitorKind::Federated,
-                config,
-                policy: PolicyConfig::counters_default(),
-                threshold: ThresholdSpec::Threshold(20.0),
-            })
+            super::super::build(
+                &super::super::MonitorSpec {
+                    kind: MonitorKind::Federated,
+                    config,
+                    policy: PolicyConfig::counters_default(),
+                    threshold: ThresholdSpec::Threshold(20.0),
+                },
+                &super::super::NoModels,
+            )
         }
     }
 

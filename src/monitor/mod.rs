@@ -2,10 +2,16 @@
 //! per epoch, one `Statistic` and health decision per test plus its outputs.
 //! Pure and synchronous; the session actor in `service/session` drives them.
 
+pub mod channel;
 pub mod epoch;
 pub mod federated;
 pub mod linear;
+pub mod rimu;
+pub mod tacan;
 pub mod tests_bank;
+
+use std::collections::{BTreeMap, HashMap, HashSet};
+use std::sync::{Arc, Mutex, OnceLock};
 
 use serde::Serialize;
 
@@ -14,6 +20,7 @@ pub use tests_bank::{TestBank, TestOutcome};
 
 use crate::detect::{PolicyConfig, PolicyError, ThresholdError, ThresholdSpec};
 use crate::filter::kalman::FilterError;
+use crate::learn::AnyModel;
 
 /// The kinds of monitor a session can run (DESIGN §4.1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
@@ -116,6 +123,34 @@ pub enum Outputs {
         /// Names of the aids currently isolated.
         isolated: Vec<&'static str>,
     },
+    /// `channel`: per channel, the prediction ŷ_k and the residual r_k = y_k − ŷ_k
+    /// (a channel appears once its predictor has enough history).
+    Channel {
+        /// ŷ_k per channel name (scalar channels give one element).
+        prediction: BTreeMap<String, Vec<f64>>,
+        /// r_k per channel name.
+        residual: BTreeMap<String, Vec<f64>>,
+    },
+    /// `rimu`: the parity vector, the gyros the classifier flagged at the last
+    /// detection, the gyros isolated, and ω from the healthy gyros (rad/s, body).
+    Rimu {
+        /// Parity residual `V v` (absent on epochs without `gyros`).
+        parity: Option<Vec<f64>>,
+        /// Gyro indices (0-based) flagged by the classifier at the last detection.
+        flagged: Vec<usize>,
+        /// Gyro indices (0-based) isolated.
+        isolated: Vec<usize>,
+        /// Angular rate by least squares over the healthy gyros, rad/s.
+        omega: Option<[f64; 3]>,
+    },
+    /// `tacan`: the window's feature vector (standardised as the model sees it) and the
+    /// one-class decision value (≥ 0 normal), once the window is full.
+    Tacan {
+        /// Feature vector `X = |X_ins − X_tacan|`, standardised.
+        features: Option<Vec<f64>>,
+        /// One-class decision value.
+        decision: Option<f64>,
+    },
 }
 
 /// What one monitor yields for one epoch.
@@ -180,8 +215,49 @@ pub enum BuildError {
     Unsupported(&'static str),
 }
 
-/// Builds a monitor from its spec, validating everything first.
-pub fn build(spec: &MonitorSpec) -> Result<Box<dyn Monitor>, BuildError> {
+/// Where monitors find trained models by id (`config.model`). The service passes its
+/// model cache; library users can pass a `HashMap` or [`NoModels`].
+pub trait ModelSource {
+    /// The model stored under `id`, if any.
+    fn model(&self, id: &str) -> Option<Arc<AnyModel>>;
+}
+
+/// A [`ModelSource`] with no models.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct NoModels;
+
+impl ModelSource for NoModels {
+    fn model(&self, _id: &str) -> Option<Arc<AnyModel>> {
+        None
+    }
+}
+
+impl ModelSource for HashMap<String, Arc<AnyModel>> {
+    fn model(&self, id: &str) -> Option<Arc<AnyModel>> {
+        self.get(id).cloned()
+    }
+}
+
+/// Interns a test name chosen by the user (a channel name) so it can live in a
+/// [`TestSlot`](tests_bank::TestSlot) as `&'static str`. Each distinct name is leaked
+/// once; the set is bounded by the names users give their channels.
+pub fn intern(name: &str) -> &'static str {
+    static NAMES: OnceLock<Mutex<HashSet<&'static str>>> = OnceLock::new();
+    let mut names = NAMES
+        .get_or_init(Default::default)
+        .lock()
+        .unwrap_or_else(|p| p.into_inner());
+    if let Some(&known) = names.get(name) {
+        return known;
+    }
+    let leaked: &'static str = Box::leak(name.to_owned().into_boxed_str());
+    names.insert(leaked);
+    leaked
+}
+
+/// Builds a monitor from its spec, validating everything first. Monitors that use a
+/// trained model (`channel`, `rimu`, `tacan`) look it up in `models`.
+pub fn build(spec: &MonitorSpec, models: &dyn ModelSource) -> Result<Box<dyn Monitor>, BuildError> {
     spec.policy.check()?;
     spec.threshold.check()?;
     match spec.kind {
@@ -201,6 +277,8 @@ pub fn build(spec: &MonitorSpec) -> Result<Box<dyn Monitor>, BuildError> {
                 spec.threshold,
             )?))
         }
-        other => Err(BuildError::Unsupported(other.as_str())),
+        MonitorKind::Channel => channel::build(spec, models),
+        MonitorKind::Rimu => rimu::build(spec, models),
+        MonitorKind::Tacan => tacan::build(spec, models),
     }
 }

@@ -36,7 +36,8 @@ pub fn build_monitors(session: &StoredSession) -> Result<NamedMonitors, ApiError
         .iter()
         .enumerate()
         .map(|(i, wire)| {
-            let built = monitor_spec(wire).and_then(|spec| monitor::build(&spec));
+            let built =
+                monitor_spec(wire).and_then(|spec| monitor::build(&spec, &monitor::NoModels));
             match built {
                 Ok(m) => Ok((wire.name.clone(), m)),
                 Err(e) => Err(build_error(i, e)),

@@ -139,7 +139,7 @@ fn solution(outputs: &Value) -> Option<(Lla, [f64; 3], Option<f64>)> {
 /// Runs `scenario` through the monitor `spec` describes, epoch by epoch, and
 /// records the corrected solution's error against the truth and every test.
 pub fn run_monitor(scenario: &Scenario, spec: &MonitorSpec) -> Result<MonitorRun, ExperimentError> {
-    let mut monitor = monitor::build(spec)?;
+    let mut monitor = monitor::build(spec, &monitor::NoModels)?;
     let mut run = MonitorRun {
         errors: Vec::with_capacity(scenario.epochs.len()),
         tests: BTreeMap::new(),

@@ -1,0 +1,378 @@
+//! The model store's view of learning: the model kinds of `POST /api/v1/models`,
+//! their parameters as the REST body gives them, one [`train`] entry point for the
+//! service's training jobs, and [`AnyModel`], the serialisable trained model the
+//! monitors predict with.
+
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+
+use super::cv::{CvParams, CvReport};
+use super::local::{LwLsSvmModel, LwLsSvmParams};
+use super::lssvm::{LsSvmModel, LsSvmParams};
+use super::svm::{OcSvmModel, OcSvmParams, SvcModel, SvcParams};
+use super::{Dataset, LearnError, Progress};
+
+/// Version of the stored model format; bumped when a model struct changes shape.
+pub const FORMAT_VERSION: u32 = 1;
+
+/// The model kinds (DESIGN §4.4).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum ModelKind {
+    /// Batch LS-SVM regression (seed 000 eq. 6).
+    #[serde(rename = "lssvm")]
+    LsSvm,
+    /// Locally weighted LS-SVM regression (seed 000 §1.2).
+    #[serde(rename = "lw-lssvm")]
+    LwLsSvm,
+    /// C-SVC classifier by SMO (seed 002).
+    #[serde(rename = "svm")]
+    Svm,
+    /// One-class SVM / SVDD by SMO (seed 003).
+    #[serde(rename = "ocsvm")]
+    OcSvm,
+}
+
+impl ModelKind {
+    /// The wire name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ModelKind::LsSvm => "lssvm",
+            ModelKind::LwLsSvm => "lw-lssvm",
+            ModelKind::Svm => "svm",
+            ModelKind::OcSvm => "ocsvm",
+        }
+    }
+
+    /// True for the regression kinds (they need `y` and predict `y`).
+    pub fn is_regression(self) -> bool {
+        matches!(self, ModelKind::LsSvm | ModelKind::LwLsSvm)
+    }
+
+    /// True when training needs targets or labels `y` (all but `ocsvm`).
+    pub fn needs_y(self) -> bool {
+        !matches!(self, ModelKind::OcSvm)
+    }
+}
+
+/// Parameters of one model kind, as `params` of `POST /api/v1/models`.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ModelParams {
+    /// `lssvm`.
+    LsSvm(LsSvmParams),
+    /// `lw-lssvm`.
+    LwLsSvm(LwLsSvmParams),
+    /// `svm`.
+    Svm(SvcParams),
+    /// `ocsvm`.
+    OcSvm(OcSvmParams),
+}
+
+impl ModelParams {
+    /// Parses `params` for `kind` (missing fields take their documented defaults,
+    /// unknown fields are refused) and checks them.
+    pub fn from_json(kind: ModelKind, params: &Value) -> Result<Self, LearnError> {
+        let params = if params.is_null() {
+            &Value::Object(Default::default())
+        } else {
+            params
+        };
+        let parsed = match kind {
+            ModelKind::LsSvm => ModelParams::LsSvm(parse(params)?),
+            ModelKind::LwLsSvm => ModelParams::LwLsSvm(parse(params)?),
+            ModelKind::Svm => ModelParams::Svm(parse(params)?),
+            ModelKind::OcSvm => ModelParams::OcSvm(parse(params)?),
+        };
+        parsed.check()?;
+        Ok(parsed)
+    }
+
+    /// The kind these parameters belong to.
+    pub fn kind(&self) -> ModelKind {
+        match self {
+            ModelParams::LsSvm(_) => ModelKind::LsSvm,
+            ModelParams::LwLsSvm(_) => ModelKind::LwLsSvm,
+            ModelParams::Svm(_) => ModelKind::Svm,
+            ModelParams::OcSvm(_) => ModelKind::OcSvm,
+        }
+    }
+
+    /// Validates every parameter; the error names the field.
+    pub fn check(&self) -> Result<(), LearnError> {
+        match self {
+            ModelParams::LsSvm(p) => p.check(),
+            ModelParams::LwLsSvm(p) => p.check(),
+            ModelParams::Svm(p) => p.check(),
+            ModelParams::OcSvm(p) => p.check(),
+        }
+    }
+
+    /// The parameters as JSON, defaults filled in (what the model record shows).
+    pub fn to_json(&self) -> Value {
+        let v = match self {
+            ModelParams::LsSvm(p) => serde_json::to_value(p),
+            ModelParams::LwLsSvm(p) => serde_json::to_value(p),
+            ModelParams::Svm(p) => serde_json::to_value(p),
+            ModelParams::OcSvm(p) => serde_json::to_value(p),
+        };
+        v.unwrap_or(Value::Null)
+    }
+}
+
+/// Deserialises one kind's params, turning serde's message into an `InvalidParams`
+/// naming the field where serde says which one.
+fn parse<T: serde::de::DeserializeOwned>(params: &Value) -> Result<T, LearnError> {
+    serde_json::from_value(params.clone()).map_err(|e| {
+        let msg = e.to_string();
+        let field = field_in(&msg).unwrap_or_default();
+        LearnError::params(field, msg)
+    })
+}
+
+/// Pulls the field name out of serde messages such as "unknown field `x`, expected …".
+fn field_in(msg: &str) -> Option<String> {
+    let start = msg.find('`')? + 1;
+    let len = msg[start..].find('`')?;
+    Some(msg[start..start + len].to_owned())
+}
+
+/// What training measured, shown by `GET /api/v1/models/{id}` when ready.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct TrainingMetrics {
+    /// Training samples.
+    pub n: usize,
+    /// Input dimension.
+    pub dim: usize,
+    /// Wall time of training, s (cross-validation included).
+    pub seconds: f64,
+    /// Regression: root-mean-square error on the training set, original units.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub train_rmse: Option<f64>,
+    /// Classification: fraction of training labels reproduced.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub train_accuracy: Option<f64>,
+    /// One-class: fraction of training samples outside the boundary.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub outlier_fraction: Option<f64>,
+    /// SVM kinds: number of support vectors.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub support_vectors: Option<usize>,
+    /// SVM kinds: SMO iterations.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub iterations: Option<usize>,
+    /// SVM kinds: final dual objective.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub objective: Option<f64>,
+    /// The cross-validation that chose the hyper-parameters, when it ran.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cv: Option<CvReport>,
+}
+
+/// A trained model, the parameters it was trained with (hyper-parameters chosen by
+/// CV filled in), and what training measured.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Trained {
+    /// The model.
+    pub model: AnyModel,
+    /// Effective parameters.
+    pub params: ModelParams,
+    /// Training figures.
+    pub metrics: TrainingMetrics,
+}
+
+/// Trains a model of `params.kind()` on `data`, running cross-validation first when
+/// `cv` is given or a hyper-parameter is `"auto"`. Blocking and CPU-heavy: the
+/// service calls it on the blocking pool.
+pub fn train(
+    params: &ModelParams,
+    cv: Option<&CvParams>,
+    data: &Dataset,
+    progress: &dyn Progress,
+) -> Result<Trained, LearnError> {
+    params.check()?;
+    if let Some(cv) = cv {
+        cv.check()?;
+    }
+    if params.kind().needs_y() {
+        data.require_y()?;
+    }
+    let started = Instant::now();
+    let mut trained = match params {
+        ModelParams::LsSvm(p) => super::lssvm::train(p, cv, data, progress)?,
+        ModelParams::LwLsSvm(p) => super::local::train(p, cv, data, progress)?,
+        ModelParams::Svm(p) => super::svm::train_svc(p, cv, data, progress)?,
+        ModelParams::OcSvm(p) => super::svm::train_ocsvm(p, cv, data, progress)?,
+    };
+    trained.metrics.n = data.n();
+    trained.metrics.dim = data.dim();
+    trained.metrics.seconds = started.elapsed().as_secs_f64();
+    progress.report(1.0, "done");
+    Ok(trained)
+}
+
+/// A trained model of any kind.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind")]
+pub enum AnyModel {
+    /// `lssvm`.
+    #[serde(rename = "lssvm")]
+    LsSvm(LsSvmModel),
+    /// `lw-lssvm`.
+    #[serde(rename = "lw-lssvm")]
+    LwLsSvm(LwLsSvmModel),
+    /// `svm`.
+    #[serde(rename = "svm")]
+    Svm(SvcModel),
+    /// `ocsvm`.
+    #[serde(rename = "ocsvm")]
+    OcSvm(OcSvmModel),
+}
+
+/// The stored envelope: format version and model.
+#[derive(Serialize, Deserialize)]
+struct Stored {
+    format_version: u32,
+    model: AnyModel,
+}
+
+/// Predictions for a set of inputs (`POST /api/v1/models/{id}/predict`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum Prediction {
+    /// Regression kinds.
+    Regression {
+        /// Predicted values, original units.
+        y: Vec<f64>,
+    },
+    /// Classifiers: decision values and labels. `svm`: label +1 when the decision
+    /// is ≥ 0 (the positive class, "fault" in seed 002), else −1. `ocsvm`: positive
+    /// decision = inside the boundary, label +1 (normal), else −1 (anomaly), as
+    /// scikit-learn's `OneClassSVM`.
+    Classification {
+        /// Decision values.
+        decision: Vec<f64>,
+        /// Labels, +1 or −1.
+        label: Vec<i32>,
+    },
+}
+
+impl AnyModel {
+    /// The kind.
+    pub fn kind(&self) -> ModelKind {
+        match self {
+            AnyModel::LsSvm(_) => ModelKind::LsSvm,
+            AnyModel::LwLsSvm(_) => ModelKind::LwLsSvm,
+            AnyModel::Svm(_) => ModelKind::Svm,
+            AnyModel::OcSvm(_) => ModelKind::OcSvm,
+        }
+    }
+
+    /// The input dimension the model was trained on.
+    pub fn input_dim(&self) -> usize {
+        match self {
+            AnyModel::LsSvm(m) => m.input_dim(),
+            AnyModel::LwLsSvm(m) => m.input_dim(),
+            AnyModel::Svm(m) => m.input_dim(),
+            AnyModel::OcSvm(m) => m.input_dim(),
+        }
+    }
+
+    /// One regression value (regression kinds) or decision value (classifiers) for
+    /// one input of [`AnyModel::input_dim`] values. The monitors' hot path.
+    pub fn predict_one(&self, x: &[f64]) -> f64 {
+        match self {
+            AnyModel::LsSvm(m) => m.predict_one(x),
+            AnyModel::LwLsSvm(m) => m.predict_one(x),
+            AnyModel::Svm(m) => m.decision_one(x),
+            AnyModel::OcSvm(m) => m.decision_one(x),
+        }
+    }
+
+    /// Predicts every row of `x`; `x`'s dimension must match.
+    pub fn predict(&self, x: &Dataset) -> Result<Prediction, LearnError> {
+        if x.dim() != self.input_dim() {
+            return Err(LearnError::data(
+                "x",
+                format!(
+                    "has {} features, the model was trained on {}",
+                    x.dim(),
+                    self.input_dim()
+                ),
+            ));
+        }
+        let values: Vec<f64> = (0..x.n()).map(|i| self.predict_one(&x.row(i))).collect();
+        Ok(if self.kind().is_regression() {
+            Prediction::Regression { y: values }
+        } else {
+            let label = values
+                .iter()
+                .map(|&d| if d >= 0.0 { 1 } else { -1 })
+                .collect();
+            Prediction::Classification {
+                decision: values,
+                label,
+            }
+        })
+    }
+
+    /// The stored form: JSON with a format version.
+    pub fn to_stored_json(&self) -> String {
+        serde_json::to_string(&Stored {
+            format_version: FORMAT_VERSION,
+            model: self.clone(),
+        })
+        .unwrap_or_default()
+    }
+
+    /// Reads the stored form, refusing other format versions.
+    pub fn from_stored_json(text: &str) -> Result<Self, LearnError> {
+        #[derive(Deserialize)]
+        struct Version {
+            format_version: u32,
+        }
+        let v: Version = serde_json::from_str(text)
+            .map_err(|e| LearnError::data("model", format!("not a stored model: {e}")))?;
+        if v.format_version != FORMAT_VERSION {
+            return Err(LearnError::data(
+                "model",
+                format!(
+                    "stored with format version {}, this build reads {FORMAT_VERSION}",
+                    v.format_version
+                ),
+            ));
+        }
+        let s: Stored = serde_json::from_str(text)
+            .map_err(|e| LearnError::data("model", format!("not a stored model: {e}")))?;
+        Ok(s.model)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unknown_params_name_the_field() {
+        let e =
+            ModelParams::from_json(ModelKind::LsSvm, &serde_json::json!({"gama": 1})).unwrap_err();
+        match e {
+            LearnError::InvalidParams { field, .. } => assert_eq!(field, "gama"),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn kinds_round_trip_their_wire_names() {
+        for k in [
+            ModelKind::LsSvm,
+            ModelKind::LwLsSvm,
+            ModelKind::Svm,
+            ModelKind::OcSvm,
+        ] {
+            let v = serde_json::to_value(k).unwrap();
+            assert_eq!(v, k.as_str());
+            assert_eq!(serde_json::from_value::<ModelKind>(v).unwrap(), k);
+        }
+    }
+}
