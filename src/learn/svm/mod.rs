@@ -5,7 +5,8 @@
 //!
 //! Layout (linfa's split): this file is the API and the shared parameter rules;
 //! [`svc`] and [`ocsvm`] set up each dual problem and hold the models; [`smo`] is
-//! the solver (libsvm's, WSS 2 + shrinking); [`cache`] its LRU kernel-row cache.
+//! the solver (libsvm's, WSS 2 + shrinking); `rows` the kernel matrix it reads;
+//! [`cache`] the LRU kernel-row cache.
 //!
 //! Kernel width, both conventions: the RBF kernel is `exp(−‖x − y‖² / sigma2)`
 //! (LS-SVMlab, DESIGN §3.5); scikit-learn / libsvm write `exp(−gamma‖x − y‖²)`, so
@@ -16,6 +17,7 @@
 
 pub mod cache;
 pub mod ocsvm;
+mod rows;
 pub mod smo;
 pub mod svc;
 
