@@ -6,13 +6,15 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
-use navguard::sim::experiment::{ramp, seed004};
+use navguard::sim::experiment::{ramp, seed002, seed004};
 
 /// The experiments.
 #[derive(Debug, clap::Subcommand)]
 pub enum ExperimentCommand {
     /// Seed 004: classic vs counter policy at thresholds 13 and 20 on the ship scenario.
     Seed004(Seed004Args),
+    /// Seed 002: redundant-gyro fault isolation (parity FSS test + wavelet-packet C-SVC).
+    Seed002(Seed002Args),
     /// GNSS position drifts of 0.5, 1, 2, 5 m/s: seconds and metres before the alarm.
     Ramp(RampArgs),
 }
@@ -33,6 +35,23 @@ pub struct Seed004Args {
     #[arg(long, default_value_t = seed004::SETTLE_S)]
     pub settle: f64,
     /// Exit non-zero unless the counter policy beats the classic one at threshold 20.
+    #[arg(long)]
+    pub check: bool,
+}
+
+/// `navguard experiment seed002` flags.
+#[derive(Debug, clap::Args)]
+pub struct Seed002Args {
+    /// Seed of the training windows; run r of each case uses seed + 1 + r.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Noise seeds per scenario × gyro × fault.
+    #[arg(long, default_value_t = 20)]
+    pub runs: usize,
+    /// Directory for the SVG figure.
+    #[arg(long, default_value = "target/experiments/seed002")]
+    pub out_dir: PathBuf,
+    /// Exit non-zero unless every steady-flight bias fault is isolated correctly.
     #[arg(long)]
     pub check: bool,
 }
@@ -81,6 +100,31 @@ pub fn run(command: ExperimentCommand) -> anyhow::Result<()> {
             );
             if args.check && !result.counters_beat_classic(20.0) {
                 bail!("the counter policy does not beat the classic one at threshold 20");
+            }
+            Ok(())
+        }
+        ExperimentCommand::Seed002(args) => {
+            let params = seed002::Seed002Params {
+                seed: args.seed,
+                runs: args.runs,
+                ..seed002::Seed002Params::default()
+            };
+            let result = seed002::run(params).context("seed 002 experiment")?;
+            print!("{}", seed002::render(&result));
+            let plots = seed002::plots(&result);
+            write_all(&args.out_dir, &plots)?;
+            println!(
+                "\nwrote {} figure(s) to {}",
+                plots.len(),
+                args.out_dir.display()
+            );
+            let steady_bias = result.rows.iter().filter(|r| {
+                r.scenario == "steady"
+                    && matches!(r.fault, navguard::sim::rimu::GyroFaultKind::Bias(_))
+            });
+            let (_, isolated, _, runs) = seed002::totals(steady_bias);
+            if args.check && isolated < runs {
+                bail!("steady bias faults isolated correctly in {isolated}/{runs} runs");
             }
             Ok(())
         }

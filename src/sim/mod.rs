@@ -18,6 +18,7 @@
 pub mod experiment;
 pub mod faults;
 pub mod ins_truth;
+pub mod rimu;
 pub mod rng;
 pub mod scenario;
 pub mod sensors;
