@@ -21,6 +21,7 @@ pub mod ins_truth;
 pub mod rng;
 pub mod scenario;
 pub mod sensors;
+pub mod tacan;
 pub mod track;
 pub mod trajectory;
 pub mod truth;
