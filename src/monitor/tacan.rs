@@ -409,3 +409,233 @@ impl Monitor for TacanMonitor {
         self.outputs = empty();
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use std::collections::HashMap;
+
+    use serde_json::json;
+
+    use super::*;
+    use crate::detect::Health;
+    use crate::features::tacan::series_features;
+    use crate::learn::{Dataset, ModelParams, NoProgress, train};
+    use crate::monitor::NoModels;
+    use crate::sim::tacan::{TacanFlightParams, default_station, simulate_flight};
+
+    fn config(model: &str) -> Value {
+        let s = default_station();
+        json!({
+            "station": {"lat": s.lat.to_degrees(), "lon": s.lon.to_degrees(), "h": s.h},
+            "model": model
+        })
+    }
+
+    fn spec(config: Value, policy: PolicyConfig) -> MonitorSpec {
+        MonitorSpec {
+            kind: MonitorKind::Tacan,
+            config,
+            policy,
+            threshold: ThresholdSpec::default(),
+        }
+    }
+
+    fn field(e: BuildError) -> String {
+        match e {
+            BuildError::Config(c) => c.field,
+            other => panic!("{other:?}"),
+        }
+    }
+
+    /// A one-class model trained on every 4th window of a clean 60 s flight at 20 m².
+    fn small_model(crest: bool) -> Arc<AnyModel> {
+        let f = simulate_flight(&TacanFlightParams {
+            seed: 11,
+            duration_s: 60.0,
+            jumps: 0,
+            ..TacanFlightParams::default()
+        })
+        .unwrap();
+        let p = TacanFeatureParams { window: 10, crest };
+        let rows: Vec<Vec<f64>> = series_features(&f.ins_range_m, &f.tacan_range_m, &p)
+            .unwrap()
+            .into_iter()
+            .step_by(4)
+            .collect();
+        let params =
+            ModelParams::from_json(ModelKind::OcSvm, &json!({"nu": 0.002, "sigma2": 3.0})).unwrap();
+        let data = Dataset::new(&rows, None).unwrap();
+        Arc::new(train(&params, None, &data, &NoProgress).unwrap().model)
+    }
+
+    #[test]
+    fn defaults_are_the_papers_window_without_crest() {
+        let c = TacanConfig::from_json(&config("m-1")).unwrap();
+        assert_eq!(c.features, TacanFeatureParams::default());
+        assert_eq!((c.model.as_str(), c.max_gap_s), ("m-1", DEFAULT_MAX_GAP_S));
+        assert!((c.station.lat - default_station().lat).abs() < 1e-15);
+    }
+
+    #[test]
+    fn invalid_configs_are_refused_naming_the_field() {
+        let station = json!({"lat": 34.0, "lon": 108.0, "h": 400.0});
+        let cases = [
+            (json!({"model": "m"}), "station"),
+            (json!({"station": 3, "model": "m"}), "station"),
+            (
+                json!({"station": {"lat": 95.0, "lon": 0.0, "h": 0.0}, "model": "m"}),
+                "station.lat",
+            ),
+            (
+                json!({"station": {"lat": 0.0, "lon": "x", "h": 0.0}, "model": "m"}),
+                "station.lon",
+            ),
+            (
+                json!({"station": {"lat": 0.0, "lon": 0.0}, "model": "m"}),
+                "station.h",
+            ),
+            (
+                json!({"station": {"lat": 0.0, "lon": 0.0, "h": 0.0, "x": 1}, "model": "m"}),
+                "station.x",
+            ),
+            (json!({"station": station}), "model"),
+            (json!({"station": station, "model": 7}), "model"),
+            (
+                json!({"station": station, "model": "m", "window": 1}),
+                "window",
+            ),
+            (
+                json!({"station": station, "model": "m", "window": 2.5}),
+                "window",
+            ),
+            (
+                json!({"station": station, "model": "m", "crest": "yes"}),
+                "crest",
+            ),
+            (
+                json!({"station": station, "model": "m", "max_gap_s": 0}),
+                "max_gap_s",
+            ),
+            (
+                json!({"station": station, "model": "m", "windw": 10}),
+                "windw",
+            ),
+        ];
+        for (c, want) in cases {
+            let e = TacanConfig::from_json(&c).unwrap_err();
+            assert_eq!(e.field, want, "{c}");
+        }
+        let e = build(&spec(config("m-404"), PolicyConfig::Classic), &NoModels)
+            .map(|_| ())
+            .unwrap_err();
+        assert_eq!(field(e), "model");
+    }
+
+    #[test]
+    fn a_model_of_the_wrong_dimension_is_refused() {
+        let models = HashMap::from([("m".to_owned(), small_model(false))]);
+        let mut c = config("m");
+        c["crest"] = json!(true);
+        let e = build(&spec(c, PolicyConfig::Classic), &models)
+            .map(|_| ())
+            .unwrap_err();
+        assert_eq!(field(e), "model");
+    }
+
+    #[test]
+    fn a_clean_stream_stays_healthy_and_a_200_m_jump_is_flagged() {
+        let models = HashMap::from([("m".to_owned(), small_model(false))]);
+        let mut monitor = build(&spec(config("m"), PolicyConfig::Classic), &models).unwrap();
+        let mut f = simulate_flight(&TacanFlightParams {
+            seed: 12,
+            duration_s: 20.0,
+            jumps: 0,
+            ..TacanFlightParams::default()
+        })
+        .unwrap();
+        // A 200 m jump on 3 samples from sample 400.
+        for k in 400..403 {
+            let r = f.epochs[k].tacan_range_m.unwrap();
+            f.epochs[k].tacan_range_m = Some(r + 200.0);
+        }
+        let mut clean_flags = 0;
+        let mut clean = 0;
+        for (k, e) in f.epochs.iter().enumerate() {
+            let report = monitor.step(e).unwrap();
+            if k < 9 {
+                assert!(report.tests.is_empty(), "no test before the window is full");
+                assert_eq!(report.outputs, empty());
+                continue;
+            }
+            let o = report.tests[0];
+            assert_eq!((o.name, o.statistic.dof), ("range", 3));
+            let Outputs::Tacan {
+                features: Some(x),
+                decision: Some(g),
+            } = &report.outputs
+            else {
+                panic!("no outputs at {k}");
+            };
+            assert_eq!(x.len(), 3);
+            // The test fails exactly when the point is outside the boundary.
+            assert_eq!(o.statistic.exceeds(), *g < 0.0);
+            let holds_jump = (400..412).contains(&k);
+            if holds_jump {
+                assert_eq!(o.decision.health, Health::Isolated, "jump window at {k}");
+                assert!(o.statistic.test_ratio() > 1.0);
+            } else {
+                clean += 1;
+                clean_flags += usize::from(o.decision.health != Health::Healthy);
+            }
+        }
+        assert!(clean > 480);
+        assert!(clean_flags <= clean / 100, "{clean_flags} of {clean}");
+        assert_eq!(
+            monitor.tests().slots()[0].policy.health(),
+            Health::Healthy,
+            "healthy again at the end"
+        );
+        monitor.reset();
+        assert!(monitor.step(&f.epochs[0]).unwrap().tests.is_empty());
+    }
+
+    #[test]
+    fn a_gap_restarts_the_window_and_epochs_without_both_blocks_are_ignored() {
+        let models = HashMap::from([("m".to_owned(), small_model(false))]);
+        let mut monitor = build(&spec(config("m"), PolicyConfig::Classic), &models).unwrap();
+        let f = simulate_flight(&TacanFlightParams {
+            seed: 13,
+            duration_s: 2.0,
+            jumps: 0,
+            ..TacanFlightParams::default()
+        })
+        .unwrap();
+        for e in &f.epochs[..10] {
+            monitor.step(e).unwrap();
+        }
+        let mut no_tacan = f.epochs[10].clone();
+        no_tacan.tacan_range_m = None;
+        let r = monitor.step(&no_tacan).unwrap();
+        assert!(r.tests.is_empty());
+        assert!(matches!(
+            r.outputs,
+            Outputs::Tacan {
+                decision: Some(_),
+                ..
+            }
+        ));
+        // 2 s later: the window starts afresh and needs 10 epochs again.
+        let mut late = f.epochs[11].clone();
+        late.t += 2.0;
+        assert!(monitor.step(&late).unwrap().tests.is_empty());
+    }
+
+    #[test]
+    fn the_range_ratio_is_one_on_the_boundary_and_grows_outside() {
+        assert_eq!(ratio(0.0, Some(2.0)), 1.0);
+        assert!(ratio(0.5, Some(2.0)) < 1.0);
+        assert_eq!(ratio(-1.0, Some(2.0)), 2.0);
+        assert_eq!(ratio(-2.0, Some(2.0)), MAX_RATIO);
+        assert_eq!(ratio(-0.5, None), 1.5);
+    }
+}

@@ -224,17 +224,14 @@ pub fn simulate_flight(p: &TacanFlightParams) -> Result<TacanFlight, SimError> {
 
     // Jumps: one per slot, kept a window apart (module doc).
     let mut offset = vec![0.0; n];
-    if p.jumps > 0 {
-        let slot = n / p.jumps;
+    if let Some(slot) = n.checked_div(p.jumps) {
         for j in 0..p.jumps {
             let len = jump_rng.random_range(1..=p.max_jump_samples);
             let start = j * slot + jump_rng.random_range(0..=slot - len - p.window);
             let mag = jump_rng.random_range(p.jump_min_m..=p.jump_max_m);
             let offset_m = if jump_rng.random_bool(0.5) { mag } else { -mag };
-            for k in start..start + len {
-                offset[k] = offset_m;
-                flight.jumped[k] = true;
-            }
+            offset[start..start + len].fill(offset_m);
+            flight.jumped[start..start + len].fill(true);
             flight.jumps.push(Jump {
                 start,
                 len,

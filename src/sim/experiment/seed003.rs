@@ -126,11 +126,11 @@ impl Default for Seed003Params {
     }
 }
 
-/// The default one-class model: ν = 0.005 (at most 0.5 % of the clean training
+/// The default one-class model: ν = 0.002 (at most 0.2 % of the clean training
 /// windows outside), σ² = 3 on standardised features (scikit-learn's `gamma="scale"`
 /// for 3 unit-variance features).
 pub fn default_model_params() -> serde_json::Value {
-    json!({"nu": 0.005, "sigma2": 3.0})
+    json!({"nu": 0.002, "sigma2": 3.0})
 }
 
 /// One test flight's figures.
@@ -174,6 +174,15 @@ fn ratio(a: usize, n: usize) -> f64 {
     if n == 0 { 1.0 } else { a as f64 / n as f64 }
 }
 
+/// The first 30 s of a test flight: `(t, d_tacan − d_ins)` and `(t, decision)`.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Trace {
+    /// Range difference, m.
+    pub range_diff: Vec<(f64, f64)>,
+    /// One-class decision.
+    pub decision: Vec<(f64, f64)>,
+}
+
 /// One noise level's results.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NoiseResult {
@@ -191,8 +200,8 @@ pub struct NoiseResult {
     pub flights: Vec<FlightResult>,
     /// Scorecards of the `range` test (classic, counters).
     pub scorecards: Vec<Scorecard>,
-    /// First test flight: `(t, d_tacan − d_ins)` and `(t, decision)`, for the figure.
-    pub trace: (Vec<(f64, f64)>, Vec<(f64, f64)>),
+    /// First 30 s of test flight 1, for the figures.
+    pub trace: Trace,
 }
 
 impl NoiseResult {
@@ -245,12 +254,23 @@ pub struct Seed003Result {
     pub levels: Vec<NoiseResult>,
 }
 
-/// Trains the one-class model on the training flights' windows at one noise level;
-/// returns the model, the windows kept and available, and the training time.
-pub fn train_model(
-    p: &Seed003Params,
-    noise_var_m2: f64,
-) -> Result<(AnyModel, usize, usize, f64, Option<usize>), Seed003Error> {
+/// A model trained for one noise level, with what training took.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrainedLevel {
+    /// The one-class model.
+    pub model: AnyModel,
+    /// Windows trained on.
+    pub train_n: usize,
+    /// Windows available before subsampling.
+    pub train_total: usize,
+    /// Training wall time, s.
+    pub seconds: f64,
+    /// Support vectors.
+    pub support_vectors: Option<usize>,
+}
+
+/// Trains the one-class model on the training flights' windows at one noise level.
+pub fn train_model(p: &Seed003Params, noise_var_m2: f64) -> Result<TrainedLevel, Seed003Error> {
     let mut all = Vec::new();
     for i in 0..p.train_flights {
         let f = simulate_flight(&TacanFlightParams {
@@ -276,14 +296,17 @@ pub fn train_model(
     let started = Instant::now();
     let trained = learn::train(&params, None, &data, &NoProgress)?;
     let seconds = started.elapsed().as_secs_f64();
-    Ok((
-        trained.model,
-        rows.len(),
-        total,
+    Ok(TrainedLevel {
+        model: trained.model,
+        train_n: rows.len(),
+        train_total: total,
         seconds,
-        trained.metrics.support_vectors,
-    ))
+        support_vectors: trained.metrics.support_vectors,
+    })
 }
+
+/// Per-window flags and `(t, decision)` of one test flight.
+type FlightRun = (Vec<bool>, Vec<(f64, f64)>);
 
 /// Runs one test flight through the `tacan` monitor under `policy`; returns the
 /// per-window flags (window `i` ends at sample `i + K − 1`) and the decisions.
@@ -291,7 +314,7 @@ fn run_flight(
     flight: &TacanFlight,
     spec: &MonitorSpec,
     models: &HashMap<String, Arc<AnyModel>>,
-) -> Result<(Vec<bool>, Vec<(f64, f64)>), Seed003Error> {
+) -> Result<FlightRun, Seed003Error> {
     let mut monitor = monitor::build(spec, models)?;
     let mut flags = Vec::with_capacity(flight.epochs.len());
     let mut decisions = Vec::with_capacity(flight.epochs.len());
@@ -335,13 +358,13 @@ pub fn run(p: Seed003Params) -> Result<Seed003Result, Seed003Error> {
     let k = p.features.window;
     let mut levels = Vec::new();
     for &var in &p.noise_vars_m2 {
-        let (model, train_n, train_total, train_seconds, support_vectors) = train_model(&p, var)?;
+        let trained = train_model(&p, var)?;
         let models: HashMap<String, Arc<AnyModel>> =
-            HashMap::from([("seed003".to_owned(), Arc::new(model))]);
+            HashMap::from([("seed003".to_owned(), Arc::new(trained.model))]);
         let mut flights = Vec::new();
         let mut traces: Vec<Vec<(f64, Health)>> = vec![Vec::new(), Vec::new()];
         let mut faults = Vec::new();
-        let mut trace = (Vec::new(), Vec::new());
+        let mut trace = Trace::default();
         let policies = [PolicyConfig::Classic, PolicyConfig::counters_default()];
         for i in 0..p.test_flights {
             let flight = simulate_flight(&TacanFlightParams {
@@ -403,7 +426,7 @@ pub fn run(p: Seed003Params) -> Result<Seed003Result, Seed003Error> {
                 flights.push(r);
                 if i == 0 {
                     let n = flight.epochs.len().min((30.0 / dt) as usize);
-                    trace.0 = (0..n)
+                    trace.range_diff = (0..n)
                         .map(|s| {
                             (
                                 s as f64 * dt,
@@ -411,7 +434,7 @@ pub fn run(p: Seed003Params) -> Result<Seed003Result, Seed003Error> {
                             )
                         })
                         .collect();
-                    trace.1 = decisions.into_iter().filter(|(t, _)| *t < 30.0).collect();
+                    trace.decision = decisions.into_iter().filter(|(t, _)| *t < 30.0).collect();
                 }
             }
         }
@@ -424,10 +447,10 @@ pub fn run(p: Seed003Params) -> Result<Seed003Result, Seed003Error> {
             .collect();
         levels.push(NoiseResult {
             noise_var_m2: var,
-            train_n,
-            train_total,
-            train_seconds,
-            support_vectors,
+            train_n: trained.train_n,
+            train_total: trained.train_total,
+            train_seconds: trained.seconds,
+            support_vectors: trained.support_vectors,
             flights,
             scorecards,
             trace,
@@ -476,7 +499,7 @@ pub fn render(r: &Seed003Result) -> String {
     let _ = writeln!(s, "(per-flight detection probability p_i, %)\n");
     let _ = writeln!(
         s,
-        "{:<8} {:>9} {:>9} {:>9} {:>9} {:>9} {:>11} {:>15} {:>8} {:>5}  {}",
+        "{:<8} {:>9} {:>9} {:>9} {:>9} {:>9} {:>11} {:>15} {:>8} {:>5}  paper",
         "σ² (m²)",
         "mean P",
         "min p_i",
@@ -487,15 +510,17 @@ pub fn render(r: &Seed003Result) -> String {
         "train n/total",
         "train s",
         "SVs",
-        "paper"
     );
     for l in &r.levels {
         let pooled = l.pooled();
-        let paper = match l.noise_var_m2 {
-            v if v == 5.0 => "P = 100 %".to_owned(),
-            v if v == 10.0 => "P = 99.99 %".to_owned(),
-            v if v == 20.0 => "P > 99 %, lowest flight 97.97 %".to_owned(),
-            _ => "—".to_owned(),
+        let paper = if l.noise_var_m2 == 5.0 {
+            "P = 100 %"
+        } else if l.noise_var_m2 == 10.0 {
+            "P = 99.99 %"
+        } else if l.noise_var_m2 == 20.0 {
+            "P > 99 %, lowest flight 97.97 %"
+        } else {
+            "—"
         };
         let _ = writeln!(
             s,
@@ -557,14 +582,14 @@ pub fn plots(r: &Seed003Result) -> Vec<(String, String)> {
             "t, s",
             "d_tacan − d_ins, m",
         )
-        .with_series(Series::new("range difference", l.trace.0.clone()));
+        .with_series(Series::new("range difference", l.trace.range_diff.clone()));
         out.push((format!("range_diff_var{v}.svg"), c.to_svg()));
         let c = Chart::new(
             format!("One-class decision, test flight 1, noise N(0, {v})"),
             "t, s",
             "decision (≥ 0 normal)",
         )
-        .with_series(Series::new("decision", l.trace.1.clone()))
+        .with_series(Series::new("decision", l.trace.decision.clone()))
         .with_threshold(0.0, "boundary");
         out.push((format!("decision_var{v}.svg"), c.to_svg()));
     }
