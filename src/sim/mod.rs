@@ -22,6 +22,7 @@ pub mod rimu;
 pub mod rng;
 pub mod scenario;
 pub mod sensors;
+pub mod tacan;
 pub mod track;
 pub mod trajectory;
 pub mod truth;
