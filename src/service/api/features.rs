@@ -82,19 +82,22 @@ fn required(body: &mut Map<String, Value>, key: &str) -> Result<Value, ApiError>
         .ok_or_else(|| ApiError::invalid(key, "required"))
 }
 
-/// The remaining keys (all but `kind`) as the feature parameters; serde's
-/// message names the field.
+/// The remaining keys (all but `kind`) as the feature parameters. Every
+/// parameter has a default, so a key that fails on its own is the bad one.
 fn rest<T: DeserializeOwned>(mut body: Map<String, Value>) -> Result<T, ApiError> {
     body.remove("kind");
-    serde_json::from_value(Value::Object(body)).map_err(|e| {
-        let message = e.to_string();
-        let start = message.find('`').map(|s| s + 1);
-        let field = start.and_then(|s| {
-            message[s..]
-                .find('`')
-                .map(|len| message[s..s + len].to_owned())
+    let all = Value::Object(body.clone());
+    serde_json::from_value(all).map_err(|e| {
+        let field = body.iter().find_map(|(k, v)| {
+            let alone = Value::Object(Map::from_iter([(k.clone(), v.clone())]));
+            serde_json::from_value::<T>(alone)
+                .is_err()
+                .then(|| k.clone())
         });
-        ApiError::Invalid { field, message }
+        ApiError::Invalid {
+            field,
+            message: e.to_string(),
+        }
     })
 }
 

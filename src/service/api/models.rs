@@ -336,11 +336,34 @@ fn parse_train(body: Value, limits: &Limits) -> Result<TrainJob, ApiError> {
     if kind == ModelKind::Svm {
         check_labels(y.as_deref().unwrap_or_default())?;
     }
+    check_folds(&params, cv.as_ref(), data.n())?;
     Ok(TrainJob {
         name,
         params,
         cv,
         data,
+    })
+}
+
+/// Cross-validation (a `cv` block, or a hyper-parameter `"auto"`) needs at least
+/// one sample per fold.
+fn check_folds(params: &ModelParams, cv: Option<&CvParams>, n: usize) -> Result<(), ApiError> {
+    let auto = params
+        .to_json()
+        .as_object()
+        .is_some_and(|p| p.values().any(|v| v == "auto"));
+    let folds = match (cv, auto) {
+        (Some(cv), _) => cv.folds,
+        (None, true) => CvParams::default().folds,
+        (None, false) => return Ok(()),
+    };
+    if folds <= n {
+        return Ok(());
+    }
+    let message = format!("{folds}-fold cross-validation needs at least {folds} samples, got {n}");
+    Err(match cv {
+        Some(_) => ApiError::invalid("cv.folds", message),
+        None => ApiError::invalid("data.x", message),
     })
 }
 
