@@ -709,9 +709,13 @@ async fn rest_answers_match_their_schemas() {
     let invalid = c.call("POST", sessions, sessions, Some(&bad)).await;
     assert_eq!(invalid["error"]["field"], "monitors[0].config.r");
     bad = session_body("s2", false);
-    bad["monitors"][0]["type"] = json!("channel");
-    let unsupported = c.call("POST", sessions, sessions, Some(&bad)).await;
-    assert_eq!(unsupported["error"]["field"], "monitors[0].type");
+    bad["monitors"][0]["type"] = json!("tacan");
+    bad["monitors"][0]["config"] = json!({
+        "station": {"lat": 34.0, "lon": 108.0, "h": 0.0},
+        "model": "m-0123456789abcdef"
+    });
+    let no_model = c.call("POST", sessions, sessions, Some(&bad)).await;
+    assert_eq!(no_model["error"]["field"], "monitors[0].config.model");
     let no_type = send(
         &c.router,
         "POST",

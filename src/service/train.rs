@@ -326,10 +326,13 @@ impl Models {
             self.lock().remove(&record.id);
             return Err(e.into());
         }
+        // The answer is the record as registered (`training`, `queued`), taken
+        // before the job can move on.
+        let answer = self.record(&record.id).unwrap_or(record);
         let models = self.clone();
-        let id = record.id.clone();
+        let id = answer.id.clone();
         tokio::spawn(async move { models.run(id, handle, job).await });
-        Ok(self.record(&record.id).unwrap_or(record))
+        Ok(answer)
     }
 
     /// The job's life: wait for a slot, train on the blocking pool, store, cache, announce.
