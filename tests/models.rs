@@ -270,6 +270,9 @@ async fn every_kind_trains_over_rest_and_predicts_like_the_same_model_in_process
 async fn a_cross_validation_job_shows_its_progress_then_its_choice() {
     let dir = tempfile::tempdir().unwrap();
     let server = serve(&dir, Limits::default()).await;
+    // A job holding the single training slot keeps the CV job visibly `training`
+    // (stage `queued`) until it is deleted: no race with a fast machine.
+    let blocker = train(&server, &large_job()).await;
     let (x, y) = sine(120);
     let id = train(
         &server,
@@ -278,11 +281,25 @@ async fn a_cross_validation_job_shows_its_progress_then_its_choice() {
                 "data": {"x": x, "y": y}}),
     )
     .await;
+    let (_, queued) = get(&server, &format!("/api/v1/models/{id}")).await;
+    assert_eq!(queued["status"], "training");
+    assert_eq!(
+        queued["progress"],
+        json!({"fraction": 0.0, "stage": "queued"})
+    );
+    assert_eq!(
+        delete(&server, &format!("/api/v1/models/{blocker}")).await,
+        204
+    );
     let (record, seen) = wait(&server, &id).await;
     assert_eq!(record["status"], "ready", "{record}");
-    // Every training record had a fraction and a stage (checked in `wait`); the
-    // job was seen at least once, at least in its first stage.
-    assert!(!seen.is_empty());
+    // Every record seen while training had a fraction in [0, 1] and a stage
+    // (checked in `wait`), and the fraction never went back.
+    let fractions: Vec<f64> = seen
+        .iter()
+        .map(|r| r["progress"]["fraction"].as_f64().unwrap())
+        .collect();
+    assert!(fractions.windows(2).all(|w| w[0] <= w[1]), "{fractions:?}");
     let cv = &record["metrics"]["cv"];
     assert_eq!(cv["folds"], 3, "{record}");
     assert!(cv["error"].as_f64().unwrap() < 0.01, "{record}");
