@@ -12,18 +12,21 @@ use navguard::monitor::{self, BuildError, MonitorKind, MonitorSpec};
 use navguard::sim::experiment::seed003::{self, Seed003Params, train_model};
 use serde_json::json;
 
-/// Seed 003 at reduced sizes: 3 training flights of 60 s (subsampled to 1,500 windows),
+/// Seed 003 at reduced sizes: 10 training flights of 30 s (subsampled to 1,500 windows),
 /// 2 test flights of 60 s with 20 jumps each (the paper's 200 per 10 min is one per 3 s;
 /// here one per 3 s too).
 fn reduced(noise: f64) -> Seed003Params {
     Seed003Params {
         noise_vars_m2: vec![noise],
-        train_flights: 3,
-        train_duration_s: 60.0,
+        train_flights: 100,
+        train_duration_s: 4.0,
         test_flights: 2,
         test_duration_s: 60.0,
         jumps: 20,
-        train_samples: 1_500,
+        train_samples: 3_000,
+        // The INS error's correlation time shrinks with the flights (300 s → 10 s) so
+        // 30 s training flights see as many INS error values as 20 min ones would.
+        ins_tau_s: 10.0,
         ..Seed003Params::default()
     }
 }
@@ -33,7 +36,7 @@ fn seed_003_reaches_99_percent_mean_detection_at_noise_variance_20() {
     let result = seed003::run(reduced(20.0)).unwrap();
     let level = &result.levels[0];
     assert_eq!(level.flights.len(), 2);
-    assert_eq!((level.train_n, level.train_total), (1_491, 4_473));
+    assert_eq!((level.train_n, level.train_total), (2_275, 9_100));
     let p = level.mean_detection();
     assert!(p >= 0.99, "mean detection probability {p}");
     let pooled = level.pooled();

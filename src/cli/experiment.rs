@@ -94,7 +94,7 @@ pub struct Seed003Args {
     /// Add the crest factor to the features.
     #[arg(long)]
     pub crest: bool,
-    /// The ocsvm params as JSON (default {"nu": 0.002, "sigma2": 3.0}).
+    /// The ocsvm params as JSON (default {"nu": 0.002, "sigma2": 10.0}).
     #[arg(long)]
     pub model_params: Option<String>,
     /// Exit non-zero unless the mean detection probability at every level is ≥ 99 %.

@@ -418,9 +418,8 @@ mod tests {
 
     use super::*;
     use crate::detect::Health;
-    use crate::features::tacan::series_features;
-    use crate::learn::{Dataset, ModelParams, NoProgress, train};
     use crate::monitor::NoModels;
+    use crate::sim::experiment::seed003::{Seed003Params, train_model};
     use crate::sim::tacan::{TacanFlightParams, default_station, simulate_flight};
 
     fn config(model: &str) -> Value {
@@ -447,25 +446,31 @@ mod tests {
         }
     }
 
-    /// A one-class model trained on every 4th window of a clean 60 s flight at 20 m².
+    /// The reduced seed 003 training set of `tests/tacan.rs` (100 clean 4 s flights at
+    /// 20 m², INS error correlation time 10 s), with the experiment's default model.
     fn small_model(crest: bool) -> Arc<AnyModel> {
-        let f = simulate_flight(&TacanFlightParams {
-            seed: 11,
-            duration_s: 60.0,
+        let p = Seed003Params {
+            noise_vars_m2: vec![20.0],
+            train_flights: 100,
+            train_duration_s: 4.0,
+            train_samples: 3_000,
+            ins_tau_s: 10.0,
+            features: TacanFeatureParams { window: 10, crest },
+            ..Seed003Params::default()
+        };
+        Arc::new(train_model(&p, 20.0).unwrap().model)
+    }
+
+    /// A clean 20 s test flight unlike any training flight.
+    fn flight() -> crate::sim::tacan::TacanFlight {
+        simulate_flight(&TacanFlightParams {
+            seed: 12,
+            duration_s: 20.0,
             jumps: 0,
+            ins_tau_s: 10.0,
             ..TacanFlightParams::default()
         })
-        .unwrap();
-        let p = TacanFeatureParams { window: 10, crest };
-        let rows: Vec<Vec<f64>> = series_features(&f.ins_range_m, &f.tacan_range_m, &p)
-            .unwrap()
-            .into_iter()
-            .step_by(4)
-            .collect();
-        let params =
-            ModelParams::from_json(ModelKind::OcSvm, &json!({"nu": 0.002, "sigma2": 3.0})).unwrap();
-        let data = Dataset::new(&rows, None).unwrap();
-        Arc::new(train(&params, None, &data, &NoProgress).unwrap().model)
+        .unwrap()
     }
 
     #[test]
@@ -546,13 +551,7 @@ mod tests {
     fn a_clean_stream_stays_healthy_and_a_200_m_jump_is_flagged() {
         let models = HashMap::from([("m".to_owned(), small_model(false))]);
         let mut monitor = build(&spec(config("m"), PolicyConfig::Classic), &models).unwrap();
-        let mut f = simulate_flight(&TacanFlightParams {
-            seed: 12,
-            duration_s: 20.0,
-            jumps: 0,
-            ..TacanFlightParams::default()
-        })
-        .unwrap();
+        let mut f = flight();
         // A 200 m jump on 3 samples from sample 400.
         for k in 400..403 {
             let r = f.epochs[k].tacan_range_m.unwrap();
@@ -588,7 +587,7 @@ mod tests {
                 clean_flags += usize::from(o.decision.health != Health::Healthy);
             }
         }
-        assert!(clean > 480);
+        assert_eq!(clean, 491 - 12);
         assert!(clean_flags <= clean / 100, "{clean_flags} of {clean}");
         assert_eq!(
             monitor.tests().slots()[0].policy.health(),
