@@ -181,19 +181,22 @@ impl OnlineLsSvm {
         if !y.is_finite() {
             return Err(LearnError::data("y", "must be finite"));
         }
-        let n = self.params.window;
-        let slot = if self.len == n {
-            let s = self.oldest;
-            self.remove(s);
-            self.oldest = (s + 1) % n;
-            s
-        } else {
-            self.len += 1;
-            self.len - 1
-        };
-        let d = self.dim;
+        let (n, d) = (self.params.window, self.dim);
+        let full = self.len == n;
+        let slot = if full { self.oldest } else { self.len };
         self.xs[slot * d..(slot + 1) * d].copy_from_slice(x);
         self.ys[slot] = y;
+        if full {
+            self.oldest = (slot + 1) % n;
+        } else {
+            self.len += 1;
+        }
+        self.kernel_column(slot);
+        if full {
+            self.remove_and_project(slot);
+        } else {
+            self.project();
+        }
         self.since_refresh += 1;
         if self.since_refresh >= self.params.refresh || !self.add(slot) {
             self.refresh()?;
@@ -202,9 +205,40 @@ impl OnlineLsSvm {
         Ok(())
     }
 
-    /// Schur-complement removal of `slot`: with `q` its row of `P` and `p = q[slot]`,
-    /// the inverse of `H` without that sample is `P − q qᵀ / p` on the other slots.
-    fn remove(&mut self, slot: usize) {
+    /// `k`: the kernel column of the sample in `slot` against the other samples in the
+    /// window (0 at `slot` and at free slots).
+    fn kernel_column(&mut self, slot: usize) {
+        let (n, d) = (self.params.window, self.dim);
+        let x = &self.xs[slot * d..(slot + 1) * d];
+        for s in 0..n {
+            let active = s != slot && (self.len == n || s < self.len);
+            self.k[s] = if active {
+                self.kernel.eval(&self.xs[s * d..(s + 1) * d], x)
+            } else {
+                0.0
+            };
+        }
+    }
+
+    /// `u = P k`, as `Σᵢ kᵢ P[i, :]` (P is symmetric): axpys, no dependency chain.
+    fn project(&mut self) {
+        let n = self.params.window;
+        self.u.iter_mut().for_each(|v| *v = 0.0);
+        for i in 0..n {
+            let ki = self.k[i];
+            if ki != 0.0 {
+                for (u, pij) in self.u.iter_mut().zip(&self.p[i * n..(i + 1) * n]) {
+                    *u += ki * pij;
+                }
+            }
+        }
+    }
+
+    /// Schur-complement removal of the sample that held `slot`, fused with
+    /// [`Self::project`] in one pass over `P`: with `q` its row of `P` and `p = q[slot]`,
+    /// the inverse without it is `P − q qᵀ / p` on the other slots, and `u = P' k` is
+    /// accumulated from each updated row.
+    fn remove_and_project(&mut self, slot: usize) {
         let n = self.params.window;
         self.q.copy_from_slice(&self.p[slot * n..(slot + 1) * n]);
         let pss = self.q[slot];
@@ -214,16 +248,18 @@ impl OnlineLsSvm {
             self.eta[i] -= self.q[i] * fe;
             self.nu[i] -= self.q[i] * fn_;
         }
+        self.u.iter_mut().for_each(|v| *v = 0.0);
         for i in 0..n {
             let f = self.q[i] / pss;
-            if f == 0.0 {
-                continue;
-            }
-            for (pij, qj) in self.p[i * n..(i + 1) * n].iter_mut().zip(&self.q) {
+            let ki = self.k[i];
+            let row = &mut self.p[i * n..(i + 1) * n];
+            for ((pij, qj), u) in row.iter_mut().zip(&self.q).zip(self.u.iter_mut()) {
                 *pij -= f * qj;
+                *u += ki * *pij;
             }
         }
         self.clear_slot(slot);
+        self.u[slot] = 0.0;
     }
 
     fn clear_slot(&mut self, slot: usize) {
@@ -239,39 +275,20 @@ impl OnlineLsSvm {
     }
 
     /// Schur-complement addition of the sample already stored in `slot` (whose row and
-    /// column of `P` are 0): with `k` its kernel column against the others,
-    /// `u = P k` and `s = K(x, x) + 1/γ − kᵀu`, the new inverse is
+    /// column of `P` are 0), given `k` and `u = P k`: with
+    /// `s = K(x, x) + 1/γ − kᵀu`, the new inverse is
     /// `[[P + u uᵀ/s, −u/s], [−uᵀ/s, 1/s]]`. False if `s` is not positive (then the
     /// caller re-factorises).
     fn add(&mut self, slot: usize) -> bool {
-        let (n, d) = (self.params.window, self.dim);
-        let x = &self.xs[slot * d..(slot + 1) * d];
-        for s in 0..n {
-            let active = s != slot && (self.len == n || s < self.len);
-            self.k[s] = if active {
-                self.kernel.eval(&self.xs[s * d..(s + 1) * d], x)
-            } else {
-                0.0
-            };
-        }
-        for i in 0..n {
-            let row = &self.p[i * n..(i + 1) * n];
-            self.u[i] = row.iter().zip(&self.k).map(|(a, b)| a * b).sum();
-        }
-        let schur = 1.0 + 1.0 / self.params.gamma - dot(&self.k, &self.u);
+        let n = self.params.window;
+        let schur = 1.0 + 1.0 / self.params.gamma - solve::dot(&self.k, &self.u);
         if !(schur > 0.0 && schur.is_finite()) {
             return false;
         }
         // η and ν of the grown system (block inverse times 1 and y), O(N).
         let sum_u: f64 = self.u.iter().sum();
         let y = self.ys[slot];
-        let uy: f64 = self
-            .u
-            .iter()
-            .zip(&self.ys)
-            .enumerate()
-            .map(|(i, (u, yi))| if i == slot { 0.0 } else { u * yi })
-            .sum();
+        let uy = solve::dot(&self.u, &self.ys) - self.u[slot] * y;
         for i in 0..n {
             self.eta[i] += self.u[i] * (sum_u - 1.0) / schur;
             self.nu[i] += self.u[i] * (uy - y) / schur;
@@ -318,7 +335,7 @@ impl OnlineLsSvm {
         for i in 0..n {
             let row = &self.p[i * n..(i + 1) * n];
             self.eta[i] = row.iter().sum();
-            self.nu[i] = dot(row, &self.ys);
+            self.nu[i] = solve::dot(row, &self.ys);
         }
         Ok(())
     }
@@ -353,10 +370,6 @@ impl OnlineLsSvm {
             x,
         ))
     }
-}
-
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
 #[cfg(test)]
