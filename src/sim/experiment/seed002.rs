@@ -301,15 +301,15 @@ fn mean(v: &[f64]) -> Option<f64> {
     (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
 }
 
+/// A scenario builder of [`RimuSimParams`]: seed and fault → parameters.
+type MakeScenario = fn(u64, Option<(usize, GyroFaultKind)>) -> RimuSimParams;
+
 /// Runs the experiment.
 pub fn run(params: Seed002Params) -> Result<Seed002Result, Seed002Error> {
     let (model, training) = train_classifier(&params)?;
     let models: HashMap<String, Arc<AnyModel>> = [(MODEL_ID.to_owned(), model)].into();
     let sigma = rsim::default_sigma();
-    let scenarios: [(
-        &'static str,
-        fn(u64, Option<(usize, GyroFaultKind)>) -> RimuSimParams,
-    ); 2] = [
+    let scenarios: [(&'static str, MakeScenario); 2] = [
         ("steady", RimuSimParams::steady),
         ("manoeuvring", RimuSimParams::manoeuvring),
     ];
