@@ -50,6 +50,9 @@ pub struct Seed002Args {
     /// Noise seeds per scenario × gyro × fault.
     #[arg(long, default_value_t = 20)]
     pub runs: usize,
+    /// Pitch reached by the manoeuvring scenario's 4 s climb, degrees.
+    #[arg(long, default_value_t = 5.0)]
+    pub climb_deg: f64,
     /// Directory for the SVG figure.
     #[arg(long, default_value = "target/experiments/seed002")]
     pub out_dir: PathBuf,
@@ -153,6 +156,7 @@ pub fn run(command: ExperimentCommand) -> anyhow::Result<()> {
             let params = seed002::Seed002Params {
                 seed: args.seed,
                 runs: args.runs,
+                climb_deg: args.climb_deg,
                 ..seed002::Seed002Params::default()
             };
             let result = seed002::run(params).context("seed 002 experiment")?;

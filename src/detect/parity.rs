@@ -81,7 +81,8 @@ impl ParitySpace {
         let hth = h.transpose() * &h;
         let eig = hth.clone().symmetric_eigenvalues();
         let (lo, hi) = (eig.min(), eig.max());
-        if !(lo > 1e-9 * hi) {
+        // NaN-safe: a NaN eigenvalue is refused too.
+        if lo.is_nan() || lo <= 1e-9 * hi {
             return Err(ParityError::new(
                 "h",
                 "the gyro axes do not span 3-D space (HᵀH is singular)",
@@ -169,7 +170,8 @@ impl ParitySpace {
             b += hi * (w * gyros[i]);
         }
         let eig = a.symmetric_eigenvalues();
-        if !(eig.min() > 1e-9 * eig.max()) {
+        let (lo, hi) = (eig.min(), eig.max());
+        if lo.is_nan() || lo <= 1e-9 * hi {
             return None;
         }
         let x = a.cholesky()?.solve(&b);

@@ -8,6 +8,8 @@
 //! Agreement with PyWavelets 1.9 `WaveletPacket(data, w, mode='periodization',
 //! maxlevel=level).get_level(level, order='natural')` is tested to 1e-9.
 
+use std::f64::consts::FRAC_1_SQRT_2;
+
 use serde::{Deserialize, Serialize};
 
 use super::FeatureError;
@@ -30,7 +32,8 @@ pub enum Wavelet {
 // (`pywt.Wavelet('dbN').dec_lo`), which tabulates Daubechies (1992), Table 6.1,
 // normalised to Σh = √2. The high-pass is the quadrature mirror
 // `dec_hi[k] = (−1)^(k+1) · dec_lo[F−1−k]` (as `pywt.Wavelet('dbN').dec_hi`).
-const DB1: [f64; 2] = [0.7071067811865476, 0.7071067811865476];
+// db1 is [1/√2, 1/√2]; PyWavelets prints 0.7071067811865476, the same f64.
+const DB1: [f64; 2] = [FRAC_1_SQRT_2, FRAC_1_SQRT_2];
 const DB2: [f64; 4] = [
     -0.12940952255126037,
     0.2241438680420134,

@@ -222,7 +222,7 @@ pub fn simulate(params: &RimuSimParams) -> Result<RimuRun, SimError> {
         return Err(SimError::param("h", "must be m × 3 with m ≥ 3"));
     }
     super::check_positive("sigma", params.sigma)?;
-    if !(params.end_s > params.start_s) {
+    if params.end_s.is_nan() || params.end_s <= params.start_s {
         return Err(SimError::param("end_s", "must be after start_s"));
     }
     if let Some(f) = params.fault

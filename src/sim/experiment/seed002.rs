@@ -68,6 +68,8 @@ pub struct Seed002Params {
     pub svm: Value,
     /// T_I (paper: 0.1).
     pub t_i: f64,
+    /// Pitch reached by the manoeuvring scenario's 4 s climb, degrees.
+    pub climb_deg: f64,
 }
 
 impl Default for Seed002Params {
@@ -81,6 +83,7 @@ impl Default for Seed002Params {
             wavelet: WaveletPacketParams::default(),
             svm: json!({"kernel": "linear", "C": 1.0}),
             t_i: 0.1,
+            climb_deg: 5.0,
         }
     }
 }
@@ -298,15 +301,15 @@ fn mean(v: &[f64]) -> Option<f64> {
     (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
 }
 
+/// A scenario builder of [`RimuSimParams`]: seed and fault → parameters.
+type MakeScenario = fn(u64, Option<(usize, GyroFaultKind)>) -> RimuSimParams;
+
 /// Runs the experiment.
 pub fn run(params: Seed002Params) -> Result<Seed002Result, Seed002Error> {
     let (model, training) = train_classifier(&params)?;
     let models: HashMap<String, Arc<AnyModel>> = [(MODEL_ID.to_owned(), model)].into();
     let sigma = rsim::default_sigma();
-    let scenarios: [(
-        &'static str,
-        fn(u64, Option<(usize, GyroFaultKind)>) -> RimuSimParams,
-    ); 2] = [
+    let scenarios: [(&'static str, MakeScenario); 2] = [
         ("steady", RimuSimParams::steady),
         ("manoeuvring", RimuSimParams::manoeuvring),
     ];
@@ -322,7 +325,7 @@ pub fn run(params: Seed002Params) -> Result<Seed002Result, Seed002Error> {
         for with_model in [true, false] {
             let spec = spec(&params, with_model);
             for gyro in 0..4 {
-                for kind in GyroFaultKind::SEED002 {
+                for (ki, kind) in GyroFaultKind::SEED002.into_iter().enumerate() {
                     let mut row = CaseRow {
                         scenario: name,
                         gyro,
@@ -337,8 +340,13 @@ pub fn run(params: Seed002Params) -> Result<Seed002Result, Seed002Error> {
                     };
                     let (mut det, mut iso, mut sq) = (Vec::new(), Vec::new(), Vec::new());
                     for r in 0..params.runs {
-                        let seed = params.seed.wrapping_add(1 + r as u64);
-                        let sim = make(seed, Some((gyro, kind)));
+                        // Fresh noise for every run and case (not the same draws per gyro).
+                        let case = (gyro * 4 + ki) as u64;
+                        let seed = params.seed.wrapping_add(1 + r as u64 + 1000 * case);
+                        let mut sim = make(seed, Some((gyro, kind)));
+                        if let rsim::Flight::Climb { climb_deg, .. } = &mut sim.flight {
+                            *climb_deg = params.climb_deg;
+                        }
                         let onset = sim.fault.map_or(0.0, |f| f.onset_s);
                         let out = run_case(&sim, &spec, &models)?;
                         if let Some(t) = out.detected_at {
@@ -464,6 +472,18 @@ pub fn totals<'a>(rows: impl IntoIterator<Item = &'a CaseRow>) -> (usize, usize,
     })
 }
 
+/// √trace((HₕᵀHₕ)⁻¹): the RMS of ‖ω̂ − ω‖ in units of σ that noise alone gives the
+/// least squares over the default gyros without gyro `out`.
+pub fn noise_floor(out: Option<usize>) -> Option<f64> {
+    let h = crate::detect::parity::default_h();
+    let mut a = nalgebra::Matrix3::<f64>::zeros();
+    for i in (0..h.nrows()).filter(|&i| Some(i) != out) {
+        let r = nalgebra::Vector3::new(h[(i, 0)], h[(i, 1)], h[(i, 2)]);
+        a += r * r.transpose();
+    }
+    a.try_inverse().map(|inv| inv.trace().sqrt())
+}
+
 /// The text report.
 pub fn render(r: &Seed002Result) -> String {
     let mut s = String::new();
@@ -495,7 +515,19 @@ pub fn render(r: &Seed002Result) -> String {
         t.support_vectors.map_or("—".into(), |n| n.to_string()),
         t.seconds,
     );
-    let _ = writeln!(s, "\nWith the classifier (RAS):");
+    let floor = |out: Option<usize>| noise_floor(out).map_or("—".into(), |f| format!("{f:.2}"));
+    let _ = writeln!(
+        s,
+        "ω noise floor (RMS ‖ω̂ − ω‖/σ of the WLS): all 4 gyros {}, gyro 1–3 out {}, gyro 4 out {}",
+        floor(None),
+        floor(Some(0)),
+        floor(Some(3)),
+    );
+    let _ = writeln!(
+        s,
+        "\nWith the classifier (RAS); manoeuvring = 4 s climb to {}° from 30 s:",
+        r.params.climb_deg
+    );
     table(&mut s, &r.rows);
     let _ = writeln!(s, "\nParity test alone (no model):");
     table(&mut s, &r.rows_parity_only);
