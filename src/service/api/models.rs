@@ -284,6 +284,17 @@ fn parse_train(body: Value, limits: &Limits) -> Result<TrainJob, ApiError> {
         .map_err(|e| learn_error(e, true))?;
     let cv = match body.remove("cv") {
         None | Some(Value::Null) => None,
+        // learn::svm refuses a cv block (no hyper-parameter search for SMO yet):
+        // say so now rather than fail the job.
+        Some(_) if !kind.is_regression() => {
+            return Err(ApiError::invalid(
+                "cv",
+                format!(
+                    "kind '{}' has no cross-validation; give its parameters",
+                    kind.as_str()
+                ),
+            ));
+        }
         Some(v) => {
             let cv: CvParams = serde_json::from_value(v).map_err(|e| {
                 let message = e.to_string();
@@ -457,6 +468,8 @@ mod tests {
             json!([[0.0, 1.0, 2.0], [1.0, 2.0, 3.0], [1.0, 1.0, 1.0]]),
         );
         assert_eq!(field(wide).0, 413);
+        let oc_cv = json!({"kind": "ocsvm", "cv": {"folds": 2}, "data": {"x": [[0.0]]}});
+        assert_eq!(field(oc_cv), (422, Some("cv".into())));
         let oc = json!({"kind": "ocsvm", "data": {"x": [[0.0]], "y": [1.0]}});
         assert_eq!(field(oc), (422, Some("data.y".into())));
         let svm = json!({"kind": "svm", "data": {"x": [[0.0], [1.0]], "y": [1.0, 0.0]}});
