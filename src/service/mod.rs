@@ -95,7 +95,7 @@ pub async fn start(config: ServiceConfig) -> Result<Server, StartError> {
             Err(ApiError::Invalid {
                 field: Some(field),
                 message,
-            }) if field.ends_with(".config.model") => {
+            }) if field.contains(".config.") && field.ends_with("model") => {
                 tracing::warn!(session = %id, %field, %message, "stored session names a deleted model; not restarted");
                 continue;
             }

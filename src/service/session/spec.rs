@@ -32,7 +32,7 @@ pub type NamedMonitors = Vec<(String, Box<dyn Monitor>)>;
 /// Builds every monitor of a stored session (used at creation and at restart).
 /// Monitors that name a trained model take it from `models` and keep their own
 /// `Arc`: deleting the model later does not change a live session (a restart
-/// then refuses the session, as its model is gone).
+/// then skips that session with a warning, as its model is gone).
 pub fn build_monitors(
     session: &StoredSession,
     models: &dyn ModelSource,
