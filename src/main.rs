@@ -60,6 +60,24 @@ struct ServeArgs {
     /// Largest REST request body, bytes.
     #[arg(long, env = "NAVGUARD_MAX_BODY_BYTES", default_value_t = Limits::default().max_body_bytes)]
     max_body_bytes: usize,
+    /// Largest `POST /api/v1/models` body (a training set), bytes.
+    #[arg(long, env = "NAVGUARD_MAX_TRAINING_BODY_BYTES", default_value_t = Limits::default().max_training_body_bytes)]
+    max_training_body_bytes: usize,
+    /// Most samples in a training set or predict request.
+    #[arg(long, env = "NAVGUARD_MAX_TRAINING_SAMPLES", default_value_t = Limits::default().max_training_samples)]
+    max_training_samples: usize,
+    /// Most numbers (samples × features) in a training set or features request.
+    #[arg(long, env = "NAVGUARD_MAX_TRAINING_VALUES", default_value_t = Limits::default().max_training_values)]
+    max_training_values: usize,
+    /// Most samples for the dense LS-SVM kinds (lssvm, lw-lssvm).
+    #[arg(long, env = "NAVGUARD_MAX_LSSVM_SAMPLES", default_value_t = Limits::default().max_lssvm_samples)]
+    max_lssvm_samples: usize,
+    /// Training jobs that run at once (the rest wait, stage "queued").
+    #[arg(long, env = "NAVGUARD_TRAINING_JOBS", default_value_t = Limits::default().max_concurrent_trainings)]
+    training_jobs: usize,
+    /// Training jobs running or queued before POST /api/v1/models answers 503.
+    #[arg(long, env = "NAVGUARD_MAX_QUEUED_TRAININGS", default_value_t = Limits::default().max_queued_trainings)]
+    max_queued_trainings: usize,
 }
 
 impl ServeArgs {
@@ -74,6 +92,12 @@ impl ServeArgs {
                 max_sessions: self.max_sessions,
                 max_monitors_per_session: self.max_monitors,
                 max_body_bytes: self.max_body_bytes,
+                max_training_body_bytes: self.max_training_body_bytes,
+                max_training_samples: self.max_training_samples,
+                max_training_values: self.max_training_values,
+                max_lssvm_samples: self.max_lssvm_samples,
+                max_concurrent_trainings: self.training_jobs,
+                max_queued_trainings: self.max_queued_trainings,
             },
         }
     }

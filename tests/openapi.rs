@@ -17,6 +17,7 @@ use navguard::service::app::{AppState, ROUTES, app};
 use navguard::service::metrics::Metrics;
 use navguard::service::session::Registry;
 use navguard::service::store::Store;
+use navguard::service::train::Models;
 use serde_json::{Value, json};
 use tokio_tungstenite::tungstenite::{self, Message};
 use tower::ServiceExt;
@@ -37,8 +38,10 @@ fn spec() -> Value {
 async fn state(dir: &Path, token: Option<&str>) -> AppState {
     let mut config = ServiceConfig::new("127.0.0.1:0".parse().unwrap(), dir.join("t.db"));
     config.token = token.map(str::to_owned);
+    let store = Store::open(&config.db_path).await.unwrap();
     AppState {
-        store: Store::open(&config.db_path).await.unwrap(),
+        models: Arc::new(Models::new(store.clone(), &config.limits)),
+        store,
         registry: Arc::new(Registry::default()),
         metrics: Arc::new(Metrics::default()),
         config: Arc::new(config),
@@ -706,9 +709,13 @@ async fn rest_answers_match_their_schemas() {
     let invalid = c.call("POST", sessions, sessions, Some(&bad)).await;
     assert_eq!(invalid["error"]["field"], "monitors[0].config.r");
     bad = session_body("s2", false);
-    bad["monitors"][0]["type"] = json!("channel");
-    let unsupported = c.call("POST", sessions, sessions, Some(&bad)).await;
-    assert_eq!(unsupported["error"]["field"], "monitors[0].type");
+    bad["monitors"][0]["type"] = json!("tacan");
+    bad["monitors"][0]["config"] = json!({
+        "station": {"lat": 34.0, "lon": 108.0, "h": 0.0},
+        "model": "m-0123456789abcdef"
+    });
+    let no_model = c.call("POST", sessions, sessions, Some(&bad)).await;
+    assert_eq!(no_model["error"]["field"], "monitors[0].config.model");
     let no_type = send(
         &c.router,
         "POST",
@@ -1070,4 +1077,140 @@ async fn socket_messages_match_their_schemas() {
     let _ = ingest.close(None).await;
     let _ = events.close(None).await;
     server.shutdown().await;
+}
+
+#[tokio::test]
+async fn model_and_feature_answers_match_their_schemas() {
+    let doc = spec();
+    let dir = tempfile::tempdir().unwrap();
+    let c = Contract {
+        router: app(state(dir.path(), None).await),
+        doc: doc.clone(),
+    };
+    let models = "/api/v1/models";
+    let model = "/api/v1/models/{id}";
+    let predict = "/api/v1/models/{id}/predict";
+
+    // Every example of the spec is accepted (202) and becomes a record.
+    let train = &operation(&doc, models, "POST")["requestBody"]["content"]["application/json"];
+    let checker = Checker { doc: &doc };
+    let mut ids = Vec::new();
+    for (name, example) in train["examples"].as_object().unwrap() {
+        checker.assert_valid(checker.schema("TrainRequest"), &example["value"], name);
+        let record = c
+            .call("POST", models, models, Some(&example["value"]))
+            .await;
+        assert_eq!(record["status"], "training", "example {name}: {record}");
+        ids.push(record["id"].as_str().unwrap().to_owned());
+    }
+    let bad = json!({"kind": "svr", "data": {"x": [[1.0]]}});
+    let refused = c.call("POST", models, models, Some(&bad)).await;
+    assert_eq!(refused["error"]["field"], "kind");
+    let ragged = json!({"kind": "ocsvm", "data": {"x": [[1.0], [1.0, 2.0]]}});
+    let refused = c.call("POST", models, models, Some(&ragged)).await;
+    assert_eq!(refused["error"]["field"], "data.x[1]");
+
+    let listed = c.call("GET", models, models, None).await;
+    assert_eq!(listed["models"].as_array().unwrap().len(), ids.len());
+    // Wait for each job to end (ready or failed, whatever the learners can do).
+    for id in &ids {
+        let uri = format!("{models}/{id}");
+        let mut record = c.call("GET", model, &uri, None).await;
+        for _ in 0..500 {
+            if record["status"] != "training" {
+                break;
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
+            record = c.call("GET", model, &uri, None).await;
+        }
+        assert_ne!(record["status"], "training", "{record}");
+        let x = json!({"x": vec![vec![0.5; record["dim"].as_u64().unwrap() as usize]]});
+        let answer = c
+            .call("POST", predict, &format!("{uri}/predict"), Some(&x))
+            .await;
+        if record["status"] == "ready" {
+            assert!(
+                answer["y"].is_array() || answer["decision"].is_array(),
+                "{answer}"
+            );
+            let wrong = json!({"x": [vec![0.5; 7]]});
+            let refused = c
+                .call("POST", predict, &format!("{uri}/predict"), Some(&wrong))
+                .await;
+            assert_eq!(refused["error"]["field"], "x");
+        } else {
+            assert_eq!(answer["error"]["code"], "conflict", "{answer}");
+        }
+    }
+    let unknown = "/api/v1/models/m-0000000000000000";
+    c.call("GET", model, unknown, None).await;
+    c.call(
+        "POST",
+        predict,
+        &format!("{unknown}/predict"),
+        Some(&json!({"x": [[1.0]]})),
+    )
+    .await;
+    c.call("DELETE", model, &format!("{models}/{}", ids[0]), None)
+        .await;
+    let gone = c
+        .call("DELETE", model, &format!("{models}/{}", ids[0]), None)
+        .await;
+    assert_eq!(gone["error"]["code"], "not_found");
+
+    let features = "/api/v1/features";
+    let wavelet = json!({"kind": "wavelet-packet", "signal": [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0],
+                         "wavelet": "db1", "level": 1, "normalize": false});
+    checker.assert_valid(
+        checker.schema("FeaturesRequest"),
+        &wavelet,
+        "wavelet request",
+    );
+    c.call("POST", features, features, Some(&wavelet)).await;
+    let tacan = json!({"kind": "tacan-window", "ins_range_m": [1.0, 2.0, 3.0, 4.0],
+                       "tacan_range_m": [1.0, 2.5, 3.0, 4.5], "window": 2, "crest": false});
+    checker.assert_valid(checker.schema("FeaturesRequest"), &tacan, "tacan request");
+    c.call("POST", features, features, Some(&tacan)).await;
+    let unknown_kind = c
+        .call("POST", features, features, Some(&json!({"kind": "fft"})))
+        .await;
+    assert_eq!(unknown_kind["error"]["field"], "kind");
+}
+
+#[test]
+fn learned_monitor_outputs_match_the_result_schema() {
+    use navguard::monitor::Outputs;
+    let doc = spec();
+    let c = Checker { doc: &doc };
+    let outputs = [
+        Outputs::Channel {
+            prediction: [("h".to_owned(), vec![1.0])].into(),
+            residual: [("h".to_owned(), vec![0.5])].into(),
+        },
+        Outputs::Rimu {
+            parity: Some(vec![0.1]),
+            flagged: vec![2],
+            isolated: vec![2],
+            omega: Some([0.0, 0.1, 0.2]),
+        },
+        Outputs::Rimu {
+            parity: None,
+            flagged: vec![],
+            isolated: vec![],
+            omega: None,
+        },
+        Outputs::Tacan {
+            features: Some(vec![0.1, 0.2, 0.3]),
+            decision: Some(-0.4),
+        },
+        Outputs::Tacan {
+            features: None,
+            decision: None,
+        },
+    ];
+    for o in outputs {
+        let mut v = serde_json::to_value(&o).unwrap();
+        v["tests"] = json!({});
+        c.assert_valid(c.schema("MonitorResult"), &v, "monitor result");
+    }
 }

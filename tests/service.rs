@@ -776,10 +776,13 @@ async fn sessions_are_validated_listed_and_deleted() {
             .unwrap()
             .contains("symmetric")
     );
-    let (status, err) = post(json!({"monitors": [{"name": "g", "type": "rimu"}]})).await;
+    // A monitor naming a model the server does not have is refused at creation.
+    let (status, err) = post(json!({"monitors": [{"name": "g", "type": "rimu",
+        "config": {"model": "m-0123456789abcdef"}}]}))
+    .await;
     assert_eq!(
         (status, err["error"]["field"].as_str()),
-        (422, Some("monitors[0].type"))
+        (422, Some("monitors[0].config.model"))
     );
     let (status, _) = post(json!({"monitors": [{"name": "cv", "type": "kalman"}]})).await;
     assert_eq!(status, 422);

@@ -6,13 +6,17 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
-use navguard::sim::experiment::{ramp, seed004};
+use navguard::sim::experiment::{ramp, seed002, seed003, seed004};
 
 /// The experiments.
 #[derive(Debug, clap::Subcommand)]
 pub enum ExperimentCommand {
     /// Seed 004: classic vs counter policy at thresholds 13 and 20 on the ship scenario.
     Seed004(Seed004Args),
+    /// Seed 002: redundant-gyro fault isolation (parity FSS test + wavelet-packet C-SVC).
+    Seed002(Seed002Args),
+    /// Seed 003: one-class SVM detection of TACAN range jumps at noise variance 5, 10, 20 m².
+    Seed003(Seed003Args),
     /// GNSS position drifts of 0.5, 1, 2, 5 m/s: seconds and metres before the alarm.
     Ramp(RampArgs),
 }
@@ -33,6 +37,70 @@ pub struct Seed004Args {
     #[arg(long, default_value_t = seed004::SETTLE_S)]
     pub settle: f64,
     /// Exit non-zero unless the counter policy beats the classic one at threshold 20.
+    #[arg(long)]
+    pub check: bool,
+}
+
+/// `navguard experiment seed002` flags.
+#[derive(Debug, clap::Args)]
+pub struct Seed002Args {
+    /// Seed of the training windows; run r of each case uses seed + 1 + r.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Noise seeds per scenario × gyro × fault.
+    #[arg(long, default_value_t = 20)]
+    pub runs: usize,
+    /// Pitch reached by the manoeuvring scenario's 4 s climb, degrees.
+    #[arg(long, default_value_t = 5.0)]
+    pub climb_deg: f64,
+    /// Directory for the SVG figure.
+    #[arg(long, default_value = "target/experiments/seed002")]
+    pub out_dir: PathBuf,
+    /// Exit non-zero unless every steady-flight bias fault is isolated correctly.
+    #[arg(long)]
+    pub check: bool,
+}
+
+/// `navguard experiment seed003` flags (defaults: the paper's sizes, training subsampled).
+#[derive(Debug, clap::Args)]
+pub struct Seed003Args {
+    /// Base seed of the flights.
+    #[arg(long, default_value_t = 3)]
+    pub seed: u64,
+    /// Directory for the SVG figures.
+    #[arg(long, default_value = "target/experiments/seed003")]
+    pub out_dir: PathBuf,
+    /// Range noise variances, m² (comma-separated).
+    #[arg(long, value_delimiter = ',', default_value = "5,10,20")]
+    pub noise: Vec<f64>,
+    /// Training flights.
+    #[arg(long, default_value_t = 10)]
+    pub train_flights: usize,
+    /// Length of a training flight, s.
+    #[arg(long, default_value_t = 1200.0)]
+    pub train_duration: f64,
+    /// Test flights.
+    #[arg(long, default_value_t = 10)]
+    pub test_flights: usize,
+    /// Length of a test flight, s.
+    #[arg(long, default_value_t = 600.0)]
+    pub test_duration: f64,
+    /// Jumps per test flight.
+    #[arg(long, default_value_t = 200)]
+    pub jumps: usize,
+    /// Training windows kept after subsampling.
+    #[arg(long, default_value_t = 30_000)]
+    pub train_samples: usize,
+    /// Window length, samples.
+    #[arg(long, default_value_t = 10)]
+    pub window: usize,
+    /// Add the crest factor to the features.
+    #[arg(long)]
+    pub crest: bool,
+    /// The ocsvm params as JSON (default {"nu": 0.002, "sigma2": 10.0}).
+    #[arg(long)]
+    pub model_params: Option<String>,
+    /// Exit non-zero unless the mean detection probability at every level is ≥ 99 %.
     #[arg(long)]
     pub check: bool,
 }
@@ -81,6 +149,67 @@ pub fn run(command: ExperimentCommand) -> anyhow::Result<()> {
             );
             if args.check && !result.counters_beat_classic(20.0) {
                 bail!("the counter policy does not beat the classic one at threshold 20");
+            }
+            Ok(())
+        }
+        ExperimentCommand::Seed002(args) => {
+            let params = seed002::Seed002Params {
+                seed: args.seed,
+                runs: args.runs,
+                climb_deg: args.climb_deg,
+                ..seed002::Seed002Params::default()
+            };
+            let result = seed002::run(params).context("seed 002 experiment")?;
+            print!("{}", seed002::render(&result));
+            let plots = seed002::plots(&result);
+            write_all(&args.out_dir, &plots)?;
+            println!(
+                "\nwrote {} figure(s) to {}",
+                plots.len(),
+                args.out_dir.display()
+            );
+            let steady_bias = result.rows.iter().filter(|r| {
+                r.scenario == "steady"
+                    && matches!(r.fault, navguard::sim::rimu::GyroFaultKind::Bias(_))
+            });
+            let (_, isolated, _, runs) = seed002::totals(steady_bias);
+            if args.check && isolated < runs {
+                bail!("steady bias faults isolated correctly in {isolated}/{runs} runs");
+            }
+            Ok(())
+        }
+        ExperimentCommand::Seed003(args) => {
+            let model_params = match &args.model_params {
+                Some(text) => serde_json::from_str(text).context("--model-params")?,
+                None => seed003::default_model_params(),
+            };
+            let params = seed003::Seed003Params {
+                seed: args.seed,
+                noise_vars_m2: args.noise,
+                train_flights: args.train_flights,
+                train_duration_s: args.train_duration,
+                test_flights: args.test_flights,
+                test_duration_s: args.test_duration,
+                jumps: args.jumps,
+                train_samples: args.train_samples,
+                features: navguard::features::tacan::TacanFeatureParams {
+                    window: args.window,
+                    crest: args.crest,
+                },
+                model_params,
+                ..seed003::Seed003Params::default()
+            };
+            let result = seed003::run(params).context("seed 003 experiment")?;
+            print!("{}", seed003::render(&result));
+            let plots = seed003::plots(&result);
+            write_all(&args.out_dir, &plots)?;
+            println!(
+                "\nwrote {} figures to {}",
+                plots.len(),
+                args.out_dir.display()
+            );
+            if args.check && result.levels.iter().any(|l| l.mean_detection() < 0.99) {
+                bail!("a noise level's mean detection probability is below 99 %");
             }
             Ok(())
         }

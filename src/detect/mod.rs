@@ -4,6 +4,7 @@
 
 pub mod chi2;
 pub mod hpl;
+pub mod parity;
 pub mod policy;
 pub mod statistic;
 

@@ -1,12 +1,640 @@
-//! The `tacan` monitor: TACAN range anomalies: window features against the INS-derived range, one-class SVM (DESIGN §3.8, seed 003).
-//! (Stub: not built yet.)
+//! The `tacan` monitor (DESIGN §3.8, seed 003): TACAN slant-range anomalies, found by
+//! comparing the measured range with the range the INS position implies, through the
+//! window features of [`crate::features::tacan`] and a stored one-class SVM. The
+//! session actor steps it once per epoch.
+//!
+//! # Config
+//! `{"station": {"lat": deg, "lon": deg, "h": m}, "window": 10, "crest": false,
+//! "model": "<ocsvm id>", "max_gap_s": 1.0}`. `station` and `model` are required;
+//! `window` (≥ 2, ≤ [`MAX_WINDOW`]) and `crest` default to the paper's 10 and false;
+//! the model must be an `ocsvm` trained on the matching feature dimension (3, or 4
+//! with `crest`).
+//!
+//! # Epochs
+//! It runs on epochs that carry both `ins` and `tacan` and ignores the others (no test,
+//! last outputs repeated). `d_ins = ‖P_ins − P_station‖` in ECEF (seed 003 eq. 1, the
+//! square there is a typo), `d_tacan = range_m`. The pair enters a sliding window of
+//! `K` samples (step 1); a gap of more than `max_gap_s` between used epochs empties it
+//! (a window must span one contiguous stretch of flight, as in training). Once full,
+//! the window's raw features go to the model, which standardises them with the
+//! training statistics it stores (`learn`'s `Standardizer`).
+//!
+//! # The `range` test
+//! The one-class decision `g(X)` (≥ 0 inside the boundary: normal; seed 003 eq. 15,
+//! `f(z) ≤ R²`, is `g ≥ 0` up to a positive factor) is `s · (m − 1)` where
+//! `m = Σ α_k K(sv_k, z) / ρ` is the kernel mass at `z` relative to the boundary's and
+//! `s = scale · ρ` the model's decision scale (1 · ρ for ν-OCSVM, 2C · ρ for SVDD).
+//! The statistic is
+//! `value = T · 1/m = T · s / (g + s)` (capped at `T ·` [`MAX_RATIO`]),
+//! `threshold = T`, `dof =` feature dimension, where `T` is the threshold in force.
+//! So:
+//! - the test fails exactly when the point is outside the boundary (`g < 0 ⇔ m < 1`),
+//!   and `test_ratio = 1/m` does not depend on `T`, on ν or on the number of training
+//!   samples: 1 on the boundary, below 1 inside, growing as `exp(d²/σ²)` with the
+//!   squared distance `d²` outside (the RBF's tail);
+//! - the monitor's `p_fa` / `threshold` do **not** move the boundary: it was fixed
+//!   when the model was trained (ν, or C = 1/(νN) for SVDD, bounds the training
+//!   outlier share, which is the false-alarm rate on normal data). They only set the
+//!   scale `T` the statistic is reported in. To make the detector more or less
+//!   sensitive, train the model with another ν;
+//! - the session's **policy** applies as to any test: classic flags each window
+//!   outside the boundary; counters (N1, N2) debounce isolated windows and isolate
+//!   the TACAN after more than N2 windows outside.
+//!
+//! `ρ` and `scale` are read once, at build, from the model's stored form (the
+//! `ocsvm` model exposes no accessor for `scale`); a model with `ρ ≤ 0` (no positive
+//! boundary mass, a degenerate training set) falls back to `test_ratio = 1 − g`,
+//! which still fails exactly when `g < 0`.
+//!
+//! # Outputs
+//! `features`: the window's feature vector as the model sees it (standardised with
+//! the model's training statistics); `decision`: `g`. Both absent until the window
+//! is full.
 
-use super::{BuildError, ModelSource, Monitor, MonitorSpec};
+use std::collections::VecDeque;
+use std::sync::Arc;
 
-/// Builds a `tacan` monitor from its spec.
-pub fn build(
-    _spec: &MonitorSpec,
-    _models: &dyn ModelSource,
-) -> Result<Box<dyn Monitor>, BuildError> {
-    Err(BuildError::Unsupported("tacan"))
+use nalgebra::Vector3;
+use serde_json::{Map, Value};
+
+use super::{
+    BuildError, ConfigError, Epoch, EpochError, ModelSource, Monitor, MonitorKind, MonitorReport,
+    MonitorSpec, Outputs, StepError, TestBank,
+};
+use crate::detect::{PolicyConfig, ThresholdSpec};
+use crate::features::tacan::{TacanFeatureParams, window_features};
+use crate::filter::kalman::FilterError;
+use crate::geo::{self, Lla};
+use crate::learn::{AnyModel, ModelKind, Standardizer};
+
+/// Longest window accepted, samples (40 s at 25 Hz).
+pub const MAX_WINDOW: usize = 1000;
+
+/// Cap of the `range` test's ratio `1/m` (far outside the boundary the kernel mass
+/// underflows to 0; the statistic stays finite for the wire).
+pub const MAX_RATIO: f64 = 1e6;
+
+/// Default largest gap between used epochs that keeps the window, s.
+pub const DEFAULT_MAX_GAP_S: f64 = 1.0;
+
+/// The slant range from `p` to a station at ECEF `station_ecef`, m: the ECEF distance.
+pub fn slant_range_m(p: &Lla, station_ecef: &Vector3<f64>) -> f64 {
+    (geo::lla_to_ecef(p) - station_ecef).norm()
+}
+
+/// A validated `tacan` config.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TacanConfig {
+    /// The station, radians and metres.
+    pub station: Lla,
+    /// Window length and feature selection.
+    pub features: TacanFeatureParams,
+    /// Id of the stored one-class model.
+    pub model: String,
+    /// Largest gap between used epochs that keeps the window, s.
+    pub max_gap_s: f64,
+}
+
+const TOP: &[&str] = &["station", "window", "crest", "model", "max_gap_s"];
+
+fn number(obj: &Map<String, Value>, key: &str, field: &str) -> Result<f64, ConfigError> {
+    obj.get(key)
+        .ok_or_else(|| ConfigError::new(field, "required"))?
+        .as_f64()
+        .filter(|v| v.is_finite())
+        .ok_or_else(|| ConfigError::new(field, "must be a finite number"))
+}
+
+impl TacanConfig {
+    /// Parses and validates the `config` JSON; errors name the field (`station.lat`,
+    /// `window`, `model`, …). The model itself is checked by [`build`].
+    pub fn from_json(value: &Value) -> Result<Self, ConfigError> {
+        let obj = value
+            .as_object()
+            .ok_or_else(|| ConfigError::new("", "config must be an object"))?;
+        if let Some(k) = obj.keys().find(|k| !TOP.contains(&k.as_str())) {
+            return Err(ConfigError::new(
+                k.as_str(),
+                format!("unknown field, expected one of {}", TOP.join(", ")),
+            ));
+        }
+        let st = obj
+            .get("station")
+            .ok_or_else(|| ConfigError::new("station", "required: {lat, lon, h}"))?
+            .as_object()
+            .ok_or_else(|| ConfigError::new("station", "must be an object {lat, lon, h}"))?;
+        if let Some(k) = st
+            .keys()
+            .find(|k| !["lat", "lon", "h"].contains(&k.as_str()))
+        {
+            return Err(ConfigError::new(
+                format!("station.{k}"),
+                "unknown field, expected lat, lon, h",
+            ));
+        }
+        let lat = number(st, "lat", "station.lat")?;
+        if !(-90.0..=90.0).contains(&lat) {
+            return Err(ConfigError::new(
+                "station.lat",
+                "must be in [−90, 90] degrees",
+            ));
+        }
+        let lon = number(st, "lon", "station.lon")?;
+        if !(-180.0..=180.0).contains(&lon) {
+            return Err(ConfigError::new(
+                "station.lon",
+                "must be in [−180, 180] degrees",
+            ));
+        }
+        let h = number(st, "h", "station.h")?;
+        let window = match obj.get("window") {
+            None => 10,
+            Some(v) => match v.as_u64() {
+                Some(w) if (2..=MAX_WINDOW as u64).contains(&w) => w as usize,
+                _ => {
+                    return Err(ConfigError::new(
+                        "window",
+                        format!("must be an integer from 2 to {MAX_WINDOW}"),
+                    ));
+                }
+            },
+        };
+        let crest = match obj.get("crest") {
+            None => false,
+            Some(v) => v
+                .as_bool()
+                .ok_or_else(|| ConfigError::new("crest", "must be true or false"))?,
+        };
+        let model = obj
+            .get("model")
+            .ok_or_else(|| ConfigError::new("model", "required: the id of an ocsvm model"))?
+            .as_str()
+            .ok_or_else(|| ConfigError::new("model", "must be a model id string"))?
+            .to_owned();
+        let max_gap_s = match obj.get("max_gap_s") {
+            None => DEFAULT_MAX_GAP_S,
+            Some(v) => v
+                .as_f64()
+                .filter(|g| g.is_finite() && *g > 0.0)
+                .ok_or_else(|| ConfigError::new("max_gap_s", "must be a finite number > 0"))?,
+        };
+        Ok(TacanConfig {
+            station: Lla {
+                lat: lat.to_radians(),
+                lon: lon.to_radians(),
+                h,
+            },
+            features: TacanFeatureParams { window, crest },
+            model,
+            max_gap_s,
+        })
+    }
+}
+
+/// Builds a `tacan` monitor from its spec, looking its model up in `models`.
+pub fn build(spec: &MonitorSpec, models: &dyn ModelSource) -> Result<Box<dyn Monitor>, BuildError> {
+    let config = TacanConfig::from_json(&spec.config)?;
+    let model = models
+        .model(&config.model)
+        .ok_or_else(|| ConfigError::new("model", format!("no stored model '{}'", config.model)))?;
+    Ok(Box::new(TacanMonitor::new(
+        config,
+        model,
+        spec.policy,
+        spec.threshold,
+    )?))
+}
+
+/// The `tacan` monitor.
+#[derive(Debug, Clone)]
+pub struct TacanMonitor {
+    config: TacanConfig,
+    model: Arc<AnyModel>,
+    station_ecef: Vector3<f64>,
+    bank: TestBank,
+    /// The last `K` pairs `(d_ins, d_tacan)`.
+    window: VecDeque<(f64, f64)>,
+    last_t: Option<f64>,
+    outputs: Outputs,
+    /// The model's input standardisation, for the `features` output.
+    standardizer: Option<Standardizer>,
+    /// The decision scale `s = scale · ρ` when positive (module doc).
+    decision_scale: Option<f64>,
+}
+
+/// Reads the standardiser and `scale · ρ` from the model's stored form (module doc).
+fn model_internals(model: &AnyModel) -> (Option<Standardizer>, Option<f64>) {
+    let Ok(v) = serde_json::to_value(model) else {
+        return (None, None);
+    };
+    let standardizer = serde_json::from_value::<Standardizer>(v["standardizer"].clone())
+        .ok()
+        .filter(|s| s.dim() == model.input_dim());
+    let scale = v["scale"].as_f64().unwrap_or(1.0);
+    let s = v["rho"].as_f64().map(|rho| scale * rho);
+    (standardizer, s.filter(|s| s.is_finite() && *s > 0.0))
+}
+
+/// The `range` test's ratio for decision `g` (module doc).
+fn ratio(g: f64, decision_scale: Option<f64>) -> f64 {
+    match decision_scale {
+        Some(s) if g + s > s / MAX_RATIO => s / (g + s),
+        Some(_) => MAX_RATIO,
+        None => 1.0 - g,
+    }
+}
+
+impl TacanMonitor {
+    /// Builds the monitor; the model must be an `ocsvm` of the feature dimension.
+    pub fn new(
+        config: TacanConfig,
+        model: Arc<AnyModel>,
+        policy: PolicyConfig,
+        spec: ThresholdSpec,
+    ) -> Result<Self, BuildError> {
+        if model.kind() != ModelKind::OcSvm {
+            return Err(ConfigError::new(
+                "model",
+                format!(
+                    "'{}' is a {} model, the tacan monitor needs an ocsvm",
+                    config.model,
+                    model.kind().as_str()
+                ),
+            )
+            .into());
+        }
+        let dim = config.features.dim();
+        if model.input_dim() != dim {
+            return Err(ConfigError::new(
+                "model",
+                format!(
+                    "'{}' was trained on {} features, the window gives {dim} (crest = {})",
+                    config.model,
+                    model.input_dim(),
+                    config.features.crest
+                ),
+            )
+            .into());
+        }
+        let bank = TestBank::new(&[("range", dim as u32)], spec, policy)?;
+        let station_ecef = geo::lla_to_ecef(&config.station);
+        let window = VecDeque::with_capacity(config.features.window);
+        let (standardizer, decision_scale) = model_internals(&model);
+        Ok(TacanMonitor {
+            standardizer,
+            decision_scale,
+            config,
+            model,
+            station_ecef,
+            bank,
+            window,
+            last_t: None,
+            outputs: empty(),
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &TacanConfig {
+        &self.config
+    }
+
+    /// The window's features as the model sees them: standardised with the model's
+    /// training statistics (raw when the model does not standardise).
+    fn model_view(&self, raw: &[f64]) -> Vec<f64> {
+        match &self.standardizer {
+            Some(s) => s.applied(raw),
+            None => raw.to_vec(),
+        }
+    }
+}
+
+fn empty() -> Outputs {
+    Outputs::Tacan {
+        features: None,
+        decision: None,
+    }
+}
+
+impl Monitor for TacanMonitor {
+    fn kind(&self) -> MonitorKind {
+        MonitorKind::Tacan
+    }
+
+    fn tests(&self) -> &TestBank {
+        &self.bank
+    }
+
+    fn tests_mut(&mut self) -> &mut TestBank {
+        &mut self.bank
+    }
+
+    /// `ins` and `tacan` are validated (finite) at the edge and both optional: nothing
+    /// here can make an epoch unusable.
+    fn check_epoch(&self, _name: &str, _epoch: &Epoch) -> Result<(), EpochError> {
+        Ok(())
+    }
+
+    fn step(&mut self, epoch: &Epoch) -> Result<MonitorReport, StepError> {
+        let (Some(ins), Some(range)) = (&epoch.ins, epoch.tacan_range_m) else {
+            return Ok(MonitorReport {
+                tests: Vec::new(),
+                outputs: self.outputs.clone(),
+            });
+        };
+        let p = Lla {
+            lat: ins.lat,
+            lon: ins.lon,
+            h: ins.h,
+        };
+        let d_ins = slant_range_m(&p, &self.station_ecef);
+        if !(d_ins.is_finite() && range.is_finite()) {
+            return Err(FilterError::NonFinite("tacan ranges").into());
+        }
+        // The candidate window, committed only once the step succeeds.
+        let k = self.config.features.window;
+        let gap = self
+            .last_t
+            .is_some_and(|t| !(0.0..=self.config.max_gap_s).contains(&(epoch.t - t)));
+        let keep = if gap { 0 } else { self.window.len().min(k - 1) };
+        let skip = self.window.len() - keep;
+        let mut a = Vec::with_capacity(k);
+        let mut b = Vec::with_capacity(k);
+        for &(x, y) in self.window.iter().skip(skip) {
+            a.push(x);
+            b.push(y);
+        }
+        a.push(d_ins);
+        b.push(range);
+
+        let mut tests = Vec::new();
+        let mut outputs = empty();
+        let mut pending = None;
+        if a.len() == k {
+            let raw = window_features(&a, &b, &self.config.features)
+                .map_err(|_| FilterError::NonFinite("tacan features"))?;
+            let g = self.model.predict_one(&raw);
+            if !g.is_finite() {
+                return Err(FilterError::NonFinite("one-class decision").into());
+            }
+            let slot = &self.bank.slots()[0];
+            let t = slot.threshold;
+            let value = t * ratio(g, self.decision_scale);
+            let (outcome, state) = self.bank.preview(0, value, slot.dof)?;
+            tests.push(outcome);
+            pending = Some(state);
+            outputs = Outputs::Tacan {
+                features: Some(self.model_view(&raw)),
+                decision: Some(g),
+            };
+        }
+
+        // Commit.
+        if let Some(state) = pending {
+            self.bank.commit(0, state);
+        }
+        self.window.clear();
+        self.window.extend(a.into_iter().zip(b));
+        self.last_t = Some(epoch.t);
+        self.outputs = outputs;
+        Ok(MonitorReport {
+            tests,
+            outputs: self.outputs.clone(),
+        })
+    }
+
+    fn reset(&mut self) {
+        self.window.clear();
+        self.last_t = None;
+        self.bank.reset();
+        self.outputs = empty();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::HashMap;
+
+    use serde_json::json;
+
+    use super::*;
+    use crate::detect::Health;
+    use crate::monitor::NoModels;
+    use crate::sim::experiment::seed003::{Seed003Params, train_model};
+    use crate::sim::tacan::{TacanFlightParams, default_station, simulate_flight};
+
+    fn config(model: &str) -> Value {
+        let s = default_station();
+        json!({
+            "station": {"lat": s.lat.to_degrees(), "lon": s.lon.to_degrees(), "h": s.h},
+            "model": model
+        })
+    }
+
+    fn spec(config: Value, policy: PolicyConfig) -> MonitorSpec {
+        MonitorSpec {
+            kind: MonitorKind::Tacan,
+            config,
+            policy,
+            threshold: ThresholdSpec::default(),
+        }
+    }
+
+    fn field(e: BuildError) -> String {
+        match e {
+            BuildError::Config(c) => c.field,
+            other => panic!("{other:?}"),
+        }
+    }
+
+    /// The reduced seed 003 training set of `tests/tacan.rs` (100 clean 4 s flights at
+    /// 20 m², INS error correlation time 10 s), with the experiment's default model.
+    fn small_model(crest: bool) -> Arc<AnyModel> {
+        let p = Seed003Params {
+            noise_vars_m2: vec![20.0],
+            train_flights: 100,
+            train_duration_s: 4.0,
+            train_samples: 3_000,
+            ins_tau_s: 10.0,
+            features: TacanFeatureParams { window: 10, crest },
+            ..Seed003Params::default()
+        };
+        Arc::new(train_model(&p, 20.0).unwrap().model)
+    }
+
+    /// A clean 20 s test flight unlike any training flight.
+    fn flight() -> crate::sim::tacan::TacanFlight {
+        simulate_flight(&TacanFlightParams {
+            seed: 12,
+            duration_s: 20.0,
+            jumps: 0,
+            ins_tau_s: 10.0,
+            ..TacanFlightParams::default()
+        })
+        .unwrap()
+    }
+
+    #[test]
+    fn defaults_are_the_papers_window_without_crest() {
+        let c = TacanConfig::from_json(&config("m-1")).unwrap();
+        assert_eq!(c.features, TacanFeatureParams::default());
+        assert_eq!((c.model.as_str(), c.max_gap_s), ("m-1", DEFAULT_MAX_GAP_S));
+        assert!((c.station.lat - default_station().lat).abs() < 1e-15);
+    }
+
+    #[test]
+    fn invalid_configs_are_refused_naming_the_field() {
+        let station = json!({"lat": 34.0, "lon": 108.0, "h": 400.0});
+        let cases = [
+            (json!({"model": "m"}), "station"),
+            (json!({"station": 3, "model": "m"}), "station"),
+            (
+                json!({"station": {"lat": 95.0, "lon": 0.0, "h": 0.0}, "model": "m"}),
+                "station.lat",
+            ),
+            (
+                json!({"station": {"lat": 0.0, "lon": "x", "h": 0.0}, "model": "m"}),
+                "station.lon",
+            ),
+            (
+                json!({"station": {"lat": 0.0, "lon": 0.0}, "model": "m"}),
+                "station.h",
+            ),
+            (
+                json!({"station": {"lat": 0.0, "lon": 0.0, "h": 0.0, "x": 1}, "model": "m"}),
+                "station.x",
+            ),
+            (json!({"station": station}), "model"),
+            (json!({"station": station, "model": 7}), "model"),
+            (
+                json!({"station": station, "model": "m", "window": 1}),
+                "window",
+            ),
+            (
+                json!({"station": station, "model": "m", "window": 2.5}),
+                "window",
+            ),
+            (
+                json!({"station": station, "model": "m", "crest": "yes"}),
+                "crest",
+            ),
+            (
+                json!({"station": station, "model": "m", "max_gap_s": 0}),
+                "max_gap_s",
+            ),
+            (
+                json!({"station": station, "model": "m", "windw": 10}),
+                "windw",
+            ),
+        ];
+        for (c, want) in cases {
+            let e = TacanConfig::from_json(&c).unwrap_err();
+            assert_eq!(e.field, want, "{c}");
+        }
+        let e = build(&spec(config("m-404"), PolicyConfig::Classic), &NoModels)
+            .map(|_| ())
+            .unwrap_err();
+        assert_eq!(field(e), "model");
+    }
+
+    #[test]
+    fn a_model_of_the_wrong_dimension_is_refused() {
+        let models = HashMap::from([("m".to_owned(), small_model(false))]);
+        let mut c = config("m");
+        c["crest"] = json!(true);
+        let e = build(&spec(c, PolicyConfig::Classic), &models)
+            .map(|_| ())
+            .unwrap_err();
+        assert_eq!(field(e), "model");
+    }
+
+    #[test]
+    fn a_clean_stream_stays_healthy_and_a_200_m_jump_is_flagged() {
+        let models = HashMap::from([("m".to_owned(), small_model(false))]);
+        let mut monitor = build(&spec(config("m"), PolicyConfig::Classic), &models).unwrap();
+        let mut f = flight();
+        // A 200 m jump on 3 samples from sample 400.
+        for k in 400..403 {
+            let r = f.epochs[k].tacan_range_m.unwrap();
+            f.epochs[k].tacan_range_m = Some(r + 200.0);
+        }
+        let mut clean_flags = 0;
+        let mut clean = 0;
+        for (k, e) in f.epochs.iter().enumerate() {
+            let report = monitor.step(e).unwrap();
+            if k < 9 {
+                assert!(report.tests.is_empty(), "no test before the window is full");
+                assert_eq!(report.outputs, empty());
+                continue;
+            }
+            let o = report.tests[0];
+            assert_eq!((o.name, o.statistic.dof), ("range", 3));
+            let Outputs::Tacan {
+                features: Some(x),
+                decision: Some(g),
+            } = &report.outputs
+            else {
+                panic!("no outputs at {k}");
+            };
+            assert_eq!(x.len(), 3);
+            // The test fails exactly when the point is outside the boundary.
+            assert_eq!(o.statistic.exceeds(), *g < 0.0);
+            let holds_jump = (400..412).contains(&k);
+            if holds_jump {
+                assert_eq!(o.decision.health, Health::Isolated, "jump window at {k}");
+                assert!(o.statistic.test_ratio() > 1.0);
+            } else {
+                clean += 1;
+                clean_flags += usize::from(o.decision.health != Health::Healthy);
+            }
+        }
+        assert_eq!(clean, 491 - 12);
+        assert!(clean_flags <= clean / 100, "{clean_flags} of {clean}");
+        assert_eq!(
+            monitor.tests().slots()[0].policy.health(),
+            Health::Healthy,
+            "healthy again at the end"
+        );
+        monitor.reset();
+        assert!(monitor.step(&f.epochs[0]).unwrap().tests.is_empty());
+    }
+
+    #[test]
+    fn a_gap_restarts_the_window_and_epochs_without_both_blocks_are_ignored() {
+        let models = HashMap::from([("m".to_owned(), small_model(false))]);
+        let mut monitor = build(&spec(config("m"), PolicyConfig::Classic), &models).unwrap();
+        let f = simulate_flight(&TacanFlightParams {
+            seed: 13,
+            duration_s: 2.0,
+            jumps: 0,
+            ..TacanFlightParams::default()
+        })
+        .unwrap();
+        for e in &f.epochs[..10] {
+            monitor.step(e).unwrap();
+        }
+        let mut no_tacan = f.epochs[10].clone();
+        no_tacan.tacan_range_m = None;
+        let r = monitor.step(&no_tacan).unwrap();
+        assert!(r.tests.is_empty());
+        assert!(matches!(
+            r.outputs,
+            Outputs::Tacan {
+                decision: Some(_),
+                ..
+            }
+        ));
+        // 2 s later: the window starts afresh and needs 10 epochs again.
+        let mut late = f.epochs[11].clone();
+        late.t += 2.0;
+        assert!(monitor.step(&late).unwrap().tests.is_empty());
+    }
+
+    #[test]
+    fn the_range_ratio_is_one_on_the_boundary_and_grows_outside() {
+        assert_eq!(ratio(0.0, Some(2.0)), 1.0);
+        assert!(ratio(0.5, Some(2.0)) < 1.0);
+        assert_eq!(ratio(-1.0, Some(2.0)), 2.0);
+        assert_eq!(ratio(-2.0, Some(2.0)), MAX_RATIO);
+        assert_eq!(ratio(-0.5, None), 1.5);
+    }
 }

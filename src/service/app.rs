@@ -6,16 +6,17 @@ use std::sync::Arc;
 use axum::Router;
 use axum::extract::DefaultBodyLimit;
 use axum::middleware;
-use axum::routing::{MethodRouter, get};
+use axum::routing::{MethodRouter, get, post};
 use tokio::sync::watch;
 
-use super::api::{alarms, chi2, health, sessions, thresholds};
+use super::api::{alarms, chi2, features, health, models, sessions, thresholds};
 use super::config::ServiceConfig;
 use super::error::ApiError;
 use super::metrics::Metrics;
 use super::session::Registry;
 use super::session::actor::ActorDeps;
 use super::store::Store;
+use super::train::Models;
 use super::{auth, events, ingest};
 
 /// Shared state of every handler. Cheap to clone.
@@ -31,6 +32,8 @@ pub struct AppState {
     pub config: Arc<ServiceConfig>,
     /// Flips to `true` when the server shuts down; sockets close on it.
     pub shutdown: watch::Receiver<bool>,
+    /// Trained models and training jobs; the monitors' model source.
+    pub models: Arc<Models>,
 }
 
 impl AppState {
@@ -39,6 +42,7 @@ impl AppState {
         ActorDeps {
             store: self.store.clone(),
             metrics: self.metrics.clone(),
+            models: self.models.clone(),
         }
     }
 }
@@ -61,6 +65,10 @@ pub const ROUTES: &[(&str, &[&str])] = &[
     ("/api/v1/chi2/threshold", &["GET"]),
     ("/api/v1/chi2/missed-detection", &["GET"]),
     ("/api/v1/alarms", &["GET"]),
+    ("/api/v1/models", &["GET", "POST"]),
+    ("/api/v1/models/{id}", &["GET", "DELETE"]),
+    ("/api/v1/models/{id}/predict", &["POST"]),
+    ("/api/v1/features", &["POST"]),
 ];
 
 fn handlers(path: &str) -> MethodRouter<AppState> {
@@ -79,6 +87,10 @@ fn handlers(path: &str) -> MethodRouter<AppState> {
         "/api/v1/chi2/threshold" => get(chi2::threshold),
         "/api/v1/chi2/missed-detection" => get(chi2::missed_detection),
         "/api/v1/alarms" => get(alarms::list),
+        "/api/v1/models" => get(models::list).post(models::create),
+        "/api/v1/models/{id}" => get(models::get).delete(models::delete),
+        "/api/v1/models/{id}/predict" => post(models::predict),
+        "/api/v1/features" => post(features::compute),
         // Unreachable while ROUTES and this match agree; a unit test walks ROUTES.
         _ => MethodRouter::new(),
     }
@@ -93,8 +105,14 @@ pub fn app(state: AppState) -> Router {
     let mut public = Router::new();
     let mut api = Router::new();
     for &(path, allowed) in ROUTES {
-        let methods =
+        let mut methods =
             handlers(path).fallback(move || async move { ApiError::MethodNotAllowed(allowed) });
+        if path == "/api/v1/models" {
+            // Training sets are larger than other bodies (30,000 × 3 is ~2 MiB of JSON).
+            methods = methods.layer(DefaultBodyLimit::max(
+                state.config.limits.max_training_body_bytes,
+            ));
+        }
         if path.starts_with("/api/") {
             api = api.route(path, methods);
         } else {

@@ -16,6 +16,21 @@ pub struct Limits {
     pub max_monitors_per_session: usize,
     /// Largest REST request body, bytes (default 16 MiB).
     pub max_body_bytes: usize,
+    /// Largest `POST /api/v1/models` body, bytes (default 64 MiB: a 30,000 × 3
+    /// training set is about 2 MiB of JSON, so this leaves room for much larger sets).
+    pub max_training_body_bytes: usize,
+    /// Most samples in a training set or a predict request (default 50,000).
+    pub max_training_samples: usize,
+    /// Most numbers in a training set (`n × dim`) or a features request (default 2,000,000).
+    pub max_training_values: usize,
+    /// Most samples for the LS-SVM kinds (`lssvm`, `lw-lssvm`), which solve dense
+    /// `n × n` systems: 5,000 samples is a 200 MB matrix (default 5,000).
+    pub max_lssvm_samples: usize,
+    /// Training jobs that run at once on the blocking pool; the others wait with
+    /// stage `queued` (default 1, so training never takes both cores from ingest).
+    pub max_concurrent_trainings: usize,
+    /// Training jobs running or queued at once; one more gets 503 (default 16).
+    pub max_queued_trainings: usize,
 }
 
 impl Default for Limits {
@@ -26,6 +41,12 @@ impl Default for Limits {
             max_sessions: 10_000,
             max_monitors_per_session: 16,
             max_body_bytes: 16 << 20,
+            max_training_body_bytes: 64 << 20,
+            max_training_samples: 50_000,
+            max_training_values: 2_000_000,
+            max_lssvm_samples: 5_000,
+            max_concurrent_trainings: 1,
+            max_queued_trainings: 16,
         }
     }
 }

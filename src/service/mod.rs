@@ -12,6 +12,7 @@ pub mod ingest;
 pub mod metrics;
 pub mod session;
 pub mod store;
+pub mod train;
 pub mod wire;
 
 use std::net::SocketAddr;
@@ -27,6 +28,7 @@ pub use error::ApiError;
 
 use session::Registry;
 use store::{Store, StoreError};
+use train::Models;
 
 /// Wall-clock now, Unix milliseconds.
 pub fn now_ms() -> i64 {
@@ -71,6 +73,8 @@ pub async fn start(config: ServiceConfig) -> Result<Server, StartError> {
         return Err(StartError::OpenWithoutToken(config.bind));
     }
     let store = Store::open(&config.db_path).await?;
+    // Models first: restored sessions may name one.
+    let models = Arc::new(Models::load(store.clone(), &config.limits).await?);
     let (shutdown_tx, shutdown_rx) = watch::channel(false);
     let state = AppState {
         store: store.clone(),
@@ -78,12 +82,25 @@ pub async fn start(config: ServiceConfig) -> Result<Server, StartError> {
         metrics: Arc::default(),
         config: Arc::new(config),
         shutdown: shutdown_rx,
+        models,
     };
     // Sessions, their monitors and thresholds persist; filter state starts afresh.
     for stored in store.sessions().await? {
         let id = stored.id.clone();
-        let handle = session::actor::spawn(stored, state.actor_deps())
-            .map_err(|e| StartError::StoredSession(id.clone(), e.to_string()))?;
+        let handle = match session::actor::spawn(stored, state.actor_deps()) {
+            Ok(handle) => handle,
+            // A model deleted while a live session used it: that session kept its
+            // copy until now, but cannot be rebuilt. Skip it (its row stays) rather
+            // than refuse to start.
+            Err(ApiError::Invalid {
+                field: Some(field),
+                message,
+            }) if field.contains(".config.") && field.ends_with("model") => {
+                tracing::warn!(session = %id, %field, %message, "stored session names a deleted model; not restarted");
+                continue;
+            }
+            Err(e) => return Err(StartError::StoredSession(id, e.to_string())),
+        };
         if state.registry.try_insert(handle, usize::MAX).is_err() {
             return Err(StartError::StoredSession(id, "duplicate id".into()));
         }
@@ -122,6 +139,9 @@ impl Server {
     /// the HTTP server, and checkpoints and closes the store.
     pub async fn shutdown(self) {
         let _ = self.shutdown.send(true);
+        // Running training jobs stop at their next progress check; their rows
+        // stay `training` and are marked failed at the next start.
+        self.state.models.cancel_all();
         for handle in self.state.registry.list() {
             handle.shutdown().await;
         }

@@ -18,9 +18,11 @@
 pub mod experiment;
 pub mod faults;
 pub mod ins_truth;
+pub mod rimu;
 pub mod rng;
 pub mod scenario;
 pub mod sensors;
+pub mod tacan;
 pub mod track;
 pub mod trajectory;
 pub mod truth;

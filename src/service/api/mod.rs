@@ -3,6 +3,8 @@
 
 pub mod alarms;
 pub mod chi2;
+pub mod features;
 pub mod health;
+pub mod models;
 pub mod sessions;
 pub mod thresholds;

@@ -20,6 +20,7 @@ use crate::service::error::ApiError;
 use crate::service::metrics::Metrics;
 use crate::service::now_ms;
 use crate::service::store::{Store, StoredSession};
+use crate::service::train::Models;
 use crate::service::wire::{
     self, AlarmRecord, ErrorEvent, FrameError, MonitorResultWire, StateChange, TestThreshold,
     ThresholdUpdate, ThresholdView,
@@ -41,6 +42,8 @@ pub struct ActorDeps {
     pub store: Store,
     /// Process metrics.
     pub metrics: Arc<Metrics>,
+    /// Trained models, for monitors that name one (`config.model`).
+    pub models: Arc<Models>,
 }
 
 struct NamedMonitor {
@@ -65,7 +68,7 @@ struct Actor {
 
 /// Builds the monitors of `stored` and starts its actor.
 pub fn spawn(stored: StoredSession, deps: ActorDeps) -> Result<SessionHandle, ApiError> {
-    let monitors = build_monitors(&stored)?;
+    let monitors = build_monitors(&stored, &*deps.models)?;
     let id: Arc<str> = Arc::from(stored.id.as_str());
     let stats = initial_stats(&id, &monitors);
     let (stats_tx, stats_rx) = watch::channel(Arc::new(stats.clone()));

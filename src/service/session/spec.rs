@@ -2,7 +2,7 @@
 //! configuration (built once here so a bad model is a 422 naming its field).
 
 use crate::detect::ThresholdSpec;
-use crate::monitor::{self, BuildError, Monitor, MonitorSpec};
+use crate::monitor::{self, BuildError, ModelSource, Monitor, MonitorSpec};
 use crate::service::config::Limits;
 use crate::service::error::ApiError;
 use crate::service::store::StoredSession;
@@ -30,14 +30,19 @@ pub fn monitor_spec(wire: &MonitorSpecWire) -> Result<MonitorSpec, BuildError> {
 pub type NamedMonitors = Vec<(String, Box<dyn Monitor>)>;
 
 /// Builds every monitor of a stored session (used at creation and at restart).
-pub fn build_monitors(session: &StoredSession) -> Result<NamedMonitors, ApiError> {
+/// Monitors that name a trained model take it from `models` and keep their own
+/// `Arc`: deleting the model later does not change a live session (a restart
+/// then skips that session with a warning, as its model is gone).
+pub fn build_monitors(
+    session: &StoredSession,
+    models: &dyn ModelSource,
+) -> Result<NamedMonitors, ApiError> {
     session
         .monitors
         .iter()
         .enumerate()
         .map(|(i, wire)| {
-            let built =
-                monitor_spec(wire).and_then(|spec| monitor::build(&spec, &monitor::NoModels));
+            let built = monitor_spec(wire).and_then(|spec| monitor::build(&spec, models));
             match built {
                 Ok(m) => Ok((wire.name.clone(), m)),
                 Err(e) => Err(build_error(i, e)),

@@ -1,6 +1,8 @@
-//! Persistence (DESIGN §4.5): sessions with their monitors and thresholds, and
-//! the alarm log, in SQLite through sqlx (WAL). An alarm is committed here
-//! before anyone is told about it.
+//! Persistence (DESIGN §4.5): sessions with their monitors and thresholds,
+//! the alarm log and trained models ([`models`]), in SQLite through sqlx (WAL).
+//! An alarm is committed here before anyone is told about it.
+
+pub mod models;
 
 use std::path::Path;
 use std::str::FromStr;
@@ -12,6 +14,8 @@ use sqlx::sqlite::{
 
 use crate::detect::Health;
 use crate::service::wire::{AlarmRecord, MonitorSpecWire};
+
+pub use models::StoredModel;
 
 /// Store failures. These are server faults (HTTP 500), never the user's input.
 #[derive(Debug, thiserror::Error)]
@@ -101,7 +105,7 @@ impl Store {
             .max_connections(4)
             .connect_with(options)
             .await?;
-        for statement in SCHEMA {
+        for statement in SCHEMA.iter().chain(models::SCHEMA) {
             sqlx::query(statement).execute(&pool).await?;
         }
         Ok(Store { pool })

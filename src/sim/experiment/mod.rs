@@ -4,6 +4,10 @@
 //! figures, the renderers turn them into the text tables and SVG plots the CLI
 //! writes. No I/O here.
 //!
+//! - [`seed002`]: seed 002's redundant-gyro isolation (parity FSS test + wavelet-packet
+//!   C-SVC) on the `rimu` scenario, with and without the classifier.
+//! - [`seed003`]: seed 003's one-class SVM detection of TACAN range jumps at
+//!   noise variances 5, 10, 20 m² (its Fig. 6).
 //! - [`seed004`]: seed 004's comparison of the classic and counter policies at
 //!   thresholds 13 and 20 on the `ship` scenario (its Tables 1–3, Figs. 3–10).
 //! - [`ramp`]: DESIGN §3.9's slow GNSS drift benchmark.
@@ -13,6 +17,8 @@
 pub mod plot;
 pub mod ramp;
 pub mod scorecard;
+pub mod seed002;
+pub mod seed003;
 pub mod seed004;
 
 use std::collections::BTreeMap;
