@@ -92,7 +92,12 @@ authForm.addEventListener("submit", (ev) => {
 
 /** Durations of frames that rendered something, ms (bounded). */
 const frameMs = [];
-function frame() {
+/** Time between consecutive animation frames, ms: above ~17 ms the page drops frames. */
+const intervalMs = [];
+let lastFrameAt = 0;
+function frame(now) {
+  if (lastFrameAt) { intervalMs.push(now - lastFrameAt); if (intervalMs.length > 5000) intervalMs.splice(0, 2500); }
+  lastFrameAt = now;
   const started = performance.now();
   try { views[current].render(); } catch (e) { console.error(e); }
   const took = performance.now() - started;
@@ -109,13 +114,16 @@ function summary(list) {
 
 /** Render-frame and message-handling times, for the browser test and the curious. */
 window.navguardPerf = (reset) => {
-  const out = { frame: summary(frameMs), message: summary(live.handleMs) };
-  if (reset) { frameMs.length = 0; live.handleMs.length = 0; }
+  const out = { frame: summary(frameMs), interval: summary(intervalMs), message: summary(live.handleMs) };
+  if (reset) { frameMs.length = 0; intervalMs.length = 0; live.handleMs.length = 0; }
   return out;
 };
 
 // Ages and "reconnecting in" countdowns move with the clock.
 setInterval(() => { views.overview.tick(); views.session.headDirty = true; }, 500);
+
+// The store, for the browser console (and the browser test's diagnostics).
+window.navguardLive = live;
 
 route();
 live.start();

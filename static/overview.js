@@ -41,8 +41,9 @@ export class OverviewView {
 
   makeCard(id) {
     const f = {
-      conn: el("dd"), worst: el("dd", { class: "num" }), eps: el("dd", { class: "num" }),
-      age: el("dd", { class: "num" }), epochs: el("dd", { class: "num" }), live: el("dd"),
+      conn: el("dd", { "data-field": "stream" }), worst: el("dd", { class: "num", "data-field": "worst" }),
+      eps: el("dd", { class: "num", "data-field": "rate" }), age: el("dd", { class: "num", "data-field": "age" }),
+      epochs: el("dd", { class: "num", "data-field": "epochs" }), live: el("dd", { "data-field": "events" }),
     };
     const fact = (label, dd) => el("div", null, el("dt", null, label), dd);
     const tbody = el("tbody");
@@ -140,5 +141,7 @@ export class OverviewView {
     const liveText = s.liveText();
     setText(card.f.live, liveText);
     card.f.live.classList.toggle("flag-off", liveText !== "live");
+    const liveState = liveText.split(" ")[0].replace("\u2026", "");
+    if (card.el.dataset.live !== liveState) card.el.dataset.live = liveState;
   }
 }

@@ -151,7 +151,8 @@ export class SessionView {
             "(the federated solution is only in the per-epoch `result` messages sent back on the ingest socket " +
             "when the session has echo: true; the events socket's `stats` carry statistics only).")));
       }
-      return el("section", { class: "card monitor", "data-monitor": m.name },
+      const wide = tests.length > 1 || extra.length > 0;
+      return el("section", { class: "card monitor" + (wide ? " wide" : ""), "data-monitor": m.name },
         el("div", { class: "monitor-head" },
           el("h3", null, m.name, " ", el("span", { class: "muted" }, m.type || "")), policy, toggle),
         controlsSlot,

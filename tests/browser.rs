@@ -149,7 +149,10 @@ async fn wait_js(client: &Client, script: &str, what: &str) -> Value {
     let html = client.source().await.unwrap_or_default();
     panic!(
         "timed out waiting for {what} ({script}); page:\n{}",
-        &html[..html.len().min(4000)]
+        &html[html.find("<main").unwrap_or(0)..][..html
+            .len()
+            .min(6000)
+            .min(html.len() - html.find("<main").unwrap_or(0))]
     );
 }
 
@@ -473,8 +476,8 @@ async fn the_dashboard_shows_a_faulty_replay_and_applies_a_threshold_change() {
     tokio::time::sleep(Duration::from_millis(300)).await;
     let perf = js(&client, "return window.navguardPerf(false);").await;
     println!(
-        "frame time with {LOAD_MONITORS} monitors at 20 stats/s: render {} ; message handling {}",
-        perf["frame"], perf["message"]
+        "frame time with {LOAD_MONITORS} monitors at 20 stats/s (ms): render {} ; frame interval {} ; message handling {}",
+        perf["frame"], perf["interval"], perf["message"]
     );
     assert!(perf["message"]["n"].as_u64().unwrap() > 10, "{perf}");
     assert!(perf["frame"]["n"].as_u64().unwrap() > 10, "{perf}");
@@ -486,6 +489,92 @@ async fn the_dashboard_shows_a_faulty_replay_and_applies_a_threshold_change() {
     assert_eq!(drawn, Value::Bool(true));
     save_screenshot(&client, "dashboard-load.png").await;
 
+    // 8. The server restarts: the page reports it unreachable, then its
+    // sockets reconnect (with backoff) and live updates flow again.
+    client.goto(&format!("{http}/#/")).await.unwrap();
+    let addr = server.addr;
+    let db = dir.path().join("t.db");
+    server.shutdown().await;
+    wait_js(
+        &client,
+        "document.getElementById('status').dataset.state === 'unreachable'",
+        "the page to notice the server is gone",
+    )
+    .await;
+    let server = restart(addr, &db, None).await;
+    wait_js(
+        &client,
+        r#"document.querySelector('[data-session="load"]')?.dataset.live === 'live'"#,
+        "the events socket to reconnect",
+    )
+    .await;
+    let mut socket = common::connect(&format!("{ws}/api/v1/sessions/load/ingest")).await;
+    common::send(&mut socket, &json!({"t": 0.0, "z": [0.5]})).await;
+    // The session publishes stats at most every 50 ms and a lone frame can fall
+    // inside that window; detaching publishes at once.
+    socket.close(None).await.unwrap();
+    wait_js(
+        &client,
+        r#"document.querySelector('[data-session="load"] dd[data-field="epochs"]')?.textContent === '1'"#,
+        "stats from the restarted server (1 epoch)",
+    )
+    .await;
+    server.shutdown().await;
+
+    // 9. Back with a token: the page asks for it once, keeps it for the tab
+    // (sessionStorage), and uses it on REST and sockets.
+    let server = restart(addr, &db, Some("s3cret")).await;
+    wait_js(
+        &client,
+        "!document.getElementById('auth').hidden",
+        "the token prompt",
+    )
+    .await;
+    client
+        .find(Locator::Id("token"))
+        .await
+        .unwrap()
+        .send_keys("s3cret")
+        .await
+        .unwrap();
+    client
+        .find(Locator::Css("#auth button"))
+        .await
+        .unwrap()
+        .click()
+        .await
+        .unwrap();
+    wait_js(
+        &client,
+        r#"document.querySelector('[data-session="ship"]')?.dataset.live === 'live' && document.getElementById('status').dataset.state === 'ok'"#,
+        "REST and sockets with the token",
+    )
+    .await;
+    client.refresh().await.unwrap();
+    wait_js(
+        &client,
+        r#"document.getElementById('status').dataset.state === 'ok' && document.getElementById('auth').hidden"#,
+        "a reload to reuse the stored token without asking",
+    )
+    .await;
+    assert_eq!(
+        js(&client, "return sessionStorage.getItem('navguard.token');").await,
+        "s3cret"
+    );
+
     client.close().await.unwrap();
     server.shutdown().await;
+}
+
+/// A server on the same address and store as before (sessions persist).
+async fn restart(
+    addr: std::net::SocketAddr,
+    db: &Path,
+    token: Option<&str>,
+) -> navguard::service::Server {
+    let mut config = navguard::service::ServiceConfig::new(addr, db);
+    config.token = token.map(str::to_owned);
+    navguard::service::start(config)
+        .await
+        .expect("the server restarts on its old address")
 }
