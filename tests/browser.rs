@@ -440,14 +440,61 @@ async fn the_dashboard_shows_a_faulty_replay_and_applies_a_threshold_change() {
     )
     .await;
 
-    // 6. Models page: degrades to a message when the server has no model API, lists otherwise.
+    // 6. Models page: a trained model is listed with its kind and can be
+    // deleted; a server without the model API shows "No models".
+    let x: Vec<Vec<f64>> = (0..40).map(|i| vec![f64::from(i) / 10.0]).collect();
+    let y: Vec<f64> = x.iter().map(|v| v[0].sin()).collect();
+    let trained = rest
+        .post(format!("{http}/api/v1/models"))
+        .json(
+            &json!({"kind": "lssvm", "name": "sine", "params": {"gamma": 10, "sigma2": 1},
+                      "data": {"x": x, "y": y}}),
+        )
+        .send()
+        .await
+        .unwrap();
     client.goto(&format!("{http}/#/models")).await.unwrap();
-    wait_js(
-        &client,
-        r#"!document.getElementById('no-models').hidden && /^No models/.test(document.getElementById('no-models').textContent) || document.querySelectorAll('#models tr').length > 0"#,
-        "the models page to settle",
-    )
-    .await;
+    if trained.status() == 404 {
+        wait_js(
+            &client,
+            "!document.getElementById('no-models').hidden && document.getElementById('no-models').textContent.startsWith('No models')",
+            "the models page to say there are no models",
+        )
+        .await;
+    } else {
+        assert_eq!(trained.status(), 202);
+        let record: Value = trained.json().await.unwrap();
+        let id = record["id"].as_str().unwrap().to_owned();
+        let row = format!(r#"#models tr[data-model="{id}"]"#);
+        let text = wait_js(
+            &client,
+            &format!(
+                r#"(() => {{ const r = document.querySelector('{row}'); return r && r.dataset.status === 'ready' && r.textContent; }})()"#
+            ),
+            "the trained model's row",
+        )
+        .await;
+        assert!(text.as_str().unwrap().contains("lssvm"), "{text}");
+        client
+            .find(Locator::Css(&format!(r#"button[data-model="{id}"]"#)))
+            .await
+            .unwrap()
+            .click()
+            .await
+            .unwrap();
+        wait_js(
+            &client,
+            &format!(r#"!document.querySelector('{row}')"#),
+            "the deleted model's row to go",
+        )
+        .await;
+        let gone = rest
+            .get(format!("{http}/api/v1/models/{id}"))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(gone.status(), 404);
+    }
 
     // 7. Load: 10 monitors, 20 stats messages a second, 10 charts on screen.
     let created = rest
