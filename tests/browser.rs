@@ -461,6 +461,7 @@ async fn the_dashboard_shows_a_faulty_replay_and_applies_a_threshold_change() {
             "the models page to say there are no models",
         )
         .await;
+        println!("no model API on this server: the models page says so");
     } else {
         assert_eq!(trained.status(), 202);
         let record: Value = trained.json().await.unwrap();
@@ -475,6 +476,8 @@ async fn the_dashboard_shows_a_faulty_replay_and_applies_a_threshold_change() {
         )
         .await;
         assert!(text.as_str().unwrap().contains("lssvm"), "{text}");
+        println!("models page lists {id}: {text}");
+        save_screenshot(&client, "dashboard-models.png").await;
         client
             .find(Locator::Css(&format!(r#"button[data-model="{id}"]"#)))
             .await
