@@ -439,6 +439,7 @@ async fn the_dashboard_shows_a_faulty_replay_and_applies_a_threshold_change() {
         "alarm rows on the alarms page",
     )
     .await;
+    save_screenshot(&client, "dashboard-alarms.png").await;
 
     // 6. Models page: a trained model is listed with its kind and can be
     // deleted; a server without the model API shows "No models".
@@ -542,6 +543,13 @@ async fn the_dashboard_shows_a_faulty_replay_and_applies_a_threshold_change() {
     // 8. The server restarts: the page reports it unreachable, then its
     // sockets reconnect (with backoff) and live updates flow again.
     client.goto(&format!("{http}/#/")).await.unwrap();
+    wait_js(
+        &client,
+        r#"document.querySelectorAll('#sessions [data-session]').length === 2"#,
+        "both sessions in the overview",
+    )
+    .await;
+    save_screenshot(&client, "dashboard-overview.png").await;
     let addr = server.addr;
     let db = dir.path().join("t.db");
     server.shutdown().await;
@@ -558,17 +566,28 @@ async fn the_dashboard_shows_a_faulty_replay_and_applies_a_threshold_change() {
         "the events socket to reconnect",
     )
     .await;
+    // Frames every 100 ms until the page shows the new stream's epochs. (The
+    // session publishes stats at most every 50 ms and has no trailing publish,
+    // so the stats of a lone last frame can wait for the next frame.)
     let mut socket = common::connect(&format!("{ws}/api/v1/sessions/load/ingest")).await;
-    common::send(&mut socket, &json!({"t": 0.0, "z": [0.5]})).await;
-    // The session publishes stats at most every 50 ms and a lone frame can fall
-    // inside that window; detaching publishes at once.
+    let epochs = r#"Number(document.querySelector('[data-session="load"] dd[data-field="epochs"]')?.textContent)"#;
+    let mut seen = 0.0;
+    for k in 0..100 {
+        common::send(&mut socket, &json!({"t": f64::from(k), "z": [0.5]})).await;
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        seen = js(&client, &format!("return {epochs};"))
+            .await
+            .as_f64()
+            .unwrap_or(0.0);
+        if seen >= 1.0 {
+            break;
+        }
+    }
+    assert!(
+        seen >= 1.0,
+        "no stats from the restarted server reached the page"
+    );
     socket.close(None).await.unwrap();
-    wait_js(
-        &client,
-        r#"document.querySelector('[data-session="load"] dd[data-field="epochs"]')?.textContent === '1'"#,
-        "stats from the restarted server (1 epoch)",
-    )
-    .await;
     server.shutdown().await;
 
     // 9. Back with a token: the page asks for it once, keeps it for the tab
