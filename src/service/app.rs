@@ -51,6 +51,7 @@ impl AppState {
 /// the OpenAPI test checks the spec against it (and the router against it).
 pub const ROUTES: &[(&str, &[&str])] = &[
     ("/", &["GET"]),
+    ("/static/{file}", &["GET"]),
     ("/healthz", &["GET"]),
     ("/metrics", &["GET"]),
     ("/api/v1/sessions", &["GET", "POST"]),
@@ -74,6 +75,7 @@ pub const ROUTES: &[(&str, &[&str])] = &[
 fn handlers(path: &str) -> MethodRouter<AppState> {
     match path {
         "/" => get(health::index),
+        "/static/{file}" => get(health::asset),
         "/healthz" => get(health::healthz),
         "/metrics" => get(health::metrics),
         "/api/v1/sessions" => get(sessions::list).post(sessions::create),

@@ -1,12 +1,13 @@
 //! `/healthz`, `/metrics` and the dashboard page.
 
 use axum::Json;
-use axum::extract::State;
+use axum::extract::{Path, State};
 use axum::http::header;
 use axum::response::{Html, IntoResponse};
 use serde_json::{Value, json};
 
 use crate::service::app::AppState;
+use crate::service::error::ApiError;
 
 /// `GET /healthz`: liveness, with the version and session count.
 pub async fn healthz(State(state): State<AppState>) -> Json<Value> {
@@ -29,4 +30,82 @@ pub async fn metrics(State(state): State<AppState>) -> impl IntoResponse {
 /// `GET /`: the dashboard (embedded at compile time; no build step).
 pub async fn index() -> Html<&'static str> {
     Html(include_str!("../../../static/index.html"))
+}
+
+/// The dashboard's scripts and style sheet, embedded at compile time: name,
+/// content type, text. A flat list (no directories) so a path can never escape it.
+const ASSETS: &[(&str, &str, &str)] = &[
+    (
+        "app.css",
+        "text/css; charset=utf-8",
+        include_str!("../../../static/app.css"),
+    ),
+    ("main.js", JS, include_str!("../../../static/main.js")),
+    ("api.js", JS, include_str!("../../../static/api.js")),
+    ("dom.js", JS, include_str!("../../../static/dom.js")),
+    ("live.js", JS, include_str!("../../../static/live.js")),
+    ("chart.js", JS, include_str!("../../../static/chart.js")),
+    (
+        "overview.js",
+        JS,
+        include_str!("../../../static/overview.js"),
+    ),
+    ("session.js", JS, include_str!("../../../static/session.js")),
+    (
+        "controls.js",
+        JS,
+        include_str!("../../../static/controls.js"),
+    ),
+    ("alarms.js", JS, include_str!("../../../static/alarms.js")),
+    ("models.js", JS, include_str!("../../../static/models.js")),
+];
+
+const JS: &str = "text/javascript; charset=utf-8";
+
+/// `GET /static/{file}`: one of the dashboard's embedded files.
+pub async fn asset(Path(file): Path<String>) -> Result<impl IntoResponse, ApiError> {
+    ASSETS
+        .iter()
+        .find(|(name, _, _)| *name == file)
+        .map(|&(_, content_type, body)| {
+            (
+                [
+                    (header::CONTENT_TYPE, content_type),
+                    // Embedded in the binary: a new build is a new server, so revalidate.
+                    (header::CACHE_CONTROL, "no-cache"),
+                ],
+                body,
+            )
+        })
+        .ok_or_else(|| ApiError::NotFound(format!("no static file '{file}'")))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Names the page or a module loads: `static/NAME` in the HTML, `from "./NAME"` in JS.
+    fn references(text: &str, marker: &str, end: char) -> Vec<String> {
+        text.split(marker)
+            .skip(1)
+            .filter_map(|rest| rest.split(end).next())
+            .map(str::to_owned)
+            .collect()
+    }
+
+    #[test]
+    fn every_file_the_dashboard_loads_is_embedded() {
+        let html = include_str!("../../../static/index.html");
+        let mut wanted = references(html, "\"static/", '"');
+        for (_, _, body) in ASSETS {
+            wanted.extend(references(body, "from \"./", '"'));
+        }
+        assert!(wanted.len() > ASSETS.len(), "{wanted:?}");
+        for name in wanted {
+            assert!(
+                ASSETS.iter().any(|(n, _, _)| *n == name),
+                "{name} is loaded but not in ASSETS"
+            );
+        }
+    }
 }

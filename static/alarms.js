@@ -1,0 +1,102 @@
+// alarms.js — the persisted alarm log (GET /api/v1/alarms), newest first,
+// filtered by session, monitor and raise time, a page at a time with the
+// server's `next_before` cursor. On the first page an alarm arriving live on
+// any events socket is inserted at the top when it passes the filters.
+
+import { el, badge, fmtNum, fmtRatio, fmtT, fmtClock } from "./dom.js";
+import { get } from "./api.js";
+
+const PAGE = 25;
+
+export class AlarmsView {
+  constructor(live, root) {
+    this.live = live;
+    this.tbody = root.querySelector("#alarms");
+    this.empty = root.querySelector("#no-alarms");
+    this.form = root.querySelector("#alarm-filters");
+    this.pageText = root.querySelector("#alarm-page");
+    this.newerBtn = root.querySelector("#alarms-newer");
+    this.olderBtn = root.querySelector("#alarms-older");
+    this.sessionList = root.querySelector("#alarm-session-list");
+    this.cursors = [null]; // `before` of each page visited; [0] = newest
+    this.next = null;
+    this.filters = {};
+    this.shown = new Set();
+    this.form.addEventListener("submit", (ev) => { ev.preventDefault(); this.readFilters(); this.cursors = [null]; this.load(); });
+    this.olderBtn.addEventListener("click", () => { if (this.next !== null) { this.cursors.push(this.next); this.load(); } });
+    this.newerBtn.addEventListener("click", () => { if (this.cursors.length > 1) { this.cursors.pop(); this.load(); } });
+    live.on("alarm", (a, isLive) => { if (isLive) this.onLive(a); });
+    live.on("sessions", () => this.fillSessionList());
+  }
+
+  open() { this.readFilters(); this.load(); }
+  render() {}
+
+  readFilters() {
+    const f = new FormData(this.form);
+    const ms = (v) => (v ? new Date(String(v)).getTime() : null);
+    this.filters = {
+      session: String(f.get("session") || "").trim() || null,
+      monitor: String(f.get("monitor") || "").trim() || null,
+      since: ms(f.get("since")),
+      until: ms(f.get("until")),
+    };
+  }
+
+  fillSessionList() {
+    const ids = [...this.live.sessions.keys()];
+    if (this.sessionList.childElementCount === ids.length) return;
+    this.sessionList.replaceChildren(...ids.map((id) => el("option", { value: id })));
+  }
+
+  matches(a) {
+    const f = this.filters;
+    return (!f.session || a.session === f.session) && (!f.monitor || a.monitor === f.monitor) &&
+      (f.since === null || a.raised_at_ms >= f.since) && (f.until === null || a.raised_at_ms < f.until);
+  }
+
+  async load() {
+    const q = new URLSearchParams({ limit: String(PAGE) });
+    for (const k of ["session", "monitor", "since", "until"]) if (this.filters[k] !== null) q.set(k, String(this.filters[k]));
+    const before = this.cursors[this.cursors.length - 1];
+    if (before !== null) q.set("before", String(before));
+    this.pageText.textContent = "Loading\u2026";
+    try {
+      const page = await get("api/v1/alarms?" + q);
+      this.next = page.next_before;
+      this.shown = new Set();
+      this.tbody.replaceChildren(...page.alarms.map((a) => this.row(a, false)));
+      this.empty.hidden = page.alarms.length > 0;
+      this.pageText.textContent = "Page " + this.cursors.length + (page.alarms.length ? "" : " (empty)");
+    } catch (e) {
+      this.pageText.textContent = "Could not load the log: " + e.message;
+    }
+    this.newerBtn.disabled = this.cursors.length <= 1;
+    this.olderBtn.disabled = this.next === null;
+  }
+
+  onLive(a) {
+    // Only the newest page grows; older pages are a stable view of the past.
+    if (this.cursors.length !== 1 || !this.matches(a) || this.shown.has(a.id)) return;
+    this.tbody.prepend(this.row(a, true));
+    this.empty.hidden = true;
+    while (this.tbody.childElementCount > PAGE) this.tbody.lastElementChild.remove();
+  }
+
+  row(a, fresh) {
+    if (a.id > 0) this.shown.add(a.id);
+    const cleared = a.cleared_t !== null && a.cleared_t !== undefined;
+    const tr = el("tr", { "data-alarm-id": a.id, "data-session": a.session, class: (cleared ? "cleared" : "") + (fresh ? " fresh" : "") },
+      el("td", null, el("time", { datetime: new Date(a.raised_at_ms).toISOString() }, fmtClock(a.raised_at_ms))),
+      el("td", { class: "wrap" }, el("a", { href: "#/session/" + encodeURIComponent(a.session) }, a.session)),
+      el("td", { class: "wrap" }, a.monitor), el("td", { class: "wrap" }, a.test),
+      el("td", null, badge(a.state)),
+      el("td", { class: "num" }, fmtNum(a.statistic) + " / " + fmtNum(a.threshold) + " (dof " + a.dof + ")"),
+      el("td", { class: "num" + (a.test_ratio > 1 ? " over" : "") }, fmtRatio(a.test_ratio)),
+      el("td", { class: "num" }, fmtT(a.t)),
+      el("td", { class: "num" }, fmtT(a.delay_s)),
+      el("td", null, cleared ? "at t = " + fmtT(a.cleared_t) : "active"));
+    if (fresh) setTimeout(() => tr.classList.remove("fresh"), 4000);
+    return tr;
+  }
+}

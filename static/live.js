@@ -1,0 +1,344 @@
+// live.js — the page's model of the server: the session list (polled over
+// REST, so new sessions appear without a reload), one events socket per
+// session (stats, state and alarm messages), and a bounded history of every
+// test's statistic for the charts. Views read from here and subscribe to
+// changes; nothing here touches the DOM.
+
+import { get, socketUrl, AuthError } from "./api.js";
+import { isNum } from "./dom.js";
+
+const POLL_MS = 2000;
+const BACKOFF_MIN_MS = 500;
+const BACKOFF_MAX_MS = 30000;
+/** A socket open this long counts as healthy and resets the backoff. */
+const STABLE_OPEN_MS = 10000;
+/** Points kept per test: 20 stats/s for 5 minutes. Trimmed in chunks (amortised O(1)). */
+const HISTORY_CAP = 6000;
+/** Recent alarms kept in memory for the overview and session views. */
+const RECENT_ALARMS = 200;
+
+/**
+ * One test's history: parallel arrays (cheaper than objects at 20 Hz × many
+ * tests) plus the state transitions the `state` messages report exactly,
+ * which the `stats` samples (≤ 20/s) could miss between two snapshots.
+ */
+export class Series {
+  constructor() {
+    this.t = []; this.v = []; this.thr = []; this.state = [];
+    this.transitions = []; // {t, to}
+    this.lastEpochs = -1;
+    this.firstState = null;
+  }
+  push(t, v, thr, state) {
+    if (this.t.length && t < this.t[this.t.length - 1]) this.clear(); // stream restarted (t went back)
+    this.t.push(t); this.v.push(v); this.thr.push(thr); this.state.push(state);
+    if (this.firstState === null) this.firstState = state;
+    if (this.t.length > 2 * HISTORY_CAP) this.trim();
+  }
+  transition(t, to) {
+    this.transitions.push({ t, to });
+    if (this.transitions.length > HISTORY_CAP) this.transitions.splice(0, this.transitions.length - HISTORY_CAP);
+  }
+  trim() {
+    const drop = this.t.length - HISTORY_CAP;
+    for (const a of [this.t, this.v, this.thr, this.state]) a.splice(0, drop);
+    const t0 = this.t[0];
+    let i = 0;
+    while (i < this.transitions.length && this.transitions[i].t < t0) i++;
+    // Keep the last transition before the window: it gives the state at its start.
+    if (i > 1) this.transitions.splice(0, i - 1);
+  }
+  clear() {
+    this.t = []; this.v = []; this.thr = []; this.state = [];
+    this.transitions = []; this.firstState = null; this.lastEpochs = -1;
+  }
+  get length() { return this.t.length; }
+
+  /**
+   * Intervals [t0, t1) spent suspect or isolated, from the exact transitions
+   * where we have them and the sampled states otherwise.
+   */
+  bands() {
+    // Cached: charts ask on every redraw, the answer changes only with new data.
+    const key = this.t.length + ":" + this.transitions.length + ":" + this.t[this.t.length - 1];
+    if (this.bandsKey !== key) { this.bandsKey = key; this.bandsCache = this.computeBands(); }
+    return this.bandsCache;
+  }
+
+  computeBands() {
+    const marks = [];
+    const n = this.t.length;
+    if (!n) return [];
+    // Sampled states give a transition wherever two samples differ.
+    let prev = this.state[0];
+    marks.push({ t: this.t[0], to: prev });
+    for (let i = 1; i < n; i++) {
+      if (this.state[i] !== prev) { marks.push({ t: this.t[i], to: this.state[i] }); prev = this.state[i]; }
+    }
+    for (const m of this.transitions) marks.push(m);
+    marks.sort((a, b) => a.t - b.t);
+    const out = [];
+    let open = null;
+    for (const m of marks) {
+      if (open && open.state !== m.to) { open.t1 = m.t; out.push(open); open = null; }
+      if (!open && (m.to === "suspect" || m.to === "isolated")) open = { t0: m.t, t1: Infinity, state: m.to };
+    }
+    if (open) { open.t1 = this.t[n - 1]; out.push(open); }
+    return out;
+  }
+}
+
+/** Everything the page knows about one session. */
+class SessionLive {
+  constructor(id) {
+    this.id = id;
+    this.info = null;      // GET /api/v1/sessions entry (spec + test states)
+    this.stats = null;     // last `stats` message
+    this.statsAt = 0;      // our clock when it arrived
+    this.series = new Map(); // "monitor/test" → Series
+    this.ws = null; this.openedAt = 0; this.delay = BACKOFF_MIN_MS;
+    this.retryTimer = null; this.retryAt = 0; this.removed = false;
+    this.maxAlarmId = 0;
+  }
+  seriesFor(monitor, test) {
+    const key = monitor + "/" + test;
+    let s = this.series.get(key);
+    if (!s) { s = new Series(); this.series.set(key, s); }
+    return s;
+  }
+  /** "live", "connecting…", "reconnecting in N s" or "off". */
+  liveText() {
+    if (this.ws && this.ws.readyState === WebSocket.OPEN) return "live";
+    if (this.ws) return "connecting\u2026";
+    if (this.retryTimer) return "reconnecting in " + Math.max(1, Math.ceil((this.retryAt - Date.now()) / 1000)) + " s";
+    return "off";
+  }
+  /** Monitors as [{name, type, spec, tests: {name: {state, dof, threshold, ...}}}]: REST spec + live stats. */
+  monitors() {
+    const out = [];
+    const byName = new Map();
+    for (const m of (this.info && this.info.monitors) || []) {
+      const entry = { name: m.name, type: m.type, spec: m, tests: Object.assign({}, m.tests || {}) };
+      byName.set(m.name, entry); out.push(entry);
+    }
+    for (const [name, m] of Object.entries((this.stats && this.stats.monitors) || {})) {
+      let entry = byName.get(name);
+      if (!entry) { entry = { name, type: m.type, spec: null, tests: {} }; byName.set(name, entry); out.push(entry); }
+      entry.live = m;
+      for (const [t, ts] of Object.entries(m.tests || {})) entry.tests[t] = ts;
+    }
+    return out;
+  }
+}
+
+/** The store. `on(kind, fn)` with kind in sessions | stats | state | alarm | status. */
+export class Live {
+  constructor() {
+    this.sessions = new Map();
+    this.recentAlarms = [];
+    this.listeners = new Map();
+    this.pollTimer = null;
+    this.loaded = false;
+    this.paused = false; // true while the page waits for a token
+    /** Time spent handling socket messages, ms (the browser test reads it). */
+    this.handleMs = [];
+  }
+
+  on(kind, fn) {
+    if (!this.listeners.has(kind)) this.listeners.set(kind, new Set());
+    this.listeners.get(kind).add(fn);
+    return () => this.listeners.get(kind).delete(fn);
+  }
+  emit(kind, ...args) {
+    for (const fn of this.listeners.get(kind) || []) {
+      try { fn(...args); } catch (e) { console.error(e); }
+    }
+  }
+
+  start() { this.paused = false; this.poll(); this.loadRecentAlarms(); }
+
+  /** Stops sockets and polling until `restart()` (e.g. while asking for a token). */
+  pause() {
+    this.paused = true;
+    clearTimeout(this.pollTimer);
+    for (const s of this.sessions.values()) this.closeSocket(s);
+  }
+
+  restart() {
+    this.paused = false;
+    for (const s of this.sessions.values()) { s.delay = BACKOFF_MIN_MS; this.connect(s); }
+    this.start();
+  }
+
+  /** The server answered again after an outage: retry sockets now, not at the end of their backoff. */
+  serverBack() {
+    for (const s of this.sessions.values()) if (s.retryTimer) { s.delay = BACKOFF_MIN_MS; this.connect(s); }
+  }
+
+  async poll() {
+    clearTimeout(this.pollTimer);
+    if (this.paused) return;
+    try {
+      const data = await get("api/v1/sessions");
+      this.sync(Array.isArray(data && data.sessions) ? data.sessions : []);
+      this.emit("status", "ok");
+    } catch (e) {
+      if (!(e instanceof AuthError)) this.emit("status", "error", e);
+    } finally {
+      if (!this.paused) this.pollTimer = setTimeout(() => this.poll(), POLL_MS);
+    }
+  }
+
+  sync(list) {
+    const seen = new Set();
+    for (const info of list) {
+      if (!info || typeof info.id !== "string") continue;
+      seen.add(info.id);
+      let s = this.sessions.get(info.id);
+      if (!s) { s = new SessionLive(info.id); this.sessions.set(info.id, s); }
+      s.info = info;
+      if (!s.ws && !s.retryTimer) this.connect(s);
+    }
+    for (const [id, s] of this.sessions) {
+      if (!seen.has(id)) { s.removed = true; this.closeSocket(s); this.sessions.delete(id); }
+    }
+    this.loaded = true;
+    this.emit("sessions");
+  }
+
+  /** Refreshes one session's REST view now (after a threshold change, say). */
+  async refresh(id) {
+    try {
+      const info = await get("api/v1/sessions/" + encodeURIComponent(id));
+      const s = this.sessions.get(id);
+      if (s) { s.info = info; this.emit("sessions"); }
+    } catch (_) { /* the next poll will tell */ }
+  }
+
+  // ------------------------------------------------------------ sockets
+
+  connect(s) {
+    clearTimeout(s.retryTimer);
+    s.retryTimer = null;
+    if (s.removed || this.paused) return;
+    if (s.ws) return;
+    let ws;
+    try {
+      ws = new WebSocket(socketUrl("api/v1/sessions/" + encodeURIComponent(s.id) + "/events"));
+    } catch (_) { this.scheduleRetry(s); return; }
+    s.ws = ws;
+    s.openedAt = 0;
+    ws.onopen = () => {
+      if (s.ws !== ws) return;
+      s.openedAt = Date.now();
+      // Alarms raised while we were not subscribed are only in the log.
+      this.catchUpAlarms(s);
+      this.emit("sessions");
+    };
+    ws.onmessage = (ev) => {
+      if (s.ws !== ws) return;
+      const started = performance.now();
+      let msg;
+      try { msg = JSON.parse(ev.data); } catch (_) { return; }
+      if (msg && msg.type === "stats") this.onStats(s, msg);
+      else if (msg && msg.type === "state") this.onState(s, msg);
+      else if (msg && msg.type === "alarm") this.onAlarm(msg, true);
+      this.handleMs.push(performance.now() - started);
+      if (this.handleMs.length > 5000) this.handleMs.splice(0, 2500);
+    };
+    ws.onclose = () => {
+      if (s.ws !== ws) return;
+      s.ws = null;
+      if (s.removed || this.paused) return;
+      if (s.openedAt && Date.now() - s.openedAt >= STABLE_OPEN_MS) s.delay = BACKOFF_MIN_MS;
+      this.scheduleRetry(s);
+      this.emit("sessions");
+    };
+  }
+
+  /** Exponential backoff with ±10 % jitter, so many tabs do not reconnect in step. */
+  scheduleRetry(s) {
+    clearTimeout(s.retryTimer);
+    const delay = Math.round(s.delay * (0.9 + Math.random() * 0.2));
+    s.retryAt = Date.now() + delay;
+    s.retryTimer = setTimeout(() => this.connect(s), delay);
+    s.delay = Math.min(s.delay * 2, BACKOFF_MAX_MS);
+  }
+
+  closeSocket(s) {
+    clearTimeout(s.retryTimer);
+    s.retryTimer = null;
+    if (s.ws) {
+      const ws = s.ws;
+      s.ws = null;
+      try { ws.close(1000, "closing"); } catch (_) { /* already closed */ }
+    }
+  }
+
+  // ------------------------------------------------------------ messages
+
+  onStats(s, st) {
+    s.stats = st;
+    s.statsAt = Date.now();
+    const t = st.last_t;
+    if (isNum(t)) {
+      for (const [mname, m] of Object.entries(st.monitors || {})) {
+        for (const [tname, ts] of Object.entries(m.tests || {})) {
+          // Only a test that ran since the last snapshot has a new statistic
+          // (an aid at 1 Hz keeps its old `last` through the INS's 10 Hz epochs).
+          const series = s.seriesFor(mname, tname);
+          if (ts.epochs === series.lastEpochs || !isNum(ts.last)) continue;
+          if (ts.epochs < series.lastEpochs) series.clear(); // the stream restarted
+          series.lastEpochs = ts.epochs;
+          series.push(t, ts.last, ts.threshold, ts.state);
+        }
+      }
+    }
+    this.emit("stats", s);
+  }
+
+  onState(s, msg) {
+    if (typeof msg.monitor !== "string" || typeof msg.test !== "string") return;
+    s.seriesFor(msg.monitor, msg.test).transition(msg.t, msg.to);
+    const m = s.stats && s.stats.monitors && s.stats.monitors[msg.monitor];
+    if (m && m.tests && m.tests[msg.test]) m.tests[msg.test].state = msg.to;
+    if (msg.to === "healthy") {
+      // Mirrors the server: a return to healthy clears that test's open alarms.
+      for (const a of this.recentAlarms) {
+        if (a.session === s.id && a.monitor === msg.monitor && a.test === msg.test && a.cleared_t == null) a.cleared_t = msg.t;
+      }
+    }
+    this.emit("state", s, msg);
+  }
+
+  /** Adds an alarm (live or from the log) to the recent list, newest first, once. */
+  onAlarm(a, live) {
+    if (!a || typeof a !== "object") return;
+    if (a.id > 0 && this.recentAlarms.some((b) => b.id === a.id)) return;
+    const s = this.sessions.get(a.session);
+    if (s && a.id > s.maxAlarmId) s.maxAlarmId = a.id;
+    let i = 0;
+    // Ids grow with insertion; an unstored alarm (id -1) goes by its clock.
+    const newer = (x, y) => (x.id > 0 && y.id > 0 ? x.id > y.id : (x.raised_at_ms || 0) > (y.raised_at_ms || 0));
+    while (i < this.recentAlarms.length && !newer(a, this.recentAlarms[i])) i++;
+    if (i >= RECENT_ALARMS) return;
+    this.recentAlarms.splice(i, 0, Object.assign({ live }, a));
+    if (this.recentAlarms.length > RECENT_ALARMS) this.recentAlarms.pop();
+    this.emit("alarm", a, live);
+  }
+
+  async loadRecentAlarms() {
+    try {
+      const page = await get("api/v1/alarms?limit=50");
+      for (const a of (page && page.alarms) || []) this.onAlarm(a, false);
+    } catch (_) { /* shown by the status line */ }
+  }
+
+  async catchUpAlarms(s) {
+    try {
+      const q = "api/v1/alarms?limit=100&session=" + encodeURIComponent(s.id) + (s.maxAlarmId > 0 ? "&after=" + s.maxAlarmId : "");
+      const page = await get(q);
+      for (const a of ((page && page.alarms) || []).reverse()) this.onAlarm(a, false);
+    } catch (_) { /* a 401 asks for the token; anything else shows in the status line */ }
+  }
+}

@@ -1,0 +1,198 @@
+// session.js — one session in detail: for each monitor a strip chart per
+// test (statistic against threshold, suspect/isolated bands), HPL against HAL
+// for federated monitors, the threshold controls, and the session's alarms.
+// All charts of the session share one time range, so zooming one zooms all.
+
+import { el, setText, badge, setBadge, fmtNum, fmtRatio, fmtT, fmtClock, policyText, isNum } from "./dom.js";
+import { StripChart } from "./chart.js";
+import { ThresholdControls } from "./controls.js";
+
+const SESSION_ALARMS = 50;
+
+export class SessionView {
+  constructor(live, root) {
+    this.live = live;
+    this.root = root;
+    this.id = null;
+    this.shape = "";
+    this.charts = [];       // {chart, monitor, test, caption}
+    this.range = null;      // shared zoom [t0, t1]
+    this.paused = false;
+    this.log = false;
+    this.alarmsDirty = true;
+    this.headDirty = true;
+    this.title = root.querySelector("#session-title");
+    this.body = root.querySelector("#session-monitors");
+    this.alarmBody = root.querySelector("#session-alarms");
+    this.facts = root.querySelector("#session-facts");
+    this.rangeText = root.querySelector("#range-text");
+    this.pauseBtn = root.querySelector("#pause");
+    this.logBox = root.querySelector("#log-scale");
+    this.pauseBtn.addEventListener("click", () => this.setPaused(!this.paused));
+    this.logBox.addEventListener("change", () => {
+      this.log = this.logBox.checked;
+      for (const c of this.charts) c.chart.setLog(this.log);
+    });
+    root.querySelector("#reset-zoom").addEventListener("click", () => this.setRange(null));
+    live.on("stats", (s) => {
+      if (s.id !== this.id) return;
+      this.headDirty = true;
+      // Paused or zoomed: the visible window is fixed, new points land outside it.
+      if (!this.paused && !this.range) for (const c of this.charts) c.chart.invalidate();
+    });
+    live.on("state", (s) => {
+      if (s.id !== this.id) return;
+      // A return to healthy also clears alarms in the list below.
+      this.headDirty = true;
+      this.alarmsDirty = true;
+      for (const c of this.charts) c.chart.invalidate();
+    });
+    live.on("alarm", (a) => { if (a.session === this.id) this.alarmsDirty = true; });
+    live.on("sessions", () => { this.headDirty = true; });
+  }
+
+  /** Shows session `id` (called by the router). */
+  open(id) {
+    if (this.id !== id) {
+      this.id = id;
+      this.shape = "";
+      this.range = null;
+      this.setPaused(false);
+      this.body.replaceChildren();
+      this.charts = [];
+    }
+    this.headDirty = true;
+    this.alarmsDirty = true;
+  }
+
+  setPaused(on) {
+    this.paused = on;
+    setText(this.pauseBtn, on ? "Resume" : "Pause");
+    this.pauseBtn.setAttribute("aria-pressed", on ? "true" : "false");
+    if (on && !this.range) {
+      // Freeze the window where it is now.
+      const s = this.live.sessions.get(this.id);
+      const first = s && [...s.series.values()].find((x) => x.length);
+      if (first) this.range = [first.t[0], first.t[first.length - 1]];
+    } else if (!on) {
+      this.range = null;
+    }
+    this.applyRange();
+  }
+
+  setRange(range) {
+    this.range = range;
+    if (!range && this.paused) { this.paused = false; setText(this.pauseBtn, "Pause"); this.pauseBtn.setAttribute("aria-pressed", "false"); }
+    this.applyRange();
+  }
+
+  applyRange() {
+    for (const c of this.charts) c.chart.setRange(this.range);
+    setText(this.rangeText, this.range ? "showing t " + fmtT(this.range[0]) + " \u2013 " + fmtT(this.range[1]) + " s" : "live");
+  }
+
+  render() {
+    const s = this.live.sessions.get(this.id);
+    if (!s) {
+      setText(this.title, "Session " + this.id + (this.live.loaded ? " (not found)" : ""));
+      return;
+    }
+    const monitors = s.monitors();
+    const shape = JSON.stringify(monitors.map((m) => [m.name, Object.keys(m.tests)]));
+    if (shape !== this.shape) { this.shape = shape; this.build(s, monitors); }
+    if (this.headDirty) { this.headDirty = false; this.fillHead(s, monitors); }
+    for (const c of this.charts) c.chart.draw();
+    if (this.alarmsDirty) { this.alarmsDirty = false; this.fillAlarms(); }
+  }
+
+  build(s, monitors) {
+    setText(this.title, "Session " + s.id);
+    this.charts = [];
+    const cards = monitors.map((m) => {
+      const tests = Object.keys(m.tests);
+      // The HPL chart first: for a federated monitor it is the integrity headline.
+      tests.sort((a, b) => (a === "hpl" ? -1 : b === "hpl" ? 1 : a.localeCompare(b)));
+      const figures = tests.map((t) => {
+        const hpl = t === "hpl";
+        const chart = new StripChart({
+          label: hpl ? "HPL (m)" : "statistic",
+          thresholdLabel: hpl ? "HAL" : "threshold",
+          onZoom: (t0, t1) => this.setRange([t0, t1]),
+          onReset: () => this.setRange(null),
+        });
+        chart.canvas.dataset.session = s.id;
+        chart.canvas.dataset.monitor = m.name;
+        chart.canvas.dataset.test = t;
+        chart.setSeries(s.seriesFor(m.name, t));
+        chart.setRange(this.range);
+        chart.setLog(this.log);
+        const b = badge(null, { "data-kind": "test", "data-monitor": m.name, "data-test": t });
+        const value = el("span", { class: "num muted" });
+        const caption = el("figcaption", null,
+          el("strong", null, hpl ? "HPL vs HAL" : t), " ", b, " ", value);
+        this.charts.push({ chart, monitor: m.name, test: t, badge: b, value });
+        return el("figure", { class: "strip" + (hpl ? " hpl" : "") }, caption, chart.el);
+      });
+      const policy = el("span", { class: "muted policy" });
+      const controlsSlot = el("div", { class: "controls-slot" });
+      const toggle = el("button", { type: "button", "aria-expanded": "false", "data-control": "toggle", "data-monitor": m.name }, "Threshold & policy\u2026");
+      toggle.addEventListener("click", () => {
+        const open = toggle.getAttribute("aria-expanded") !== "true";
+        toggle.setAttribute("aria-expanded", String(open));
+        if (open) controlsSlot.replaceChildren(new ThresholdControls(s.id, m.name, () => this.live.refresh(s.id)).el);
+        else controlsSlot.replaceChildren();
+      });
+      const extra = [];
+      if (m.type === "federated") {
+        extra.push(el("figure", { class: "strip track" },
+          el("figcaption", null, el("strong", null, "Track (local ENU, m)")),
+          el("p", { class: "muted note" },
+            "Corrected vs raw INS track: not drawn. The public API carries no positions to an observer " +
+            "(the federated solution is only in the per-epoch `result` messages sent back on the ingest socket " +
+            "when the session has echo: true; the events socket's `stats` carry statistics only).")));
+      }
+      const wide = tests.length > 1 || extra.length > 0;
+      return el("section", { class: "card monitor" + (wide ? " wide" : ""), "data-monitor": m.name },
+        el("div", { class: "monitor-head" },
+          el("h3", null, m.name, " ", el("span", { class: "muted" }, m.type || "")), policy, toggle),
+        controlsSlot,
+        el("div", { class: "strips" }, ...figures, ...extra));
+    });
+    this.body.replaceChildren(...cards);
+    this.policyCells = new Map(monitors.map((m, i) => [m.name, cards[i].querySelector(".policy")]));
+  }
+
+  fillHead(s, monitors) {
+    for (const m of monitors) {
+      const cell = this.policyCells && this.policyCells.get(m.name);
+      if (cell && m.spec) {
+        setText(cell, [policyText(m.spec.policy), isNum(m.spec.p_fa) ? "p_fa " + m.spec.p_fa : null,
+          isNum(m.spec.threshold) ? "threshold " + fmtNum(m.spec.threshold) : null].filter(Boolean).join(" \u00b7 "));
+      }
+    }
+    for (const c of this.charts) {
+      const m = monitors.find((x) => x.name === c.monitor);
+      const ts = m && m.tests[c.test];
+      setBadge(c.badge, ts && ts.state);
+      setText(c.value, ts && isNum(ts.last) ? "last " + fmtNum(ts.last) + " / " + fmtNum(ts.threshold) + " (ratio " + fmtRatio(ts.last_test_ratio) + ")" : "");
+    }
+    const st = s.stats;
+    setText(this.facts, st
+      ? (st.connected ? "stream connected" : "stream not connected") + " \u00b7 " + st.epochs + " epochs \u00b7 t " + fmtT(st.last_t) + " s \u00b7 events " + s.liveText()
+      : "events " + s.liveText());
+  }
+
+  fillAlarms() {
+    const rows = this.live.recentAlarms.filter((a) => a.session === this.id).slice(0, SESSION_ALARMS).map((a) => {
+      const cleared = a.cleared_t !== null && a.cleared_t !== undefined;
+      return el("tr", { "data-alarm-id": a.id, class: cleared ? "cleared" : null },
+        el("td", null, fmtClock(a.raised_at_ms)), el("td", null, a.monitor), el("td", null, a.test),
+        el("td", null, badge(a.state)), el("td", { class: "num" }, fmtT(a.t)),
+        el("td", { class: "num" }, fmtNum(a.statistic) + " / " + fmtNum(a.threshold)),
+        el("td", { class: "num" }, fmtRatio(a.test_ratio)),
+        el("td", null, cleared ? "at t " + fmtT(a.cleared_t) : "active"));
+    });
+    this.alarmBody.replaceChildren(...rows);
+    if (!rows.length) this.alarmBody.append(el("tr", null, el("td", { colspan: 8, class: "muted" }, "No alarms for this session.")));
+  }
+}

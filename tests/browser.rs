@@ -1,0 +1,649 @@
+//! The dashboard in a real browser: headless Chromium driven over WebDriver
+//! (chromedriver) against a server started in this process on port 0. A
+//! shortened ship scenario with a GNSS position step is streamed into the
+//! ingest socket at 20× real time while the page is open; the test checks that
+//! the session appears, the alarm row appears, the charts have been drawn with
+//! data, and that a threshold change made through the page's controls is what
+//! the REST API then reports. It also feeds 10 monitors at 20 stats messages a
+//! second and prints the page's own frame-time figures (never asserted: no
+//! test asserts wall-clock time), and saves screenshots under `target/`.
+//!
+//! Needs `/usr/bin/chromium` and `/usr/bin/chromedriver` (Debian's `chromium`
+//! and `chromium-driver`; `CHROMIUM` / `CHROMEDRIVER` override the paths). With
+//! `NAVGUARD_BROWSER_TEST=1` (set by `.ci/run`) their absence fails the test;
+//! otherwise the test prints why it is skipped and passes. With
+//! `NAVGUARD_DASHBOARD_PNG=path` the session-view screenshot is also written
+//! there (how `static/dashboard.png` for the README is made).
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+use fantoccini::wd::Capabilities;
+use fantoccini::{Client, ClientBuilder, Locator};
+use futures_util::SinkExt;
+use navguard::service::Limits;
+use navguard::service::wire::epoch_to_wire;
+use navguard::sim::scenario::ship_with;
+use navguard::sim::{Aid, Channel, Fault, FaultKind};
+use serde_json::{Value, json};
+use tokio_tungstenite::tungstenite::Message;
+
+/// Seconds of the shortened ship run (10 Hz INS: 2,400 epochs).
+const SHIP_SECONDS: f64 = 240.0;
+/// Epochs per frame: one simulated second of the 10 Hz INS.
+const EPOCHS_PER_FRAME: usize = 10;
+/// Pause between frames: 20 frames a wall-clock second, i.e. 20× real time,
+/// which is also the events socket's top rate of `stats` messages.
+const FRAME_PERIOD: Duration = Duration::from_millis(50);
+/// Monitors in the load session.
+const LOAD_MONITORS: usize = 10;
+
+fn tool(env: &str, default: &str) -> PathBuf {
+    std::env::var_os(env).map_or_else(|| PathBuf::from(default), PathBuf::from)
+}
+
+/// The browser and its driver, or the reason the test cannot run.
+fn browser_tools() -> Result<(PathBuf, PathBuf), String> {
+    let chromium = tool("CHROMIUM", "/usr/bin/chromium");
+    let driver = tool("CHROMEDRIVER", "/usr/bin/chromedriver");
+    for path in [&chromium, &driver] {
+        if !path.exists() {
+            return Err(format!(
+                "{} not found (install Debian's chromium and chromium-driver)",
+                path.display()
+            ));
+        }
+    }
+    Ok((chromium, driver))
+}
+
+/// chromedriver on a free port; killed on drop.
+struct Driver {
+    child: Child,
+    url: String,
+}
+
+impl Drop for Driver {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+async fn start_driver(path: &Path) -> Driver {
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let child = Command::new(path)
+        .arg(format!("--port={port}"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("chromedriver starts");
+    // Owned by the guard from here on, so a panic below still kills it.
+    let driver = Driver {
+        child,
+        url: format!("http://127.0.0.1:{port}"),
+    };
+    for _ in 0..100 {
+        if tokio::net::TcpStream::connect(("127.0.0.1", port))
+            .await
+            .is_ok()
+        {
+            return driver;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    panic!("chromedriver did not listen on port {port}");
+}
+
+async fn open_browser(driver: &Driver, chromium: &Path, profile: &Path) -> Client {
+    let mut caps = Capabilities::new();
+    caps.insert(
+        "goog:chromeOptions".into(),
+        json!({
+            "binary": chromium,
+            // The flags a sandboxed CI machine with a closed network needs.
+            "args": [
+                "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+                "--no-first-run", "--disable-background-networking",
+                "--disable-component-update", "--disable-sync",
+                "--disable-dev-shm-usage", "--hide-scrollbars",
+                format!("--user-data-dir={}", profile.display()),
+                "--window-size=1400,1000",
+            ],
+        }),
+    );
+    let connector = hyper_util::client::legacy::connect::HttpConnector::new();
+    ClientBuilder::new(connector)
+        .capabilities(caps)
+        .connect(&driver.url)
+        .await
+        .expect("a WebDriver session with chromium")
+}
+
+/// Polls `script` (a JS expression) until it is truthy; panics with `what` after 30 s.
+async fn wait_js(client: &Client, script: &str, what: &str) -> Value {
+    for _ in 0..300 {
+        let v = client
+            .execute(&format!("return ({script});"), vec![])
+            .await
+            .expect("script runs");
+        let truthy = match &v {
+            Value::Null => false,
+            Value::Bool(b) => *b,
+            Value::Number(n) => n.as_f64() != Some(0.0),
+            Value::String(s) => !s.is_empty(),
+            _ => true,
+        };
+        if truthy {
+            return v;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    let html = client.source().await.unwrap_or_default();
+    panic!(
+        "timed out waiting for {what} ({script}); page:\n{}",
+        &html[html.find("<main").unwrap_or(0)..][..html
+            .len()
+            .min(6000)
+            .min(html.len() - html.find("<main").unwrap_or(0))]
+    );
+}
+
+async fn js(client: &Client, script: &str) -> Value {
+    client.execute(script, vec![]).await.expect("script runs")
+}
+
+/// The ship run with a GNSS position step of 40 m north on [90, 150) s: a
+/// fault the GNSS test isolates within a few epochs and releases after.
+fn ship_frames() -> Vec<String> {
+    let fault = Fault {
+        aid: Aid::Gnss,
+        channel: Channel::Position,
+        component: 1,
+        kind: FaultKind::Step { value: 40.0 },
+        start_s: 90.0,
+        end_s: Some(150.0),
+    };
+    let scenario = ship_with(7, vec![fault], SHIP_SECONDS).expect("ship scenario");
+    scenario
+        .epochs
+        .chunks(EPOCHS_PER_FRAME)
+        .map(|chunk| {
+            let epochs: Vec<String> = chunk
+                .iter()
+                .map(|e| epoch_to_wire(&e.epoch).expect("finite epoch"))
+                .collect();
+            format!("[{}]", epochs.join(","))
+        })
+        .collect()
+}
+
+fn ship_session() -> Value {
+    let scenario = ship_with(7, vec![], 1.0).expect("ship scenario");
+    json!({
+        "id": "ship",
+        "monitors": [{
+            "name": "federated",
+            "type": "federated",
+            "config": scenario.default_monitor_config(),
+            "policy": {"kind": "counters", "n1": 10, "n2": 5},
+        }],
+    })
+}
+
+/// A constant-velocity track (DESIGN §3.2's linear monitor) observed in noise.
+fn load_session() -> Value {
+    let monitors: Vec<Value> = (0..LOAD_MONITORS)
+        .map(|i| {
+            json!({
+                "name": format!("cv{i}"),
+                "type": "linear",
+                "config": {
+                    "f": [[1.0, 1.0], [0.0, 1.0]], "h": [[1.0, 0.0]],
+                    "q": [[0.25, 0.5], [0.5, 1.0]], "r": [[1.0]],
+                    "x0": [0.0, 0.0], "p0": [[10.0, 0.0], [0.0, 10.0]],
+                },
+            })
+        })
+        .collect();
+    json!({"id": "load", "monitors": monitors})
+}
+
+/// Frames of `z` = a deterministic pseudo-noise around 0 (no RNG needed: the
+/// statistic only has to move for the charts to redraw).
+fn load_frames(n: usize) -> Vec<String> {
+    (0..n)
+        .map(|k| {
+            let z = ((k as f64) * 1.7).sin() * 0.8;
+            json!({"t": k as f64, "z": [z]}).to_string()
+        })
+        .collect()
+}
+
+async fn stream(url: String, frames: Vec<String>) {
+    let mut socket = common::connect(&url).await;
+    for frame in frames {
+        socket
+            .send(Message::Text(frame.into()))
+            .await
+            .expect("send");
+        tokio::time::sleep(FRAME_PERIOD).await;
+    }
+    let _ = socket.close(None).await;
+}
+
+async fn save_screenshot(client: &Client, name: &str) -> PathBuf {
+    let png = client.screenshot().await.expect("screenshot");
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("target");
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join(name);
+    std::fs::write(&path, &png).unwrap();
+    path
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_dashboard_shows_a_faulty_replay_and_applies_a_threshold_change() {
+    let (chromium, driver_path) = match browser_tools() {
+        Ok(tools) => tools,
+        Err(reason) if std::env::var("NAVGUARD_BROWSER_TEST").as_deref() == Ok("1") => {
+            panic!("NAVGUARD_BROWSER_TEST=1 but {reason}")
+        }
+        Err(reason) => {
+            eprintln!(
+                "skipping the browser test: {reason}; set NAVGUARD_BROWSER_TEST=1 to require it"
+            );
+            return;
+        }
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let server = common::start(&dir.path().join("t.db"), None, Limits::default()).await;
+    let http = common::http(&server);
+    let ws = common::ws(&server);
+    let rest = reqwest::Client::new();
+    let created = rest
+        .post(format!("{http}/api/v1/sessions"))
+        .json(&ship_session())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(created.status(), 201, "{}", created.text().await.unwrap());
+
+    let driver = start_driver(&driver_path).await;
+    let profile = tempfile::tempdir().unwrap();
+    let client = open_browser(&driver, &chromium, profile.path()).await;
+    client.goto(&format!("{http}/")).await.unwrap();
+
+    // 1. The session appears in the overview, with its monitor's test badges.
+    client
+        .wait()
+        .for_element(Locator::Css(r#"#sessions [data-session="ship"]"#))
+        .await
+        .expect("the session card appears");
+    wait_js(
+        &client,
+        r#"document.querySelectorAll('#sessions [data-session="ship"] .badge[data-test]').length >= 4"#,
+        "badges for gnss, dvl, cns and hpl",
+    )
+    .await;
+
+    // 2. Open the session and replay the faulty run while the page watches.
+    client
+        .goto(&format!("{http}/#/session/ship"))
+        .await
+        .unwrap();
+    let feeder = tokio::spawn(stream(
+        format!("{ws}/api/v1/sessions/ship/ingest"),
+        ship_frames(),
+    ));
+    let alarm = wait_js(
+        &client,
+        r#"(() => { const r = document.querySelector('#session-alarms tr[data-alarm-id]'); return r && r.textContent; })()"#,
+        "an alarm row in the session view",
+    )
+    .await;
+    println!("first alarm row: {alarm}");
+    feeder.await.unwrap();
+
+    // 3. The GNSS chart has drawn the whole run, and its canvas holds real pixels.
+    let points = wait_js(
+        &client,
+        r#"(() => { const c = document.querySelector('canvas[data-monitor="federated"][data-test="gnss"]'); return c && Number(c.dataset.points) >= 100 && Number(c.dataset.points); })()"#,
+        "the gnss chart to draw at least 100 points",
+    )
+    .await;
+    let inked = js(
+        &client,
+        r#"const c = document.querySelector('canvas[data-test="gnss"]');
+           const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+           let blue = 0, shaded = 0;
+           for (let i = 0; i < d.length; i += 4) {
+             if (d[i + 2] > 150 && d[i] < 60 && d[i + 3] > 200) blue++;       // the statistic line
+             if (d[i] > 200 && d[i + 2] < 200 && d[i + 3] > 20 && d[i + 3] < 120) shaded++; // a state band
+           }
+           return {blue, shaded};"#,
+    )
+    .await;
+    println!("gnss chart: {points} points drawn, pixels {inked}");
+    assert!(inked["blue"].as_u64().unwrap() > 100, "{inked}");
+    let hpl = js(
+        &client,
+        r#"return Number(document.querySelector('canvas[data-test="hpl"]').dataset.points);"#,
+    )
+    .await;
+    assert!(hpl.as_f64().unwrap() >= 100.0, "HPL chart points: {hpl}");
+
+    // The page's alarm matches the log.
+    let log: Value = rest
+        .get(format!(
+            "{http}/api/v1/alarms?session=ship&monitor=federated"
+        ))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let gnss_alarms: Vec<&Value> = log["alarms"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|a| a["test"] == "gnss")
+        .collect();
+    assert!(!gnss_alarms.is_empty(), "{log}");
+    let t = gnss_alarms.last().unwrap()["t"].as_f64().unwrap();
+    assert!((90.0..100.0).contains(&t), "GNSS alarm at t = {t}");
+    let shot = save_screenshot(&client, "dashboard-session.png").await;
+    if let Some(path) = std::env::var_os("NAVGUARD_DASHBOARD_PNG") {
+        std::fs::copy(&shot, path).unwrap();
+    }
+
+    // 4. Change the threshold through the controls; REST reports it.
+    client
+        .find(Locator::Css(
+            r#"button[data-control="toggle"][data-monitor="federated"]"#,
+        ))
+        .await
+        .unwrap()
+        .click()
+        .await
+        .unwrap();
+    wait_js(
+        &client,
+        r#"document.querySelector('[data-control="applied"]')?.dataset.state === 'loaded'"#,
+        "the controls to load the threshold in force",
+    )
+    .await;
+    client
+        .find(Locator::Css(r#"select[data-control="mode"]"#))
+        .await
+        .unwrap()
+        .select_by_value("p_fa")
+        .await
+        .unwrap();
+    let value = client
+        .find(Locator::Css(r#"input[data-control="value"]"#))
+        .await
+        .unwrap();
+    value.clear().await.unwrap();
+    value.send_keys("0.0001").await.unwrap();
+    // The live preview asks /api/v1/chi2/threshold: χ²(6) at p_fa 1e-4 is 27.86.
+    let preview = wait_js(
+        &client,
+        r#"[...document.querySelectorAll('[data-preview]')].map(e => e.textContent).find(t => t.startsWith('gnss (dof 6)') && t.includes('27.86'))"#,
+        "the preview of the GNSS threshold",
+    )
+    .await;
+    println!("preview: {preview}");
+    client
+        .find(Locator::Css(r#"button[data-control="apply"]"#))
+        .await
+        .unwrap()
+        .click()
+        .await
+        .unwrap();
+    let applied = wait_js(
+        &client,
+        r#"(() => { const p = document.querySelector('[data-control="applied"]'); return p.dataset.state === 'applied' && p.textContent; })()"#,
+        "the controls to show the change applied",
+    )
+    .await;
+    println!("{applied}");
+    let view: Value = rest
+        .get(format!(
+            "{http}/api/v1/sessions/ship/monitors/federated/threshold"
+        ))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(view["p_fa"], 0.0001, "{view}");
+    assert_eq!(view["policy"]["kind"], "counters", "{view}");
+    let gnss = view["tests"]["gnss"]["threshold"].as_f64().unwrap();
+    // χ²(6) quantile at 1 − 1e-4 (scipy.stats.chi2.ppf(1 - 1e-4, 6) = 27.8563...).
+    assert!((gnss - 27.856_3).abs() < 1e-3, "{view}");
+
+    // 5. The alarm log page lists the persisted alarms.
+    client.goto(&format!("{http}/#/alarms")).await.unwrap();
+    wait_js(
+        &client,
+        r#"document.querySelectorAll('#alarms tr[data-session="ship"]').length > 0"#,
+        "alarm rows on the alarms page",
+    )
+    .await;
+    save_screenshot(&client, "dashboard-alarms.png").await;
+
+    // 6. Models page: a trained model is listed with its kind and can be
+    // deleted; a server without the model API shows "No models".
+    let x: Vec<Vec<f64>> = (0..40).map(|i| vec![f64::from(i) / 10.0]).collect();
+    let y: Vec<f64> = x.iter().map(|v| v[0].sin()).collect();
+    let trained = rest
+        .post(format!("{http}/api/v1/models"))
+        .json(
+            &json!({"kind": "lssvm", "name": "sine", "params": {"gamma": 10, "sigma2": 1},
+                      "data": {"x": x, "y": y}}),
+        )
+        .send()
+        .await
+        .unwrap();
+    client.goto(&format!("{http}/#/models")).await.unwrap();
+    if trained.status() == 404 {
+        wait_js(
+            &client,
+            "!document.getElementById('no-models').hidden && document.getElementById('no-models').textContent.startsWith('No models')",
+            "the models page to say there are no models",
+        )
+        .await;
+        println!("no model API on this server: the models page says so");
+    } else {
+        assert_eq!(trained.status(), 202);
+        let record: Value = trained.json().await.unwrap();
+        let id = record["id"].as_str().unwrap().to_owned();
+        let row = format!(r#"#models tr[data-model="{id}"]"#);
+        let text = wait_js(
+            &client,
+            &format!(
+                r#"(() => {{ const r = document.querySelector('{row}'); return r && r.dataset.status === 'ready' && r.textContent; }})()"#
+            ),
+            "the trained model's row",
+        )
+        .await;
+        assert!(text.as_str().unwrap().contains("lssvm"), "{text}");
+        println!("models page lists {id}: {text}");
+        save_screenshot(&client, "dashboard-models.png").await;
+        client
+            .find(Locator::Css(&format!(r#"button[data-model="{id}"]"#)))
+            .await
+            .unwrap()
+            .click()
+            .await
+            .unwrap();
+        wait_js(
+            &client,
+            &format!(r#"!document.querySelector('{row}')"#),
+            "the deleted model's row to go",
+        )
+        .await;
+        let gone = rest
+            .get(format!("{http}/api/v1/models/{id}"))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(gone.status(), 404);
+    }
+
+    // 7. Load: 10 monitors, 20 stats messages a second, 10 charts on screen.
+    let created = rest
+        .post(format!("{http}/api/v1/sessions"))
+        .json(&load_session())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(created.status(), 201);
+    client
+        .goto(&format!("{http}/#/session/load"))
+        .await
+        .unwrap();
+    wait_js(
+        &client,
+        "document.querySelectorAll('#session-monitors canvas').length === 10",
+        "ten charts",
+    )
+    .await;
+    js(&client, "window.navguardPerf(true); return null;").await;
+    stream(
+        format!("{ws}/api/v1/sessions/load/ingest"),
+        load_frames(120),
+    )
+    .await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let perf = js(&client, "return window.navguardPerf(false);").await;
+    println!(
+        "frame time with {LOAD_MONITORS} monitors at 20 stats/s (ms): render {} ; frame interval {} ; message handling {}",
+        perf["frame"], perf["interval"], perf["message"]
+    );
+    assert!(perf["message"]["n"].as_u64().unwrap() > 10, "{perf}");
+    assert!(perf["frame"]["n"].as_u64().unwrap() > 10, "{perf}");
+    let drawn = js(
+        &client,
+        "return [...document.querySelectorAll('#session-monitors canvas')].every(c => Number(c.dataset.points) > 50);",
+    )
+    .await;
+    assert_eq!(drawn, Value::Bool(true));
+    save_screenshot(&client, "dashboard-load.png").await;
+
+    // 8. The server restarts: the page reports it unreachable, then its
+    // sockets reconnect (with backoff) and live updates flow again.
+    client.goto(&format!("{http}/#/")).await.unwrap();
+    wait_js(
+        &client,
+        r#"document.querySelectorAll('#sessions [data-session]').length === 2"#,
+        "both sessions in the overview",
+    )
+    .await;
+    save_screenshot(&client, "dashboard-overview.png").await;
+    let addr = server.addr;
+    let db = dir.path().join("t.db");
+    server.shutdown().await;
+    wait_js(
+        &client,
+        "document.getElementById('status').dataset.state === 'unreachable'",
+        "the page to notice the server is gone",
+    )
+    .await;
+    let server = restart(addr, &db, None).await;
+    wait_js(
+        &client,
+        r#"document.querySelector('[data-session="load"]')?.dataset.live === 'live'"#,
+        "the events socket to reconnect",
+    )
+    .await;
+    // Frames every 100 ms until the page shows the new stream's epochs. (The
+    // session publishes stats at most every 50 ms and has no trailing publish,
+    // so the stats of a lone last frame can wait for the next frame.)
+    let mut socket = common::connect(&format!("{ws}/api/v1/sessions/load/ingest")).await;
+    let epochs = r#"Number(document.querySelector('[data-session="load"] dd[data-field="epochs"]')?.textContent)"#;
+    let mut seen = 0.0;
+    for k in 0..100 {
+        common::send(&mut socket, &json!({"t": f64::from(k), "z": [0.5]})).await;
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        seen = js(&client, &format!("return {epochs};"))
+            .await
+            .as_f64()
+            .unwrap_or(0.0);
+        if seen >= 1.0 {
+            break;
+        }
+    }
+    assert!(
+        seen >= 1.0,
+        "no stats from the restarted server reached the page"
+    );
+    socket.close(None).await.unwrap();
+    server.shutdown().await;
+
+    // 9. Back with a token: the page asks for it once, keeps it for the tab
+    // (sessionStorage), and uses it on REST and sockets.
+    let server = restart(addr, &db, Some("s3cret")).await;
+    wait_js(
+        &client,
+        "!document.getElementById('auth').hidden",
+        "the token prompt",
+    )
+    .await;
+    client
+        .find(Locator::Id("token"))
+        .await
+        .unwrap()
+        .send_keys("s3cret")
+        .await
+        .unwrap();
+    client
+        .find(Locator::Css("#auth button"))
+        .await
+        .unwrap()
+        .click()
+        .await
+        .unwrap();
+    wait_js(
+        &client,
+        r#"document.querySelector('[data-session="ship"]')?.dataset.live === 'live' && document.getElementById('status').dataset.state === 'ok'"#,
+        "REST and sockets with the token",
+    )
+    .await;
+    client.refresh().await.unwrap();
+    wait_js(
+        &client,
+        r#"document.getElementById('status').dataset.state === 'ok' && document.getElementById('auth').hidden"#,
+        "a reload to reuse the stored token without asking",
+    )
+    .await;
+    assert_eq!(
+        js(&client, "return sessionStorage.getItem('navguard.token');").await,
+        "s3cret"
+    );
+
+    client.close().await.unwrap();
+    server.shutdown().await;
+}
+
+/// A server on the same address and store as before (sessions persist).
+async fn restart(
+    addr: std::net::SocketAddr,
+    db: &Path,
+    token: Option<&str>,
+) -> navguard::service::Server {
+    let mut config = navguard::service::ServiceConfig::new(addr, db);
+    config.token = token.map(str::to_owned);
+    navguard::service::start(config)
+        .await
+        .expect("the server restarts on its old address")
+}
