@@ -1,17 +1,36 @@
-//! The REST side of `navguard replay` (get or create a session, read its
-//! stats) through reqwest, bounded in time, and the URL handling shared with
-//! the socket side.
+//! The client side shared by `navguard replay` and `navguard loadgen`: the
+//! URL handling, REST calls through one reqwest client (bounded in time), and
+//! opening an ingest socket up to its `ready` message.
 
+use std::sync::OnceLock;
 use std::time::Duration;
 
 use anyhow::{Context, bail};
-use tokio_tungstenite::tungstenite::http::Uri;
+use futures_util::StreamExt;
+use tokio::net::TcpStream;
+use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+use tokio_tungstenite::tungstenite::http::{HeaderValue, Uri};
+use tokio_tungstenite::tungstenite::{self, Message};
+use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};
 
 /// Longest a REST call may take, connect to last byte.
 const TIMEOUT: Duration = Duration::from_secs(15);
+/// Longest wait for a socket to open and say `ready`.
+const CONNECT_TIMEOUT: Duration = Duration::from_secs(10);
 
-/// The navguard server `replay` talks to, derived from the `--url` it was given.
-#[derive(Debug, Clone, PartialEq)]
+/// The client socket's read buffer: the protocol layer zero-fills it before
+/// every read, so the 128 KiB default costs more than the messages themselves.
+const READ_BUFFER_BYTES: usize = 8 << 10;
+
+fn socket_config() -> tungstenite::protocol::WebSocketConfig {
+    tungstenite::protocol::WebSocketConfig::default().read_buffer_size(READ_BUFFER_BYTES)
+}
+
+/// A client WebSocket to the server.
+pub type Socket = WebSocketStream<MaybeTlsStream<TcpStream>>;
+
+/// The navguard server a tool talks to, derived from the `--url` it was given.
+#[derive(Debug, Clone)]
 pub struct Endpoint {
     /// Host name or address.
     pub host: String,
@@ -21,6 +40,8 @@ pub struct Endpoint {
     pub prefix: String,
     /// Bearer token, if any.
     pub token: Option<String>,
+    /// One HTTP client (and its connection pool) for every REST call.
+    client: OnceLock<reqwest::Client>,
 }
 
 impl Endpoint {
@@ -50,6 +71,7 @@ impl Endpoint {
             port: uri.port_u16().unwrap_or(default_port),
             prefix,
             token: token.filter(|t| !t.is_empty()),
+            client: OnceLock::new(),
         })
     }
 
@@ -82,11 +104,17 @@ impl Endpoint {
         let url = format!("{}{path}", self.http_base());
         let method = reqwest::Method::from_bytes(method.as_bytes())
             .with_context(|| format!("bad HTTP method {method:?}"))?;
-        let client = reqwest::Client::builder()
-            .timeout(TIMEOUT)
-            .user_agent("navguard-replay")
-            .build()
-            .context("building the HTTP client")?;
+        let client = match self.client.get() {
+            Some(client) => client,
+            None => {
+                let built = reqwest::Client::builder()
+                    .timeout(TIMEOUT)
+                    .user_agent("navguard-cli")
+                    .build()
+                    .context("building the HTTP client")?;
+                self.client.get_or_init(|| built)
+            }
+        };
         let mut request = client.request(method.clone(), &url);
         if let Some(token) = &self.token {
             request = request.bearer_auth(token);
@@ -104,6 +132,58 @@ impl Endpoint {
             .await
             .with_context(|| format!("{method} {url}: reading the answer"))?;
         Ok((status, text))
+    }
+
+    /// Opens the socket at `path` (offering the `navguard` subprotocol and the
+    /// token) and waits for the server's `ready` message.
+    pub async fn connect(&self, path: &str) -> anyhow::Result<Socket> {
+        let url = self.ws_url(path);
+        let mut request = url.as_str().into_client_request()?;
+        request.headers_mut().insert(
+            "Sec-WebSocket-Protocol",
+            HeaderValue::from_static("navguard"),
+        );
+        if let Some(token) = &self.token {
+            request.headers_mut().insert(
+                "Authorization",
+                HeaderValue::from_str(&format!("Bearer {token}"))?,
+            );
+        }
+        let (mut socket, _) = tokio::time::timeout(
+            CONNECT_TIMEOUT,
+            tokio_tungstenite::connect_async_with_config(request, Some(socket_config()), false),
+        )
+        .await
+        .with_context(|| format!("{url}: no WebSocket handshake within 10 s"))?
+        .map_err(|e| match e {
+            tungstenite::Error::Http(response) => {
+                let body = response
+                    .body()
+                    .as_deref()
+                    .map(String::from_utf8_lossy)
+                    .unwrap_or_default()
+                    .into_owned();
+                anyhow::anyhow!("{url}: HTTP {}: {body}", response.status())
+            }
+            e => anyhow::anyhow!("cannot open the ingest socket {url}: {e}"),
+        })?;
+        let ready = tokio::time::timeout(CONNECT_TIMEOUT, async {
+            while let Some(message) = socket.next().await {
+                match message? {
+                    Message::Text(text) => return Ok(Some(text.to_string())),
+                    Message::Close(frame) => bail!("the server closed the socket: {frame:?}"),
+                    _ => continue,
+                }
+            }
+            Ok(None)
+        })
+        .await
+        .context("no `ready` from the server within 10 s")??;
+        match ready {
+            Some(text) if text.contains("\"ready\"") => Ok(socket),
+            Some(text) => bail!("expected `ready` from the server, got {text}"),
+            None => bail!("the server closed the socket before `ready`"),
+        }
     }
 }
 

@@ -23,19 +23,13 @@ use serde::de::IgnoredAny;
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 use tokio::io::AsyncBufReadExt;
-use tokio::net::TcpStream;
 use tokio::time::Instant;
-use tokio_tungstenite::tungstenite::client::IntoClientRequest;
-use tokio_tungstenite::tungstenite::http::HeaderValue;
 use tokio_tungstenite::tungstenite::protocol::CloseFrame;
 use tokio_tungstenite::tungstenite::{self, Message};
-use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};
 
-use super::http::Endpoint;
+use super::http::{Endpoint, Socket};
 use super::progress::{Progress, thousands};
 
-/// Longest wait for the socket to open and say `ready`.
-const CONNECT_TIMEOUT: Duration = Duration::from_secs(10);
 /// Longest the server may go without processing a frame while we wait for
 /// the last ones.
 const DRAIN_STALL: Duration = Duration::from_secs(30);
@@ -45,8 +39,6 @@ const ALARM_GRACE: Duration = Duration::from_secs(5);
 const MAX_ALARM_EVENTS: usize = 100_000;
 /// Error messages kept as examples.
 const MAX_ERROR_SAMPLES: usize = 5;
-
-type Socket = WebSocketStream<MaybeTlsStream<TcpStream>>;
 
 /// How fast to stream: a multiple of real time, or as fast as the server takes it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -430,7 +422,7 @@ pub async fn run(args: ReplayArgs) -> anyhow::Result<()> {
     let path = format!("/api/v1/sessions/{}", args.session);
     let created = ensure_session(&endpoint, &args, &scan, &path).await?;
     let baseline = stats(&endpoint, &path).await?;
-    let socket = connect(&endpoint, &format!("{path}/ingest")).await?;
+    let socket = endpoint.connect(&format!("{path}/ingest")).await?;
     let (sink, stream) = socket.split();
     let tally = Arc::new(Mutex::new(Tally::default()));
     let reader = tokio::spawn(read_events(stream, tally.clone()));
@@ -524,54 +516,6 @@ async fn stats(endpoint: &Endpoint, path: &str) -> anyhow::Result<Value> {
         bail!("GET {path}/stats: HTTP {status}: {body}");
     }
     serde_json::from_str(&body).context("the stats are not JSON")
-}
-
-async fn connect(endpoint: &Endpoint, path: &str) -> anyhow::Result<Socket> {
-    let url = endpoint.ws_url(path);
-    let mut request = url.as_str().into_client_request()?;
-    request.headers_mut().insert(
-        "Sec-WebSocket-Protocol",
-        HeaderValue::from_static("navguard"),
-    );
-    if let Some(token) = &endpoint.token {
-        request.headers_mut().insert(
-            "Authorization",
-            HeaderValue::from_str(&format!("Bearer {token}"))?,
-        );
-    }
-    let (mut socket, _) =
-        tokio::time::timeout(CONNECT_TIMEOUT, tokio_tungstenite::connect_async(request))
-            .await
-            .with_context(|| format!("{url}: no WebSocket handshake within 10 s"))?
-            .map_err(|e| match e {
-                tungstenite::Error::Http(response) => {
-                    let body = response
-                        .body()
-                        .as_deref()
-                        .map(String::from_utf8_lossy)
-                        .unwrap_or_default()
-                        .into_owned();
-                    anyhow::anyhow!("{url}: HTTP {}: {body}", response.status())
-                }
-                e => anyhow::anyhow!("cannot open the ingest socket {url}: {e}"),
-            })?;
-    let ready = tokio::time::timeout(CONNECT_TIMEOUT, async {
-        while let Some(message) = socket.next().await {
-            match message? {
-                Message::Text(text) => return Ok(Some(text.to_string())),
-                Message::Close(frame) => bail!("the server closed the socket: {frame:?}"),
-                _ => continue,
-            }
-        }
-        Ok(None)
-    })
-    .await
-    .context("no `ready` from the server within 10 s")??;
-    match ready {
-        Some(text) if text.contains("\"ready\"") => Ok(socket),
-        Some(text) => bail!("expected `ready` from the server, got {text}"),
-        None => bail!("the server closed the socket before `ready`"),
-    }
 }
 
 async fn read_events(mut stream: SplitStream<Socket>, tally: Arc<Mutex<Tally>>) {

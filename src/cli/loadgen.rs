@@ -1,0 +1,524 @@
+//! `navguard loadgen`: a load generator for a running server (DESIGN §5). It
+//! creates N sessions (`echo: true`) over REST, streams simulated epochs into
+//! each one's ingest socket at a set rate or as fast as the server takes them,
+//! and reports throughput, frame-to-result and alarm-to-event latency, errors,
+//! per-epoch ordering, and the server's resident memory (idle and loaded, from
+//! `/metrics`); then deletes its sessions.
+//!
+//! The workload is generated once and shared by every session: the `ship`
+//! scenario of [`navguard::sim`] for `federated`, a constant-velocity track for
+//! `linear`. A session streams it in passes; each pass is a fresh socket (the
+//! server restarts filter state and time on a new stream, DESIGN §4.1), so a
+//! long run never needs an unbounded scenario in memory. The tool talks only
+//! to `--url`, stops after `--duration`, and waits at most a bounded time for
+//! the last answers.
+
+use std::ops::Range;
+use std::str::FromStr;
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+use futures_util::StreamExt;
+use navguard::service::wire::epoch_to_wire;
+use navguard::sim::{self, Aid, Channel, Fault, FaultKind};
+use rand::SeedableRng;
+use rand::rngs::StdRng;
+use rand_distr::{Distribution, Normal};
+use serde_json::{Value, json};
+use tokio::time::Instant;
+use tokio_tungstenite::tungstenite::Utf8Bytes;
+
+use super::http::Endpoint;
+use super::progress::thousands;
+
+mod report;
+mod stream;
+
+use report::{Report, percentiles, render};
+use stream::{Tally, run_session};
+
+/// Most epochs generated for one pass (a pass is replayed on a fresh socket).
+const MAX_PASS_EPOCHS: usize = 100_000;
+/// Longest wait for the answers to frames already sent, after the last send.
+const DRAIN_TIMEOUT: Duration = Duration::from_secs(20);
+/// Sessions created or deleted concurrently.
+const REST_CONCURRENCY: usize = 16;
+/// Size of the GNSS position step (federated) or `z` step (linear) injected by `--fault-at`.
+const FAULT_STEP: f64 = 100.0;
+
+/// Frames per second per session, or as fast as the server takes them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Rate {
+    /// Back to back; the socket's backpressure sets the pace.
+    Max,
+    /// Frames per second per session.
+    Hz(f64),
+}
+
+impl FromStr for Rate {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s.eq_ignore_ascii_case("max") {
+            return Ok(Rate::Max);
+        }
+        match s.parse::<f64>() {
+            Ok(f) if f.is_finite() && f > 0.0 => Ok(Rate::Hz(f)),
+            _ => Err(format!(
+                "expected `max` or a positive rate in Hz, got {s:?}"
+            )),
+        }
+    }
+}
+
+/// The monitor every loadgen session runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum MonitorArg {
+    /// INS/GNSS/DVL/CNS federated filter on the simulated ship (15 states, 3 aids).
+    Federated,
+    /// 4-state constant-velocity Kalman filter with 2 measurements.
+    Linear,
+}
+
+/// `navguard loadgen` flags.
+#[derive(Debug, clap::Args)]
+#[command(after_long_help = LOADGEN_HELP)]
+pub struct LoadgenArgs {
+    /// The server, as ws://host:port (REST calls go to http://host:port).
+    #[arg(long, default_value = "ws://127.0.0.1:8080")]
+    pub url: String,
+    /// Bearer token for a server started with --token.
+    #[arg(long, env = "NAVGUARD_TOKEN", hide_env_values = true)]
+    pub token: Option<String>,
+    /// Sessions to create and stream into concurrently.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=100_000))]
+    pub sessions: u64,
+    /// Frames per second per session, or `max`.
+    #[arg(long, default_value = "10")]
+    pub rate: Rate,
+    /// Epochs per frame (1 sends single-epoch objects, more send arrays).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=10_000))]
+    pub batch: u64,
+    /// How long to stream, seconds (then it waits for the last answers).
+    #[arg(long, default_value_t = 10.0)]
+    pub duration: f64,
+    /// The monitor each session runs.
+    #[arg(long, value_enum, default_value = "federated")]
+    pub monitor: MonitorArg,
+    /// Epoch time t (s) at which a 100 m step starts on GNSS position (federated)
+    /// or on z[0] (linear), in every session and pass, lasting to the pass's end.
+    #[arg(long)]
+    pub fault_at: Option<f64>,
+    /// RNG seed of the simulated workload.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Seconds to wait after creating the sessions before reading idle memory.
+    #[arg(long, default_value_t = 1.0)]
+    pub settle: f64,
+    /// Print the report as JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+const LOADGEN_HELP: &str = "\
+Examples (server in another terminal: cargo run --release -- serve --db /tmp/lg.db):
+  navguard loadgen --sessions 1 --rate max --batch 200 --duration 10
+  navguard loadgen --sessions 1000 --rate 10 --batch 1 --duration 30
+  navguard loadgen --sessions 1 --rate 10 --fault-at 20 --duration 30
+Latency: frame-to-result is from just before a frame is written to the socket
+to the arrival of the `result` of its last epoch; alarm-to-event is from the
+sending of the frame holding the epoch an alarm names to the alarm's arrival.
+Idle memory per session is (RSS after creating the sessions − RSS before) / N,
+read from the server's process_resident_memory_bytes. Sessions are named
+loadgen-PID-I and deleted at the end.";
+
+/// The workload shared by every session: pre-serialised frames of one pass.
+struct Workload {
+    /// Frames, ready to send (cloning shares the bytes).
+    frames: Vec<Utf8Bytes>,
+    /// Epoch indices of each frame.
+    ranges: Vec<Range<usize>>,
+    /// `t` of every epoch of the pass.
+    times: Vec<f64>,
+    /// `POST /api/v1/sessions` body without its `id`.
+    spec: Value,
+}
+
+impl Workload {
+    fn build(args: &LoadgenArgs) -> anyhow::Result<Workload> {
+        let per_session = match args.rate {
+            Rate::Max => MAX_PASS_EPOCHS as f64,
+            Rate::Hz(hz) => (hz * args.duration * args.batch as f64).ceil() + args.batch as f64,
+        };
+        let epochs = (per_session.min(MAX_PASS_EPOCHS as f64) as usize).max(args.batch as usize);
+        let (lines, spec) = match args.monitor {
+            MonitorArg::Federated => federated_lines(epochs, args.seed, args.fault_at)?,
+            MonitorArg::Linear => linear_lines(epochs, args.seed, args.fault_at),
+        };
+        let times = lines.iter().map(|(t, _)| *t).collect();
+        let batch = args.batch as usize;
+        let mut frames = Vec::with_capacity(lines.len().div_ceil(batch));
+        let mut ranges = Vec::with_capacity(frames.capacity());
+        for (k, chunk) in lines.chunks(batch).enumerate() {
+            let text = if batch == 1 {
+                chunk[0].1.clone()
+            } else {
+                let mut text = String::with_capacity(chunk.iter().map(|l| l.1.len() + 1).sum());
+                text.push('[');
+                for (i, (_, line)) in chunk.iter().enumerate() {
+                    if i > 0 {
+                        text.push(',');
+                    }
+                    text.push_str(line);
+                }
+                text.push(']');
+                text
+            };
+            frames.push(Utf8Bytes::from(text));
+            ranges.push(k * batch..k * batch + chunk.len());
+        }
+        Ok(Workload {
+            frames,
+            ranges,
+            times,
+            spec,
+        })
+    }
+
+    fn epochs(&self) -> usize {
+        self.times.len()
+    }
+}
+
+/// The ship scenario (10 Hz INS, GNSS and DVL at 1 Hz, CNS at 0.1 Hz) as wire lines.
+fn federated_lines(
+    epochs: usize,
+    seed: u64,
+    fault_at: Option<f64>,
+) -> anyhow::Result<(Vec<(f64, String)>, Value)> {
+    let faults = fault_at
+        .map(|start_s| {
+            vec![Fault {
+                aid: Aid::Gnss,
+                channel: Channel::Position,
+                component: 1,
+                kind: FaultKind::Step { value: FAULT_STEP },
+                start_s,
+                end_s: None,
+            }]
+        })
+        .unwrap_or_default();
+    let duration = (epochs - 1) as f64 / sim::SHIP_INS_RATE_HZ;
+    let scenario = sim::ship_with(seed, faults, duration).context("simulating the ship")?;
+    let lines = scenario
+        .epochs
+        .iter()
+        .map(|e| {
+            epoch_to_wire(&e.epoch)
+                .map(|line| (e.epoch.t, line))
+                .map_err(|e| anyhow::anyhow!("serialising a simulated epoch: {}", e.message))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let monitor = json!({
+        "name": "federated",
+        "type": "federated",
+        "config": scenario.default_monitor_config(),
+        "policy": {"kind": "counters", "n1": 10, "n2": 5},
+    });
+    Ok((lines, json!({"echo": true, "monitors": [monitor]})))
+}
+
+/// A constant-velocity target seen in x and y with correlated noise, 10 Hz.
+fn linear_lines(epochs: usize, seed: u64, fault_at: Option<f64>) -> (Vec<(f64, String)>, Value) {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let noise = Normal::new(0.0, 1.0).expect("unit normal");
+    let dt = 0.1;
+    let lines = (0..epochs)
+        .map(|k| {
+            let t = k as f64 * dt;
+            let step = if fault_at.is_some_and(|f| t >= f) {
+                FAULT_STEP
+            } else {
+                0.0
+            };
+            let x = t + noise.sample(&mut rng) + step;
+            let y = -t + 1.4 * noise.sample(&mut rng);
+            (t, format!(r#"{{"t":{t},"z":[{x},{y}]}}"#))
+        })
+        .collect();
+    let q = 0.05 * dt;
+    let (a, b) = (q * dt * dt / 3.0, q * dt / 2.0);
+    let config = json!({
+        "f": [[1, dt, 0, 0], [0, 1, 0, 0], [0, 0, 1, dt], [0, 0, 0, 1]],
+        "h": [[1, 0, 0, 0], [0, 0, 1, 0]],
+        "q": [[a, b, 0, 0], [b, q, 0, 0], [0, 0, a, b], [0, 0, b, q]],
+        "r": [[1.0, 0.0], [0.0, 1.96]],
+        "x0": [0, 1, 0, -1],
+        "p0": [[5, 0, 0, 0], [0, 5, 0, 0], [0, 0, 5, 0], [0, 0, 0, 5]],
+    });
+    let monitor = json!({"name": "linear", "type": "linear", "config": config,
+        "policy": {"kind": "counters", "n1": 10, "n2": 5}});
+    (lines, json!({"echo": true, "monitors": [monitor]}))
+}
+
+/// Reads `process_resident_memory_bytes` from the server's `/metrics`.
+async fn server_rss(endpoint: &Endpoint) -> anyhow::Result<Option<u64>> {
+    let (status, body) = endpoint.request("GET", "/metrics", None).await?;
+    if status != 200 {
+        bail!("GET /metrics: HTTP {status}");
+    }
+    Ok(body.lines().find_map(|line| {
+        let value = line.strip_prefix("process_resident_memory_bytes ")?;
+        value.trim().parse::<f64>().ok().map(|v| v as u64)
+    }))
+}
+
+/// Runs `f` over `items` with at most [`REST_CONCURRENCY`] at a time.
+async fn each_concurrently<T, F, Fut>(items: Vec<T>, f: F) -> Vec<anyhow::Result<()>>
+where
+    F: Fn(T) -> Fut,
+    Fut: std::future::Future<Output = anyhow::Result<()>>,
+{
+    futures_util::stream::iter(items.into_iter().map(f))
+        .buffer_unordered(REST_CONCURRENCY)
+        .collect()
+        .await
+}
+
+async fn create_session(endpoint: &Endpoint, spec: &Value, id: &str) -> anyhow::Result<()> {
+    let mut body = spec.clone();
+    body["id"] = json!(id);
+    let (status, text) = endpoint
+        .request("POST", "/api/v1/sessions", Some(&body))
+        .await?;
+    match status {
+        201 => Ok(()),
+        401 => bail!("unauthorized; pass --token"),
+        s => bail!("creating session '{id}': HTTP {s}: {text}"),
+    }
+}
+
+async fn delete_sessions(endpoint: &Endpoint, ids: Vec<String>) -> usize {
+    let results = each_concurrently(ids, |id| async move {
+        let (status, text) = endpoint
+            .request("DELETE", &format!("/api/v1/sessions/{id}"), None)
+            .await?;
+        match status {
+            204 | 404 => Ok(()),
+            s => bail!("deleting session '{id}': HTTP {s}: {text}"),
+        }
+    })
+    .await;
+    results.iter().filter(|r| r.is_err()).count()
+}
+
+/// Runs the command.
+pub async fn run(args: LoadgenArgs) -> anyhow::Result<()> {
+    if !(args.duration.is_finite() && args.duration > 0.0) {
+        bail!("--duration must be a positive number of seconds");
+    }
+    if let Some(t) = args.fault_at
+        && !(t.is_finite() && t >= 0.0)
+    {
+        bail!("--fault-at must be a non-negative epoch time, s");
+    }
+    let endpoint = Arc::new(Endpoint::parse(&args.url, args.token.clone())?);
+    let work = Arc::new(Workload::build(&args)?);
+    if !args.json {
+        eprintln!(
+            "workload: {} epochs per pass in {} frames of ≤ {}",
+            thousands(work.epochs() as u64),
+            thousands(work.frames.len() as u64),
+            args.batch
+        );
+    }
+    let rss_baseline = server_rss(&endpoint).await?;
+    let ids: Vec<String> = (0..args.sessions)
+        .map(|i| format!("loadgen-{}-{i}", std::process::id()))
+        .collect();
+    let created = each_concurrently(ids.clone(), |id| {
+        let (endpoint, spec) = (&endpoint, &work.spec);
+        async move { create_session(endpoint, spec, &id).await }
+    })
+    .await;
+    if let Some(Err(e)) = created.into_iter().find(Result::is_err) {
+        delete_sessions(&endpoint, ids).await;
+        return Err(e.context("creating the sessions (the ones created were deleted)"));
+    }
+    tokio::time::sleep(Duration::from_secs_f64(args.settle.max(0.0))).await;
+    let rss_idle = server_rss(&endpoint).await?;
+    let outcome = stream(&args, &endpoint, &work, &ids).await;
+    let rss_loaded = server_rss(&endpoint).await.ok().flatten();
+    let undeleted = delete_sessions(&endpoint, ids).await;
+    if undeleted > 0 {
+        eprintln!("warning: {undeleted} sessions could not be deleted");
+    }
+    let (tally, wall_s) = outcome;
+    let report = report(&args, tally, wall_s, [rss_baseline, rss_idle, rss_loaded]);
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!("{}", render(&report));
+    }
+    if report.failures.is_empty() {
+        Ok(())
+    } else {
+        bail!("{} session(s) failed", report.failures.len())
+    }
+}
+
+async fn stream(
+    args: &LoadgenArgs,
+    endpoint: &Arc<Endpoint>,
+    work: &Arc<Workload>,
+    ids: &[String],
+) -> (Tally, f64) {
+    let started = Instant::now();
+    let deadline = started + Duration::from_secs_f64(args.duration);
+    let period = match args.rate {
+        Rate::Max => Duration::ZERO,
+        Rate::Hz(hz) => Duration::from_secs_f64(1.0 / hz),
+    };
+    let n = ids.len() as u32;
+    let tasks: Vec<_> = ids
+        .iter()
+        .enumerate()
+        .map(|(i, id)| {
+            // Spread the sessions' first frames over one period.
+            let phase = period * i as u32 / n.max(1);
+            tokio::spawn(run_session(
+                endpoint.clone(),
+                id.clone(),
+                work.clone(),
+                args.rate,
+                phase,
+                deadline,
+            ))
+        })
+        .collect();
+    let mut total = Tally::default();
+    for task in tasks {
+        match task.await {
+            Ok(tally) => total.merge(tally),
+            Err(e) => total.failures.push(format!("a session task failed: {e}")),
+        }
+    }
+    let end = total.last_answer.unwrap_or_else(Instant::now);
+    (total, (end - started).as_secs_f64())
+}
+
+fn report(args: &LoadgenArgs, mut t: Tally, wall_s: f64, rss: [Option<u64>; 3]) -> Report {
+    let per_s = |n: u64| if wall_s > 0.0 { n as f64 / wall_s } else { 0.0 };
+    let [baseline, idle, loaded] = rss;
+    Report {
+        url: args.url.clone(),
+        monitor: format!("{:?}", args.monitor).to_lowercase(),
+        sessions: args.sessions,
+        rate_hz: match args.rate {
+            Rate::Max => None,
+            Rate::Hz(hz) => Some(hz),
+        },
+        batch: args.batch,
+        wall_s,
+        epochs_sent: t.epochs_sent,
+        frames_sent: t.frames_sent,
+        results: t.results,
+        out_of_order: t.out_of_order,
+        unanswered_frames: t.unanswered_frames,
+        passes: t.passes,
+        epochs_per_s: per_s(t.results),
+        frames_per_s: per_s(t.frames_answered),
+        frame_latency: percentiles(&mut t.frame_latency_us),
+        alarm_latency: percentiles(&mut t.alarm_latency_us),
+        alarms: t.alarms,
+        state_changes: t.states,
+        errors: t.errors,
+        failures: t.failures,
+        rss_baseline_bytes: baseline,
+        rss_idle_bytes: idle,
+        rss_loaded_bytes: loaded,
+        idle_bytes_per_session: match (baseline, idle) {
+            (Some(b), Some(i)) => Some((i as f64 - b as f64) / args.sessions as f64),
+            _ => None,
+        },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::stream::result_t;
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Wrap {
+        #[command(flatten)]
+        args: LoadgenArgs,
+    }
+
+    fn args(extra: &[&str]) -> LoadgenArgs {
+        Wrap::parse_from(std::iter::once("loadgen").chain(extra.iter().copied())).args
+    }
+
+    #[test]
+    fn rates_parse_as_hz_or_max() {
+        assert_eq!("max".parse::<Rate>(), Ok(Rate::Max));
+        assert_eq!("12.5".parse::<Rate>(), Ok(Rate::Hz(12.5)));
+        assert!("0".parse::<Rate>().is_err());
+        assert!("fast".parse::<Rate>().is_err());
+    }
+
+    #[test]
+    fn result_t_reads_the_leading_time_only_of_results() {
+        assert_eq!(
+            result_t(r#"{"type":"result","t":12.5,"monitors":{}}"#),
+            Some(12.5)
+        );
+        assert_eq!(result_t(r#"{"type":"alarm","t":12.5}"#), None);
+    }
+
+    #[test]
+    fn percentiles_use_the_nearest_rank() {
+        let mut v: Vec<u32> = (1..=1000).rev().collect();
+        let p = percentiles(&mut v);
+        assert_eq!(
+            (p.count, p.p50_us, p.p99_us, p.p999_us, p.max_us),
+            (1000, 500, 990, 999, 1000)
+        );
+        assert_eq!(percentiles(&mut []).count, 0);
+    }
+
+    #[test]
+    fn a_linear_workload_is_batched_into_arrays_with_every_epoch_once() {
+        let a = args(&[
+            "--monitor",
+            "linear",
+            "--rate",
+            "10",
+            "--duration",
+            "2",
+            "--batch",
+            "3",
+        ]);
+        let w = Workload::build(&a).unwrap();
+        // 10 Hz × 2 s × 3 epochs + one spare frame = 63 epochs in 21 frames.
+        assert_eq!((w.epochs(), w.frames.len()), (63, 21));
+        let first: Value = serde_json::from_str(w.frames[0].as_str()).unwrap();
+        assert_eq!(first.as_array().map(Vec::len), Some(3));
+        assert_eq!(first[1]["t"], json!(0.1));
+        assert_eq!(w.ranges[20], 60..63);
+        assert_eq!(w.spec["monitors"][0]["type"], "linear");
+    }
+
+    #[test]
+    fn a_federated_workload_carries_the_ship_and_its_monitor() {
+        let a = args(&["--rate", "1", "--duration", "2", "--fault-at", "1"]);
+        let w = Workload::build(&a).unwrap();
+        assert_eq!(w.epochs(), 3);
+        let first: Value = serde_json::from_str(w.frames[0].as_str()).unwrap();
+        assert!(first["ins"].is_object() && first["gnss"].is_object());
+        assert_eq!(w.spec["echo"], json!(true));
+        assert_eq!(w.spec["monitors"][0]["type"], "federated");
+    }
+}

@@ -1,0 +1,190 @@
+//! The report of `navguard loadgen`: latency percentiles, the figures it
+//! prints, and their text table (`--json` prints the struct).
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+
+use serde::Serialize;
+
+use crate::cli::progress::thousands;
+
+/// Latency percentiles, microseconds.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct Percentiles {
+    /// Observations.
+    pub count: u64,
+    /// Median.
+    pub p50_us: u32,
+    /// 99th percentile.
+    pub p99_us: u32,
+    /// 99.9th percentile.
+    pub p999_us: u32,
+    /// Largest.
+    pub max_us: u32,
+}
+
+/// Nearest-rank percentiles of `samples` (sorted in place).
+pub(super) fn percentiles(samples: &mut [u32]) -> Percentiles {
+    if samples.is_empty() {
+        return Percentiles::default();
+    }
+    samples.sort_unstable();
+    let n = samples.len();
+    let rank = |p: f64| samples[((p * n as f64).ceil() as usize).clamp(1, n) - 1];
+    Percentiles {
+        count: n as u64,
+        p50_us: rank(0.50),
+        p99_us: rank(0.99),
+        p999_us: rank(0.999),
+        max_us: samples[n - 1],
+    }
+}
+
+/// The report (`--json` prints it as is).
+#[derive(Debug, Clone, Serialize)]
+pub struct Report {
+    /// Server URL.
+    pub url: String,
+    /// Monitor type.
+    pub monitor: String,
+    /// Sessions streamed.
+    pub sessions: u64,
+    /// Frames per second per session (`null` for max).
+    pub rate_hz: Option<f64>,
+    /// Epochs per frame.
+    pub batch: u64,
+    /// Seconds from the first send to the last answer.
+    pub wall_s: f64,
+    /// Epochs sent.
+    pub epochs_sent: u64,
+    /// Frames sent.
+    pub frames_sent: u64,
+    /// `result` messages received.
+    pub results: u64,
+    /// Results whose `t` was not the next epoch sent.
+    pub out_of_order: u64,
+    /// Frames without an answer when the tool gave up waiting.
+    pub unanswered_frames: u64,
+    /// Sockets opened (one per session per pass over the workload).
+    pub passes: u64,
+    /// Results per second over `wall_s`.
+    pub epochs_per_s: f64,
+    /// Answered frames per second over `wall_s`.
+    pub frames_per_s: f64,
+    /// Frame sent → result of its last epoch.
+    pub frame_latency: Percentiles,
+    /// Frame holding the alarm's epoch sent → alarm received.
+    pub alarm_latency: Percentiles,
+    /// Alarms received.
+    pub alarms: u64,
+    /// State changes received.
+    pub state_changes: u64,
+    /// Error events by code.
+    pub errors: BTreeMap<String, u64>,
+    /// Sessions that failed (connection refused, socket dropped), up to five.
+    pub failures: Vec<String>,
+    /// Server RSS before creating the sessions, bytes.
+    pub rss_baseline_bytes: Option<u64>,
+    /// Server RSS with the sessions created and idle, bytes.
+    pub rss_idle_bytes: Option<u64>,
+    /// Server RSS at the end of the stream, bytes.
+    pub rss_loaded_bytes: Option<u64>,
+    /// (idle − baseline) / sessions, bytes.
+    pub idle_bytes_per_session: Option<f64>,
+}
+
+pub(super) fn ms(us: u32) -> String {
+    format!("{:.3}", f64::from(us) / 1000.0)
+}
+
+pub(super) fn mib(bytes: Option<u64>) -> String {
+    bytes.map_or("-".into(), |b| format!("{:.1} MiB", b as f64 / 1048576.0))
+}
+
+/// The report as a text table.
+pub fn render(r: &Report) -> String {
+    let mut out = String::new();
+    let rate = r.rate_hz.map_or("max".into(), |hz| format!("{hz} Hz"));
+    let _ = writeln!(
+        out,
+        "loadgen → {}: {} × {} session(s), rate {rate}, batch {}",
+        r.url, r.monitor, r.sessions, r.batch
+    );
+    let row = |out: &mut String, k: &str, v: String| {
+        let _ = writeln!(out, "  {k:<28} {v}");
+    };
+    row(&mut out, "wall time", format!("{:.2} s", r.wall_s));
+    row(
+        &mut out,
+        "epochs sent / results",
+        format!("{} / {}", thousands(r.epochs_sent), thousands(r.results)),
+    );
+    row(&mut out, "frames sent", thousands(r.frames_sent));
+    row(
+        &mut out,
+        "epochs/s (results)",
+        thousands(r.epochs_per_s.round() as u64),
+    );
+    row(
+        &mut out,
+        "frames/s (answered)",
+        thousands(r.frames_per_s.round() as u64),
+    );
+    let pct = |p: &Percentiles| {
+        if p.count == 0 {
+            "-".to_owned()
+        } else {
+            format!(
+                "p50 {}  p99 {}  p99.9 {}  max {} ms  (n = {})",
+                ms(p.p50_us),
+                ms(p.p99_us),
+                ms(p.p999_us),
+                ms(p.max_us),
+                thousands(p.count)
+            )
+        }
+    };
+    row(&mut out, "frame → result latency", pct(&r.frame_latency));
+    row(&mut out, "alarm → event latency", pct(&r.alarm_latency));
+    row(
+        &mut out,
+        "alarms / state changes",
+        format!("{} / {}", r.alarms, r.state_changes),
+    );
+    let errors = if r.errors.is_empty() {
+        "none".to_owned()
+    } else {
+        r.errors
+            .iter()
+            .map(|(code, n)| format!("{code} {n}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    row(&mut out, "errors", errors);
+    row(
+        &mut out,
+        "out of order / unanswered",
+        format!("{} / {}", r.out_of_order, r.unanswered_frames),
+    );
+    row(&mut out, "sockets (passes)", thousands(r.passes));
+    row(
+        &mut out,
+        "server RSS base/idle/loaded",
+        format!(
+            "{} / {} / {}",
+            mib(r.rss_baseline_bytes),
+            mib(r.rss_idle_bytes),
+            mib(r.rss_loaded_bytes)
+        ),
+    );
+    row(
+        &mut out,
+        "idle memory per session",
+        r.idle_bytes_per_session
+            .map_or("-".into(), |b| format!("{:.1} KiB", b / 1024.0)),
+    );
+    for f in &r.failures {
+        row(&mut out, "failure", f.clone());
+    }
+    out
+}

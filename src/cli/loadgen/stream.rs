@@ -1,0 +1,281 @@
+//! One session's stream for `navguard loadgen`: passes over the shared
+//! workload, each on a fresh ingest socket, with a reader that checks every
+//! result against the epoch it answers and times frames and alarms.
+
+use std::collections::{BTreeMap, VecDeque};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use anyhow::bail;
+use futures_util::{SinkExt, StreamExt};
+use serde_json::Value;
+use tokio::sync::Notify;
+use tokio::time::{Instant, MissedTickBehavior};
+use tokio_tungstenite::tungstenite::Message;
+
+use super::{DRAIN_TIMEOUT, Rate, Workload};
+use crate::cli::http::Endpoint;
+
+/// Frames sent and not yet fully answered, oldest first.
+#[derive(Default)]
+pub(super) struct Flight {
+    /// (frame index, when it was sent).
+    pub(super) queue: VecDeque<(usize, Instant)>,
+    /// The last answered frames, for alarms that arrive after their frame's result.
+    pub(super) recent: VecDeque<(usize, Instant)>,
+}
+
+/// What one session saw, merged into the report at the end.
+#[derive(Debug, Default)]
+pub(super) struct Tally {
+    pub(super) frames_sent: u64,
+    pub(super) epochs_sent: u64,
+    pub(super) frames_answered: u64,
+    pub(super) results: u64,
+    pub(super) out_of_order: u64,
+    pub(super) unanswered_frames: u64,
+    pub(super) passes: u64,
+    pub(super) frame_latency_us: Vec<u32>,
+    pub(super) alarm_latency_us: Vec<u32>,
+    pub(super) alarms: u64,
+    pub(super) states: u64,
+    pub(super) errors: BTreeMap<String, u64>,
+    pub(super) failures: Vec<String>,
+    pub(super) last_answer: Option<Instant>,
+}
+
+impl Tally {
+    pub(super) fn merge(&mut self, other: Tally) {
+        self.frames_sent += other.frames_sent;
+        self.epochs_sent += other.epochs_sent;
+        self.frames_answered += other.frames_answered;
+        self.results += other.results;
+        self.out_of_order += other.out_of_order;
+        self.unanswered_frames += other.unanswered_frames;
+        self.passes += other.passes;
+        self.frame_latency_us.extend(other.frame_latency_us);
+        self.alarm_latency_us.extend(other.alarm_latency_us);
+        self.alarms += other.alarms;
+        self.states += other.states;
+        for (code, n) in other.errors {
+            *self.errors.entry(code).or_default() += n;
+        }
+        if self.failures.len() < 5 {
+            self.failures.extend(other.failures.into_iter().take(5));
+        }
+        self.last_answer = self.last_answer.max(other.last_answer);
+    }
+}
+
+pub(super) fn micros(d: Duration) -> u32 {
+    u32::try_from(d.as_micros()).unwrap_or(u32::MAX)
+}
+
+/// The `t` of a `result` message, read without parsing the whole message
+/// (the server writes `{"type":"result","t":…,` first); `None` for other messages.
+pub(super) fn result_t(text: &str) -> Option<f64> {
+    let rest = text.strip_prefix(r#"{"type":"result","t":"#)?;
+    let end = rest.find(',')?;
+    rest[..end].parse().ok()
+}
+
+/// Reads one pass's socket: checks every result against the expected epoch,
+/// times frames and alarms, counts errors. Returns when the socket closes.
+pub(super) struct Reader {
+    pub(super) work: Arc<Workload>,
+    pub(super) flight: Arc<Mutex<Flight>>,
+    pub(super) drained: Arc<Notify>,
+    pub(super) next: usize,
+    pub(super) tally: Tally,
+}
+
+impl Reader {
+    fn answer_front(&mut self, flight: &mut Flight, now: Instant, timed: bool) {
+        if let Some((frame, sent)) = flight.queue.pop_front() {
+            if timed {
+                self.tally.frame_latency_us.push(micros(now - sent));
+            }
+            self.tally.frames_answered += 1;
+            self.tally.last_answer = Some(now);
+            self.next = self.work.ranges[frame].end;
+            flight.recent.push_back((frame, sent));
+            if flight.recent.len() > 64 {
+                flight.recent.pop_front();
+            }
+            if flight.queue.is_empty() {
+                self.drained.notify_one();
+            }
+        }
+    }
+
+    fn take(&mut self, text: &str) {
+        let now = Instant::now();
+        let flight = self.flight.clone();
+        let mut flight = flight.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(t) = result_t(text) {
+            self.tally.results += 1;
+            // serde_json's default float parser may be 1 ulp off the exact value.
+            let expected = self.work.times.get(self.next).copied();
+            if !expected.is_some_and(|e| (e - t).abs() <= 1e-9 * e.abs().max(1.0)) {
+                self.tally.out_of_order += 1;
+            }
+            self.next += 1;
+            if let Some(&(frame, _)) = flight.queue.front()
+                && self.next >= self.work.ranges[frame].end
+            {
+                self.answer_front(&mut flight, now, true);
+            }
+            return;
+        }
+        let Ok(v) = serde_json::from_str::<Value>(text) else {
+            *self.tally.errors.entry("unparsable".into()).or_default() += 1;
+            return;
+        };
+        match v["type"].as_str() {
+            Some("alarm") => {
+                self.tally.alarms += 1;
+                let t = v["t"].as_f64().unwrap_or(f64::NAN);
+                let times = &self.work.times;
+                let holds = |&&(frame, _): &&(usize, Instant)| {
+                    let r = &self.work.ranges[frame];
+                    times[r.start] <= t && t <= times[r.end - 1]
+                };
+                let sent = flight
+                    .queue
+                    .iter()
+                    .find(holds)
+                    .or_else(|| flight.recent.iter().rev().find(holds))
+                    .map(|&(_, sent)| sent);
+                if let Some(sent) = sent {
+                    self.tally.alarm_latency_us.push(micros(now - sent));
+                }
+            }
+            Some("state") => self.tally.states += 1,
+            Some("error") => {
+                let code = v["code"].as_str().unwrap_or("?").to_owned();
+                // Frames are handled in order: the error answers the oldest one.
+                // A `numerical` failure part-way leaves earlier results counted.
+                *self.tally.errors.entry(code).or_default() += 1;
+                self.answer_front(&mut flight, now, false);
+            }
+            _ => {}
+        }
+    }
+}
+
+/// Streams one session for the run: passes over the workload until the deadline.
+pub(super) async fn run_session(
+    endpoint: Arc<Endpoint>,
+    id: String,
+    work: Arc<Workload>,
+    rate: Rate,
+    phase: Duration,
+    deadline: Instant,
+) -> Tally {
+    let mut total = Tally::default();
+    let path = format!("/api/v1/sessions/{id}/ingest");
+    let mut first = true;
+    while Instant::now() < deadline {
+        let tally = match run_pass(&endpoint, &path, &work, rate, phase, first, deadline).await {
+            Ok(tally) => tally,
+            Err(e) => {
+                total.failures.push(format!("{id}: {e:#}"));
+                break;
+            }
+        };
+        first = false;
+        total.merge(tally);
+    }
+    total
+}
+
+pub(super) async fn run_pass(
+    endpoint: &Endpoint,
+    path: &str,
+    work: &Arc<Workload>,
+    rate: Rate,
+    phase: Duration,
+    first: bool,
+    deadline: Instant,
+) -> anyhow::Result<Tally> {
+    let socket = endpoint.connect(path).await?;
+    let (mut sink, mut stream) = socket.split();
+    let flight = Arc::new(Mutex::new(Flight::default()));
+    let drained = Arc::new(Notify::new());
+    let mut reader = Reader {
+        work: work.clone(),
+        flight: flight.clone(),
+        drained: drained.clone(),
+        next: 0,
+        tally: Tally::default(),
+    };
+    let reading = tokio::spawn(async move {
+        while let Some(message) = stream.next().await {
+            match message {
+                Ok(Message::Text(text)) => reader.take(&text),
+                Ok(Message::Close(_)) | Err(_) => break,
+                Ok(_) => {}
+            }
+        }
+        reader.drained.notify_one();
+        reader.tally
+    });
+    let mut ticks = match rate {
+        Rate::Max => None,
+        Rate::Hz(hz) => {
+            let start = if first {
+                Instant::now() + phase
+            } else {
+                Instant::now()
+            };
+            let mut ticks = tokio::time::interval_at(start, Duration::from_secs_f64(1.0 / hz));
+            ticks.set_missed_tick_behavior(MissedTickBehavior::Delay);
+            Some(ticks)
+        }
+    };
+    let (mut frames_sent, mut epochs_sent) = (0u64, 0u64);
+    let mut send_error = None;
+    for (k, frame) in work.frames.iter().enumerate() {
+        if let Some(ticks) = &mut ticks {
+            ticks.tick().await;
+        }
+        if Instant::now() >= deadline {
+            break;
+        }
+        flight
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .queue
+            .push_back((k, Instant::now()));
+        if let Err(e) = sink.send(Message::Text(frame.clone())).await {
+            send_error = Some(e);
+            break;
+        }
+        frames_sent += 1;
+        epochs_sent += work.ranges[k].len() as u64;
+    }
+    // Wait for every frame's answer, or give up after DRAIN_TIMEOUT.
+    let drain_deadline = Instant::now() + DRAIN_TIMEOUT;
+    loop {
+        let waiting = flight.lock().unwrap_or_else(|p| p.into_inner()).queue.len();
+        if waiting == 0 || reading.is_finished() || Instant::now() >= drain_deadline {
+            break;
+        }
+        let _ = tokio::time::timeout_at(drain_deadline, drained.notified()).await;
+    }
+    let _ = sink.close().await;
+    let mut tally = match tokio::time::timeout(Duration::from_secs(5), reading).await {
+        Ok(Ok(tally)) => tally,
+        _ => bail!("the socket reader did not finish"),
+    };
+    tally.frames_sent = frames_sent;
+    tally.epochs_sent = epochs_sent;
+    tally.passes = 1;
+    tally.unanswered_frames = flight.lock().unwrap_or_else(|p| p.into_inner()).queue.len() as u64;
+    if let Some(e) = send_error {
+        tally
+            .failures
+            .push(format!("the server dropped the socket: {e}"));
+    }
+    Ok(tally)
+}

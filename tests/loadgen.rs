@@ -1,0 +1,202 @@
+//! Backpressure and fairness (issue 7 item 3, DESIGN §5): a client that sends
+//! faster than its session is processed (and does not read its results) slows
+//! only its own socket; another session's epochs keep being answered, each in
+//! order; once the flooding client reads again, every one of its epochs is
+//! processed and answered in order, without an error.
+//!
+//! The server runs in-process and the test drives it with tokio-tungstenite
+//! directly rather than through `navguard loadgen`: the load generator lives in
+//! the binary (its engine measures, it does not assert per epoch), and the
+//! shared target directory's `navguard` binary may be another build. Small
+//! numbers, correctness only: no assertion depends on time except generous
+//! timeouts that turn a deadlock into a failure.
+
+use std::time::Duration;
+
+use futures_util::{SinkExt, StreamExt};
+use navguard::service::{self, ServiceConfig};
+use serde_json::{Value, json};
+use tokio::net::{TcpSocket, TcpStream};
+use tokio_tungstenite::tungstenite::Message;
+use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};
+
+type Socket = WebSocketStream<MaybeTlsStream<TcpStream>>;
+
+/// Epochs per frame of the flooding client.
+const FLOOD_BATCH: usize = 100;
+/// Frames the flooding client sends back to back.
+const FLOOD_FRAMES: usize = 400;
+/// Single-epoch frames of the well-behaved session.
+const STEADY_FRAMES: usize = 40;
+/// Longest wait for anything: a deadlock fails the test instead of hanging it.
+const PATIENCE: Duration = Duration::from_secs(60);
+
+fn linear_session(id: &str) -> Value {
+    let q = 0.005;
+    let (a, b) = (q * 0.01 / 3.0, q * 0.1 / 2.0);
+    json!({"id": id, "echo": true, "monitors": [{"name": "track", "type": "linear", "config": {
+        "f": [[1, 0.1, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0.1], [0, 0, 0, 1]],
+        "h": [[1, 0, 0, 0], [0, 0, 1, 0]],
+        "q": [[a, b, 0, 0], [b, q, 0, 0], [0, 0, a, b], [0, 0, b, q]],
+        "r": [[1.0, 0.0], [0.0, 1.0]],
+        "x0": [0, 1, 0, -1],
+        "p0": [[5, 0, 0, 0], [0, 5, 0, 0], [0, 0, 5, 0], [0, 0, 0, 5]]
+    }}]})
+}
+
+/// Epoch `k` of a target moving at (1, −1) m/s, seen without noise at 10 Hz.
+fn epoch(k: usize) -> String {
+    let t = k as f64 * 0.1;
+    format!(r#"{{"t":{t},"z":[{t},{}]}}"#, -t)
+}
+
+fn t_of(k: usize) -> f64 {
+    k as f64 * 0.1
+}
+
+/// Opens a session's ingest socket; `small_receive_buffer` shrinks the
+/// client's TCP receive buffer so that unread results back up quickly.
+async fn connect(addr: std::net::SocketAddr, id: &str, small_receive_buffer: bool) -> Socket {
+    let tcp = TcpSocket::new_v4().unwrap();
+    if small_receive_buffer {
+        tcp.set_recv_buffer_size(4096).unwrap();
+    }
+    let stream = tcp.connect(addr).await.unwrap();
+    let url = format!("ws://{addr}/api/v1/sessions/{id}/ingest");
+    let (mut socket, _) = tokio_tungstenite::client_async(url, MaybeTlsStream::Plain(stream))
+        .await
+        .unwrap();
+    let ready = next_json(&mut socket).await;
+    assert_eq!(ready["type"], "ready", "{ready}");
+    socket
+}
+
+async fn next_json(socket: &mut Socket) -> Value {
+    loop {
+        let message = tokio::time::timeout(PATIENCE, socket.next())
+            .await
+            .expect("the server answered")
+            .expect("the socket is open")
+            .expect("no socket error");
+        if let Message::Text(text) = message {
+            return serde_json::from_str(&text).unwrap();
+        }
+    }
+}
+
+async fn processed_epochs(http: &reqwest::Client, addr: std::net::SocketAddr, id: &str) -> u64 {
+    let stats: Value = http
+        .get(format!("http://{addr}/api/v1/sessions/{id}/stats"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    stats["epochs"].as_u64().unwrap()
+}
+
+/// Reads results until `count` epochs are answered; asserts that they come in
+/// order starting at epoch `from`, and that nothing else but `result` arrives.
+async fn expect_results<S>(stream: &mut S, from: usize, count: usize)
+where
+    S: StreamExt<Item = Result<Message, tokio_tungstenite::tungstenite::Error>> + Unpin,
+{
+    let mut k = from;
+    while k < from + count {
+        let message = tokio::time::timeout(PATIENCE, stream.next())
+            .await
+            .expect("results keep coming")
+            .expect("the socket is open")
+            .expect("no socket error");
+        let Message::Text(text) = message else {
+            continue;
+        };
+        let v: Value = serde_json::from_str(&text).unwrap();
+        assert_eq!(v["type"], "result", "epoch {k}: {v}");
+        let t = v["t"].as_f64().unwrap();
+        assert!((t - t_of(k)).abs() < 1e-9, "epoch {k}: result for t = {t}");
+        assert!(v["monitors"]["track"]["tests"]["residual"].is_object());
+        k += 1;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_flooding_session_slows_only_its_own_socket_and_every_epoch_is_answered_in_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = service::start(ServiceConfig::new(
+        "127.0.0.1:0".parse().unwrap(),
+        dir.path().join("loadgen.db"),
+    ))
+    .await
+    .unwrap();
+    let addr = server.addr;
+    let http = reqwest::Client::new();
+    for id in ["flood", "steady"] {
+        let status = http
+            .post(format!("http://{addr}/api/v1/sessions"))
+            .json(&linear_session(id))
+            .send()
+            .await
+            .unwrap()
+            .status();
+        assert_eq!(status, 201);
+    }
+
+    // The flooder writes every frame back to back and reads nothing yet.
+    let flood = connect(addr, "flood", true).await;
+    let (mut flood_sink, mut flood_stream) = flood.split();
+    let writer = tokio::spawn(async move {
+        for f in 0..FLOOD_FRAMES {
+            let frame: Vec<String> = (f * FLOOD_BATCH..(f + 1) * FLOOD_BATCH)
+                .map(epoch)
+                .collect();
+            let text = format!("[{}]", frame.join(","));
+            flood_sink.send(Message::Text(text.into())).await.unwrap();
+        }
+        flood_sink
+    });
+
+    // Its session stalls: results it cannot deliver stop its actor, and its
+    // socket stops being read. Wait until its count stops moving.
+    let total = (FLOOD_FRAMES * FLOOD_BATCH) as u64;
+    let mut last = u64::MAX;
+    let stalled = loop {
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        let now = processed_epochs(&http, addr, "flood").await;
+        if now == last {
+            break now;
+        }
+        last = now;
+    };
+    assert!(
+        stalled < total,
+        "the flooding session processed all {total} epochs without its results being read"
+    );
+    // (Whether the client's own writes block too depends on how much the
+    // kernel's socket buffers hold; the session's actor has stopped either way.)
+
+    // Meanwhile another session is answered, epoch by epoch, in order.
+    let mut steady = connect(addr, "steady", false).await;
+    for k in 0..STEADY_FRAMES {
+        steady.send(Message::Text(epoch(k).into())).await.unwrap();
+        expect_results(&mut steady, k, 1).await;
+    }
+    assert_eq!(
+        processed_epochs(&http, addr, "steady").await,
+        STEADY_FRAMES as u64
+    );
+
+    // The flooder reads again: every epoch it sent is processed and answered
+    // in order, with no error.
+    expect_results(&mut flood_stream, 0, total as usize).await;
+    let flood_sink = tokio::time::timeout(PATIENCE, writer)
+        .await
+        .expect("the flooding client finished writing")
+        .unwrap();
+    assert_eq!(processed_epochs(&http, addr, "flood").await, total);
+    let mut flood = flood_sink.reunite(flood_stream).unwrap();
+    flood.close(None).await.unwrap();
+    steady.close(None).await.unwrap();
+    server.shutdown().await;
+}
