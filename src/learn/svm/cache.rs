@@ -17,6 +17,9 @@ pub struct RowCache {
     next: Vec<usize>,
     /// Entries still free in the budget.
     free: usize,
+    /// A few evicted buffers kept for reuse: a fresh allocation per row would
+    /// have the kernel zero new pages each time (beyond the budget by ≤ 2 rows).
+    spare: Vec<Vec<f32>>,
 }
 
 impl RowCache {
@@ -34,6 +37,7 @@ impl RowCache {
             prev,
             next,
             free: entries.max(2 * l),
+            spare: Vec::new(),
         }
     }
 
@@ -60,12 +64,17 @@ impl RowCache {
     fn drop_row(&mut self, i: usize) {
         self.unlink(i);
         self.free += self.rows[i].len();
-        self.rows[i] = Vec::new();
+        let mut old = std::mem::take(&mut self.rows[i]);
+        if self.spare.len() < 2 {
+            old.clear();
+            self.spare.push(old);
+        }
     }
 
-    /// Makes row `i` hold at least `len` entries, evicting least recently used rows
-    /// as needed, marks it most recently used, and returns how many leading entries
-    /// are already valid (the caller fills `filled..len`).
+    /// Reserves room for row `i` to hold `len` entries, evicting least recently
+    /// used rows as needed, marks it most recently used, and returns how many
+    /// leading entries are already valid; the caller then appends entries
+    /// `filled..len` through [`RowCache::row_vec`] (no zero-filling first).
     pub fn prepare(&mut self, i: usize, len: usize) -> usize {
         let have = self.rows[i].len();
         if have > 0 {
@@ -81,7 +90,12 @@ impl RowCache {
                 self.drop_row(oldest);
             }
             self.free = self.free.saturating_sub(more);
-            self.rows[i].resize(len, 0.0);
+            if have == 0 {
+                if let Some(buf) = self.spare.pop() {
+                    self.rows[i] = buf;
+                }
+            }
+            self.rows[i].reserve_exact(more);
         }
         self.link_last(i);
         have.min(len)
@@ -93,9 +107,9 @@ impl RowCache {
         &self.rows[i]
     }
 
-    /// Mutable row `i` (to fill what [`RowCache::prepare`] left invalid).
+    /// Row `i`'s buffer, to append what [`RowCache::prepare`] reserved.
     #[inline]
-    pub fn row_mut(&mut self, i: usize) -> &mut [f32] {
+    pub fn row_vec(&mut self, i: usize) -> &mut Vec<f32> {
         &mut self.rows[i]
     }
 
@@ -146,10 +160,12 @@ mod tests {
         // Budget of 2 full rows of 4 (the minimum).
         let mut c = RowCache::new(4, 0.0);
         assert_eq!(c.prepare(0, 4), 0);
-        c.row_mut(0).copy_from_slice(&[1.0, 2.0, 3.0, 4.0]);
+        c.row_vec(0).extend([1.0, 2.0, 3.0, 4.0]);
         assert_eq!(c.prepare(1, 4), 0);
+        c.row_vec(1).extend([0.0; 4]);
         assert_eq!(c.prepare(0, 4), 4); // hit; 1 becomes the oldest
         assert_eq!(c.prepare(2, 4), 0); // evicts 1
+        c.row_vec(2).extend([0.0; 4]);
         assert_eq!(c.prepare(0, 4), 4);
         assert_eq!(c.prepare(1, 4), 0);
     }
@@ -158,9 +174,9 @@ mod tests {
     fn swapping_indices_permutes_cached_columns_and_drops_partial_rows() {
         let mut c = RowCache::new(4, 1.0);
         c.prepare(0, 4);
-        c.row_mut(0).copy_from_slice(&[1.0, 2.0, 3.0, 4.0]);
+        c.row_vec(0).extend([1.0, 2.0, 3.0, 4.0]);
         c.prepare(1, 2);
-        c.row_mut(1).copy_from_slice(&[5.0, 6.0]);
+        c.row_vec(1).extend([5.0, 6.0]);
         c.swap_index(1, 3);
         assert_eq!(c.row(0), &[1.0, 4.0, 3.0, 2.0]);
         // Row 1 moved to 3, and its prefix of 2 covers column 1 but not 3: dropped.

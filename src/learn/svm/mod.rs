@@ -5,7 +5,8 @@
 //!
 //! Layout (linfa's split): this file is the API and the shared parameter rules;
 //! [`svc`] and [`ocsvm`] set up each dual problem and hold the models; [`smo`] is
-//! the solver (libsvm's, WSS 2 + shrinking); [`cache`] its LRU kernel-row cache.
+//! the solver (libsvm's, WSS 2 + shrinking); `rows` the kernel matrix it reads;
+//! [`cache`] the LRU kernel-row cache.
 //!
 //! Kernel width, both conventions: the RBF kernel is `exp(−‖x − y‖² / sigma2)`
 //! (LS-SVMlab, DESIGN §3.5); scikit-learn / libsvm write `exp(−gamma‖x − y‖²)`, so
@@ -16,6 +17,7 @@
 
 pub mod cache;
 pub mod ocsvm;
+mod rows;
 pub mod smo;
 pub mod svc;
 
@@ -160,4 +162,75 @@ fn default_tol() -> f64 {
 
 fn default_cache_mb() -> f64 {
     DEFAULT_CACHE_MB
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::learn::model::{ModelKind, ModelParams, Prediction, train};
+    use crate::learn::{AnyModel, NoProgress};
+    use serde_json::json;
+
+    fn field_of(e: LearnError) -> String {
+        match e {
+            LearnError::InvalidParams { field, .. } => field,
+            other => panic!("expected InvalidParams, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn rest_params_are_checked_and_errors_name_the_field() {
+        let e = ModelParams::from_json(ModelKind::Svm, &json!({"sigma2": 1, "gamma": 1}));
+        assert_eq!(field_of(e.unwrap_err()), "gamma");
+        let e = ModelParams::from_json(ModelKind::Svm, &json!({"C": -2}));
+        assert_eq!(field_of(e.unwrap_err()), "C");
+        let e = ModelParams::from_json(ModelKind::OcSvm, &json!({"nu": 1.5}));
+        assert_eq!(field_of(e.unwrap_err()), "nu");
+        let e = ModelParams::from_json(ModelKind::OcSvm, &json!({"nu": 0.1, "C": 0.5}));
+        assert_eq!(field_of(e.unwrap_err()), "C");
+        let e = ModelParams::from_json(ModelKind::OcSvm, &json!({"kernel": "linear"}));
+        assert_eq!(field_of(e.unwrap_err()), "kernel");
+        let ok = ModelParams::from_json(ModelKind::Svm, &serde_json::Value::Null).unwrap();
+        assert_eq!(ok, ModelParams::Svm(SvcParams::default()));
+    }
+
+    #[test]
+    fn a_cv_block_is_refused_for_the_svm_kinds() {
+        let data = Dataset::new(&[vec![0.0], vec![1.0]], Some(&[-1.0, 1.0])).unwrap();
+        let cv = CvParams::default();
+        let e = train_svc(&SvcParams::default(), Some(&cv), &data, &NoProgress).unwrap_err();
+        assert_eq!(field_of(e), "cv");
+        let e = train_ocsvm(&OcSvmParams::default(), Some(&cv), &data, &NoProgress).unwrap_err();
+        assert_eq!(field_of(e), "cv");
+    }
+
+    #[test]
+    fn the_training_entry_point_fills_metrics_and_predicts_labels() {
+        let rows: Vec<Vec<f64>> = (0..60)
+            .map(|i| vec![(i as f64 * 0.7).sin(), (i as f64 * 0.3).cos()])
+            .collect();
+        let y: Vec<f64> = rows
+            .iter()
+            .map(|r| if r[0] > 0.0 { 1.0 } else { -1.0 })
+            .collect();
+        let data = Dataset::new(&rows, Some(&y)).unwrap();
+        let svm = ModelParams::from_json(ModelKind::Svm, &json!({"C": 10})).unwrap();
+        let t = train(&svm, None, &data, &NoProgress).unwrap();
+        assert!(t.metrics.train_accuracy.unwrap() > 0.95);
+        assert!(t.metrics.support_vectors.unwrap() > 0);
+        assert!(t.metrics.iterations.unwrap() > 0);
+        assert!(t.metrics.objective.unwrap() < 0.0);
+        // The effective parameters show the default width that was used.
+        assert!(matches!(t.params, ModelParams::Svm(ref p) if p.sigma2.is_some()));
+        let q = Dataset::new(&[vec![0.9, 0.0], vec![-0.9, 0.0]], None).unwrap();
+        match t.model.predict(&q).unwrap() {
+            Prediction::Classification { label, .. } => assert_eq!(label, vec![1, -1]),
+            other => panic!("expected labels, got {other:?}"),
+        }
+        let oc = ModelParams::from_json(ModelKind::OcSvm, &json!({"nu": 0.2})).unwrap();
+        let t = train(&oc, None, &data, &NoProgress).unwrap();
+        assert!(t.metrics.outlier_fraction.unwrap() <= 0.25);
+        assert!(matches!(t.model, AnyModel::OcSvm(_)));
+        assert_eq!(t.model.input_dim(), 2);
+    }
 }

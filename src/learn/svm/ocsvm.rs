@@ -541,7 +541,7 @@ mod tests {
                 true
             }
         }
-        let data = random_set(1200, 6);
+        let data = random_set(300, 6);
         let e = params(0.1, 1.0).fit_with(&data, &Stop).unwrap_err();
         assert_eq!(e, LearnError::Cancelled);
     }

@@ -3,10 +3,10 @@
 //! `min ½ αᵀQα + pᵀα  s.t.  yᵀα = Δ, 0 ≤ α_i ≤ C_i` with `Q_ij = y_i y_j K(x_i, x_j)`,
 //! second-order working-set selection (Fan, Chen & Lin 2005, "WSS 2"), shrinking
 //! with gradient reconstruction before the final optimality check, and kernel rows
-//! from an LRU [`RowCache`]. Pure and deterministic: the same problem gives the
+//! from an LRU [`super::cache::RowCache`]. Pure and deterministic: the same problem gives the
 //! same iterates. Called by [`super::svc`] and [`super::ocsvm`].
 
-use super::cache::RowCache;
+use super::rows::QMatrix;
 use crate::learn::{Kernel, LearnError, Progress};
 
 /// libsvm's `TAU`: the curvature used when `K_ii + K_jj − 2K_ij ≤ 0`.
@@ -66,76 +66,6 @@ enum Bound {
     Lower,
     Upper,
     Free,
-}
-
-/// The kernel matrix `Q` in the solver's (permuted) order, rows through the cache.
-struct QMatrix {
-    x: Vec<f64>,
-    dim: usize,
-    sq: Vec<f64>,
-    y: Vec<f64>,
-    kernel: Kernel,
-    diag: Vec<f64>,
-    cache: RowCache,
-}
-
-impl QMatrix {
-    fn new(problem: &Problem<'_>, cache_mb: f64) -> Self {
-        let n = problem.y.len();
-        let dim = problem.dim;
-        let x = problem.x.to_vec();
-        // Squared norms once, so a kernel entry costs one dot product.
-        let sq: Vec<f64> = x.chunks_exact(dim).map(|r| dot(r, r)).collect();
-        let kernel = problem.kernel;
-        let diag = sq.iter().map(|&s| kernel.eval_parts(0.0, s)).collect();
-        QMatrix {
-            x,
-            dim,
-            sq,
-            y: problem.y.clone(),
-            kernel,
-            diag,
-            cache: RowCache::new(n, cache_mb),
-        }
-    }
-
-    /// Makes row `i` valid on `0..len` (computing only the missing tail).
-    fn ensure(&mut self, i: usize, len: usize) {
-        let start = self.cache.prepare(i, len);
-        if start >= len {
-            return;
-        }
-        let d = self.dim;
-        let xi = &self.x[i * d..(i + 1) * d];
-        let (sqi, yi) = (self.sq[i], self.y[i]);
-        let row = self.cache.row_mut(i);
-        for (j, out) in row.iter_mut().enumerate().take(len).skip(start) {
-            let xj = &self.x[j * d..(j + 1) * d];
-            let dt = dot(xi, xj);
-            let dist2 = (sqi + self.sq[j] - 2.0 * dt).max(0.0);
-            *out = (yi * self.y[j] * self.kernel.eval_parts(dist2, dt)) as f32;
-        }
-    }
-
-    fn row(&self, i: usize) -> &[f32] {
-        self.cache.row(i)
-    }
-
-    fn swap_index(&mut self, i: usize, j: usize) {
-        self.cache.swap_index(i, j);
-        let d = self.dim;
-        for k in 0..d {
-            self.x.swap(i * d + k, j * d + k);
-        }
-        self.sq.swap(i, j);
-        self.y.swap(i, j);
-        self.diag.swap(i, j);
-    }
-}
-
-#[inline]
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(u, v)| u * v).sum()
 }
 
 /// Solver state (libsvm `Solver`), all vectors in permuted order.
@@ -496,7 +426,13 @@ pub fn solve(
 ) -> Result<Solution, LearnError> {
     let l = problem.y.len();
     let mut s = Smo {
-        q: QMatrix::new(problem, options.cache_mb),
+        q: QMatrix::new(
+            problem.x,
+            problem.dim,
+            &problem.y,
+            problem.kernel,
+            options.cache_mb,
+        ),
         y: problem.y.clone(),
         p: problem.p.clone(),
         alpha: problem.alpha.clone(),

@@ -539,3 +539,46 @@ mod tests {
         }
     }
 }
+
+#[cfg(test)]
+mod progress_tests {
+    use super::*;
+    use std::sync::Mutex;
+
+    struct Record(Mutex<Vec<(f64, String)>>);
+
+    impl Progress for Record {
+        fn report(&self, fraction: f64, stage: &str) {
+            self.0.lock().unwrap().push((fraction, stage.to_owned()));
+        }
+    }
+
+    #[test]
+    fn progress_is_reported_as_a_growing_fraction_of_stage_smo() {
+        // Interleaved labels with a large C need thousands of SMO iterations.
+        let rows: Vec<Vec<f64>> = (0..200)
+            .map(|i| vec![(i as f64 * 0.917).sin(), (i as f64 * 0.31).cos()])
+            .collect();
+        let y: Vec<f64> = (0..200)
+            .map(|i| if (i * 7919) % 13 < 6 { 1.0 } else { -1.0 })
+            .collect();
+        let data = Dataset::new(&rows, Some(&y)).unwrap();
+        let record = Record(Mutex::new(Vec::new()));
+        let p = SvcParams {
+            c: 1e4,
+            sigma2: Some(0.05),
+            tol: 1e-6,
+            ..SvcParams::default()
+        };
+        let (_, _, metrics) = p.fit_with(&data, &record).unwrap();
+        let reports = record.0.into_inner().unwrap();
+        assert!(metrics.iterations.unwrap() >= 1000, "{metrics:?}");
+        assert!(!reports.is_empty());
+        assert!(
+            reports
+                .iter()
+                .all(|(f, s)| (0.0..=1.0).contains(f) && s == "smo")
+        );
+        assert!(reports.windows(2).all(|w| w[1].0 >= w[0].0));
+    }
+}
