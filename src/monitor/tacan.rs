@@ -539,6 +539,16 @@ mod tests {
     #[test]
     fn a_model_of_the_wrong_dimension_is_refused() {
         let models = HashMap::from([("m".to_owned(), small_model(false))]);
+        // The right one: ρ, scale and the standardiser are read from its stored form.
+        let m = TacanMonitor::new(
+            TacanConfig::from_json(&config("m")).unwrap(),
+            models["m"].clone(),
+            PolicyConfig::Classic,
+            ThresholdSpec::default(),
+        )
+        .unwrap();
+        assert!(m.decision_scale.is_some_and(|s| s > 0.0));
+        assert_eq!(m.standardizer.as_ref().map(Standardizer::dim), Some(3));
         let mut c = config("m");
         c["crest"] = json!(true);
         let e = build(&spec(c, PolicyConfig::Classic), &models)

@@ -319,8 +319,8 @@ pub fn train_model(p: &Seed003Params, noise_var_m2: f64) -> Result<TrainedLevel,
     })
 }
 
-/// Per-window flags and `(t, decision)` of one test flight.
-type FlightRun = (Vec<bool>, Vec<(f64, f64)>);
+/// Per-window flags, `(t, decision)` and the total monitor step time (s) of one test flight.
+type FlightRun = (Vec<bool>, Vec<(f64, f64)>, f64);
 
 /// Runs one test flight through the `tacan` monitor under `policy`; returns the
 /// per-window flags (window `i` ends at sample `i + K − 1`) and the decisions.
@@ -332,10 +332,13 @@ fn run_flight(
     let mut monitor = monitor::build(spec, models)?;
     let mut flags = Vec::with_capacity(flight.epochs.len());
     let mut decisions = Vec::with_capacity(flight.epochs.len());
+    let mut busy = 0.0;
     for e in &flight.epochs {
+        let started = Instant::now();
         let report = monitor
             .step(e)
             .map_err(|source| Seed003Error::Step { t: e.t, source })?;
+        busy += started.elapsed().as_secs_f64();
         if let Some(o) = report.tests.first() {
             flags.push(o.decision.health != Health::Healthy);
         }
@@ -346,7 +349,7 @@ fn run_flight(
             decisions.push((e.t, g));
         }
     }
-    Ok((flags, decisions))
+    Ok((flags, decisions, busy))
 }
 
 fn spec(p: &Seed003Params, policy: PolicyConfig) -> MonitorSpec {
@@ -380,6 +383,7 @@ pub fn run(p: Seed003Params) -> Result<Seed003Result, Seed003Error> {
         let mut faults = Vec::new();
         let mut trace = Trace::default();
         let policies = [PolicyConfig::Classic, PolicyConfig::counters_default()];
+        let (mut busy_s, mut epochs) = ([0.0; 2], [0usize; 2]);
         for i in 0..p.test_flights {
             let flight = simulate_flight(&TacanFlightParams {
                 seed: p.seed * 1000 + 500 + i as u64,
@@ -396,7 +400,9 @@ pub fn run(p: Seed003Params) -> Result<Seed003Result, Seed003Error> {
             let dt = 1.0 / TacanFlightParams::default().rate_hz;
             let offset = i as f64 * (p.test_duration_s + 60.0);
             for (pi, &policy) in policies.iter().enumerate() {
-                let (flags, decisions) = run_flight(&flight, &spec(&p, policy), &models)?;
+                let (flags, decisions, busy) = run_flight(&flight, &spec(&p, policy), &models)?;
+                busy_s[pi] += busy;
+                epochs[pi] += flight.epochs.len();
                 for (w, &f) in flags.iter().enumerate() {
                     let h = if f { Health::Isolated } else { Health::Healthy };
                     traces[pi].push((offset + (w + k - 1) as f64 * dt, h));
@@ -459,8 +465,10 @@ pub fn run(p: Seed003Params) -> Result<Seed003Result, Seed003Error> {
         let scorecards = traces
             .iter()
             .zip(labels)
-            .map(|(t, label)| {
-                let mut card = scorecard::score("range", label, t, &faults, None);
+            .enumerate()
+            .map(|(pi, (t, label))| {
+                let per_epoch = busy_s[pi] / epochs[pi].max(1) as f64;
+                let mut card = scorecard::score("range", label, t, &faults, Some(per_epoch));
                 // One figure instead of 2,000: the longest recovery (`None` if one never
                 // recovered before the next jump).
                 card.recovery_s = vec![card.max_recovery_s()];
