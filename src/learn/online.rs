@@ -84,6 +84,10 @@ pub struct OnlineLsSvm {
     oldest: usize,
     /// Updates since the last re-factorisation.
     since_refresh: usize,
+    /// The last add's rank-1 term `u uᵀ / s`, not yet applied to `p` (`pending_s` = 0:
+    /// none): it is folded into the next slide's single pass over `P`.
+    pending_u: Vec<f64>,
+    pending_s: f64,
     /// Scratch: kernel column of the newcomer, `u = P k`, leaver's row.
     k: Vec<f64>,
     u: Vec<f64>,
@@ -111,6 +115,8 @@ impl OnlineLsSvm {
             len: 0,
             oldest: 0,
             since_refresh: 0,
+            pending_u: vec![0.0; n],
+            pending_s: 0.0,
             k: vec![0.0; n],
             u: vec![0.0; n],
             q: vec![0.0; n],
@@ -198,7 +204,7 @@ impl OnlineLsSvm {
             self.project();
         }
         self.since_refresh += 1;
-        if self.since_refresh >= self.params.refresh || !self.add(slot) {
+        if self.since_refresh >= self.params.refresh || !self.add(slot, full) {
             self.refresh()?;
         }
         self.update_coefficients();
@@ -234,13 +240,22 @@ impl OnlineLsSvm {
         }
     }
 
-    /// Schur-complement removal of the sample that held `slot`, fused with
-    /// [`Self::project`] in one pass over `P`: with `q` its row of `P` and `p = q[slot]`,
-    /// the inverse without it is `P − q qᵀ / p` on the other slots, and `u = P' k` is
+    /// Schur-complement removal of the sample that held `slot`, fused with the pending
+    /// rank-1 term of the previous add and with [`Self::project`], in one pass over `P`
+    /// (the step is bound by memory traffic, so one pass instead of three is what
+    /// makes it fast): with `q` the leaver's row of the true `P` and `p = q[slot]`, the
+    /// inverse without it is `P − q qᵀ / p` on the other slots, and `u = P' k` is
     /// accumulated from each updated row.
     fn remove_and_project(&mut self, slot: usize) {
         let n = self.params.window;
+        let ps = self.pending_s;
         self.q.copy_from_slice(&self.p[slot * n..(slot + 1) * n]);
+        if ps != 0.0 {
+            let a = self.pending_u[slot] / ps;
+            for (qj, uj) in self.q.iter_mut().zip(&self.pending_u) {
+                *qj += a * uj;
+            }
+        }
         let pss = self.q[slot];
         // η' = η − q η_s / p (likewise ν), derived from η = P1 block-wise.
         let (fe, fn_) = (self.eta[slot] / pss, self.nu[slot] / pss);
@@ -249,15 +264,15 @@ impl OnlineLsSvm {
             self.nu[i] -= self.q[i] * fn_;
         }
         self.u.iter_mut().for_each(|v| *v = 0.0);
-        for i in 0..n {
-            let f = self.q[i] / pss;
-            let ki = self.k[i];
-            let row = &mut self.p[i * n..(i + 1) * n];
-            for ((pij, qj), u) in row.iter_mut().zip(&self.q).zip(self.u.iter_mut()) {
-                *pij -= f * qj;
-                *u += ki * *pij;
-            }
-        }
+        let pass = SlidePass {
+            q: &self.q,
+            pending_u: &self.pending_u,
+            k: &self.k,
+            ps,
+            pss,
+        };
+        pass.run(&mut self.p, &mut self.u);
+        self.pending_s = 0.0;
         self.clear_slot(slot);
         self.u[slot] = 0.0;
     }
@@ -279,7 +294,7 @@ impl OnlineLsSvm {
     /// `s = K(x, x) + 1/γ − kᵀu`, the new inverse is
     /// `[[P + u uᵀ/s, −u/s], [−uᵀ/s, 1/s]]`. False if `s` is not positive (then the
     /// caller re-factorises).
-    fn add(&mut self, slot: usize) -> bool {
+    fn add(&mut self, slot: usize, defer: bool) -> bool {
         let n = self.params.window;
         let schur = 1.0 + 1.0 / self.params.gamma - solve::dot(&self.k, &self.u);
         if !(schur > 0.0 && schur.is_finite()) {
@@ -295,14 +310,12 @@ impl OnlineLsSvm {
         }
         self.eta[slot] = (1.0 - sum_u) / schur;
         self.nu[slot] = (y - uy) / schur;
-        for i in 0..n {
-            let f = self.u[i] / schur;
-            if f == 0.0 {
-                continue;
-            }
-            for (pij, uj) in self.p[i * n..(i + 1) * n].iter_mut().zip(&self.u) {
-                *pij += f * uj;
-            }
+        if defer {
+            // u[slot] = 0, so the deferred term leaves row/column `slot` alone.
+            self.pending_u.copy_from_slice(&self.u);
+            self.pending_s = schur;
+        } else {
+            self.apply_rank1(schur);
         }
         for i in 0..n {
             self.p[i * n + slot] = -self.u[i] / schur;
@@ -312,11 +325,26 @@ impl OnlineLsSvm {
         true
     }
 
+    /// `P += u uᵀ / s`.
+    fn apply_rank1(&mut self, schur: f64) {
+        let n = self.params.window;
+        for i in 0..n {
+            let f = self.u[i] / schur;
+            if f == 0.0 {
+                continue;
+            }
+            for (pij, uj) in self.p[i * n..(i + 1) * n].iter_mut().zip(&self.u) {
+                *pij += f * uj;
+            }
+        }
+    }
+
     /// Re-factorises `H` of the current window from scratch (Cholesky, then the
     /// explicit inverse) and recomputes `η`, `ν`: O(N³), run every `refresh` updates.
     pub fn refresh(&mut self) -> Result<(), LearnError> {
         let (n, d) = (self.params.window, self.dim);
         self.since_refresh = 0;
+        self.pending_s = 0.0;
         if self.len == 0 {
             return Ok(());
         }
@@ -369,6 +397,59 @@ impl OnlineLsSvm {
             &self.kernel,
             x,
         ))
+    }
+}
+
+/// The one pass over `P` of a slide: `P += a uₚᵀ − f qᵀ` row by row (`a = uₚ/s`,
+/// `f = q/p`), accumulating `u += kᵢ · P[i, :]`.
+struct SlidePass<'a> {
+    q: &'a [f64],
+    pending_u: &'a [f64],
+    k: &'a [f64],
+    ps: f64,
+    pss: f64,
+}
+
+impl SlidePass<'_> {
+    /// Runs the pass with AVX2 when the CPU has it (the default x86-64 target only
+    /// assumes SSE2; twice the vector width matters for this bandwidth-bound loop).
+    fn run(&self, p: &mut [f64], u: &mut [f64]) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2, checked just above.
+            unsafe { self.run_avx2(p, u) };
+            return;
+        }
+        self.run_generic(p, u);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn run_avx2(&self, p: &mut [f64], u: &mut [f64]) {
+        self.run_generic(p, u);
+    }
+
+    #[inline(always)]
+    fn run_generic(&self, p: &mut [f64], u: &mut [f64]) {
+        let n = self.q.len();
+        for (i, row) in p.chunks_exact_mut(n).enumerate() {
+            let a = if self.ps != 0.0 {
+                self.pending_u[i] / self.ps
+            } else {
+                0.0
+            };
+            let f = self.q[i] / self.pss;
+            let ki = self.k[i];
+            for (((pij, qj), pu), uj) in row
+                .iter_mut()
+                .zip(self.q)
+                .zip(self.pending_u)
+                .zip(u.iter_mut())
+            {
+                *pij += a * pu - f * qj;
+                *uj += ki * *pij;
+            }
+        }
     }
 }
 
