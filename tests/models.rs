@@ -83,6 +83,19 @@ fn check_progress(record: &Value) {
 
 /// Polls until the model leaves `training`; returns the final record and every
 /// record seen while training.
+/// Waits until job `id` holds a training slot (its stage is no longer `queued`), so a
+/// job submitted next is certain to queue behind it.
+async fn wait_running(server: &Server, id: &str) {
+    for _ in 0..6000 {
+        let (_, record) = get(server, &format!("/api/v1/models/{id}")).await;
+        if record["status"] != "training" || record["progress"]["stage"] != "queued" {
+            return;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(5)).await;
+    }
+    panic!("job {id} never left the queue");
+}
+
 async fn wait(server: &Server, id: &str) -> (Value, Vec<Value>) {
     let mut seen = Vec::new();
     for _ in 0..6000 {
@@ -273,6 +286,7 @@ async fn a_cross_validation_job_shows_its_progress_then_its_choice() {
     // A job holding the single training slot keeps the CV job visibly `training`
     // (stage `queued`) until it is deleted: no race with a fast machine.
     let blocker = train(&server, &large_job()).await;
+    wait_running(&server, &blocker).await;
     let (x, y) = sine(120);
     let id = train(
         &server,
@@ -474,6 +488,7 @@ async fn training_never_blocks_ingest_and_delete_cancels_the_job() {
     let dir = tempfile::tempdir().unwrap();
     let server = serve(&dir, Limits::default()).await;
     let large = train(&server, &large_job()).await;
+    wait_running(&server, &large).await;
     // A second job waits for the single training slot.
     let (x, y) = sine(20);
     let small =
