@@ -1082,3 +1082,36 @@ async fn a_slow_subscriber_gets_every_alarm_and_stats_stay_decimated() {
     );
     server.shutdown().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_last_frame_of_a_burst_reaches_observers_while_the_stream_stays_open() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = start(&dir.path().join("t.db"), None, Limits::default()).await;
+    create_session(
+        &client(),
+        &server,
+        &cv_session(
+            "burst",
+            &MODEL,
+            json!({"kind": "classic"}),
+            json!({"p_fa": 0.002}),
+            false,
+        ),
+    )
+    .await;
+    let mut events = connect(&format!("{}/api/v1/sessions/burst/events", ws(&server))).await;
+    let mut socket = ingest(&server, "burst").await;
+    // Two frames well inside one 50 ms publication period: the second one's
+    // statistics are held back by the rate limit and must still be published,
+    // although no further frame arrives and the ingest socket stays open.
+    let z = MODEL.measurements(20, 3, |_| 0.0);
+    let frames = epochs(&z, 0);
+    send(&mut socket, &Value::Array(frames[..10].to_vec())).await;
+    send(&mut socket, &Value::Array(frames[10..].to_vec())).await;
+    let (stats, _) = recv_until(&mut events, |v| {
+        v["type"] == "stats" && v["epochs"].as_u64() == Some(20)
+    })
+    .await;
+    assert_eq!(stats["monitors"]["cv"]["epochs"], 20, "{stats}");
+    drop(socket);
+}

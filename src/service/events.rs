@@ -32,6 +32,9 @@ pub async fn events(
     let ws = ws.map_err(upgrade_rejection)?;
     Ok(ws
         .protocols([SUBPROTOCOL])
+        // Observers send almost nothing; the protocol layer zero-fills its read
+        // buffer before each read, so the 128 KiB default only costs (see ingest.rs).
+        .read_buffer_size(8 << 10)
         .on_upgrade(move |socket| async move {
             state.metrics.event_sockets.fetch_add(1, Ordering::Relaxed);
             run(socket, state.clone(), handle).await;

@@ -60,6 +60,9 @@ struct Actor {
     shared: Arc<SessionShared>,
     stats_tx: watch::Sender<Arc<SessionStats>>,
     last_published: Instant,
+    /// Statistics changed since the last publication (held back by the rate limit);
+    /// a timer publishes them so a stream's last frame is never left unseen.
+    stats_pending: bool,
     ingest: Option<mpsc::Sender<String>>,
     stream: u64,
     last_t: Option<f64>,
@@ -90,6 +93,7 @@ pub fn spawn(stored: StoredSession, deps: ActorDeps) -> Result<SessionHandle, Ap
         shared: shared.clone(),
         stats_tx,
         last_published: Instant::now(),
+        stats_pending: false,
         ingest: None,
         stream: 0,
         last_t: None,
@@ -151,6 +155,7 @@ impl Actor {
         mut control: mpsc::Receiver<ControlCommand>,
     ) {
         loop {
+            let trailing = tokio::time::Instant::from_std(self.last_published + STATS_PERIOD);
             tokio::select! {
                 biased;
                 command = control.recv() => match command {
@@ -161,6 +166,9 @@ impl Actor {
                     Some(frame) => self.frame(frame).await,
                     None => break,
                 },
+                () = tokio::time::sleep_until(trailing), if self.stats_pending => {
+                    self.publish(true);
+                }
             }
         }
         // Close every event subscriber's queue so their sockets end too.
@@ -587,8 +595,11 @@ impl Actor {
         let now = Instant::now();
         if force || now.duration_since(self.last_published) >= STATS_PERIOD {
             self.last_published = now;
+            self.stats_pending = false;
             self.stats.published_at_ms = now_ms();
             self.stats_tx.send_replace(Arc::new(self.stats.clone()));
+        } else {
+            self.stats_pending = true;
         }
     }
 }
