@@ -6,6 +6,8 @@ pub mod chi2;
 pub mod hpl;
 pub mod policy;
 pub mod statistic;
+pub mod ta;
 
 pub use policy::{Decision, Health, PolicyConfig, PolicyError, PolicyState};
 pub use statistic::{Statistic, ThresholdError, ThresholdSpec};
+pub use ta::{TaError, TaParams, TaStatistic};
