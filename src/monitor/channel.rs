@@ -26,11 +26,15 @@
 //! - `n`, `min_differences`: T_a's window and warm-up ([`TaParams`]).
 //!
 //! Per epoch and channel: ŷ_k from the history, `r_k = y_k − ŷ_k`, T_a, the policy. While
-//! the channel's decision is **not healthy** the measured value is treated as faulty: the
-//! prediction ŷ_k enters the history instead of y_k (the predictor runs through the fault
-//! on its own output), nothing enters the online window, the outlier filter is bypassed
-//! (and restarts on the return to healthy), and T_a's V is frozen. A channel absent from an
-//! epoch skips it. A singular V (a channel whose residual never varies) leaves the test
+//! the channel's decision is **not healthy** nothing is learned from it: no sample enters
+//! the online window (it keeps the model of the healthy past), T_a's V is frozen, and the
+//! outlier filter is bypassed (it restarts on the return to healthy). The measured value
+//! still enters the embedding history: feeding the prediction back instead (free-running
+//! through the fault) was tried and deadlocks — once the free-run drifts from the signal
+//! the residual stays large after the fault has ended, the channel never returns to
+//! healthy and so never sees real data again. With measured inputs a fault leaves the
+//! embedding m epochs after it ends and T_a's window n epochs after that. A channel absent
+//! from an epoch skips it. A singular V (a residual that never varies) leaves the test
 //! idle that epoch. A prediction that is not finite fails the step (state unchanged).
 
 use std::collections::{BTreeMap, HashSet, VecDeque};
@@ -501,22 +505,19 @@ impl Monitor for ChannelMonitor {
                 residual = Some((r, health == Health::Healthy));
             }
             let healthy = health == Health::Healthy;
-            // What enters the history and the window (module doc): the filtered measurement
-            // while healthy, the prediction otherwise.
-            let (value, filters) = match (&yhat, healthy) {
-                (Some(p), false) => (p.clone(), None),
-                _ => match &ch.filters {
-                    Some(f) => {
-                        let mut f = f.clone();
-                        let v = y
-                            .iter()
-                            .zip(f.iter_mut())
-                            .map(|(&v, f)| f.filter(v).0)
-                            .collect();
-                        (v, Some(f))
-                    }
-                    None => (y.clone(), None),
-                },
+            // What enters the history (module doc): the measurement, through the outlier
+            // filter while healthy.
+            let (value, filters) = match (&ch.filters, healthy) {
+                (Some(f), true) => {
+                    let mut f = f.clone();
+                    let v = y
+                        .iter()
+                        .zip(f.iter_mut())
+                        .map(|(&v, f)| f.filter(v).0)
+                        .collect();
+                    (v, Some(f))
+                }
+                _ => (y.clone(), None),
             };
             let windows = match (&ch.predictor, &x, healthy) {
                 (Predictor::Online(w), Some(x), true) => {

@@ -10,7 +10,8 @@
 //! Noise models. The paper names the error states (eq. 22: wind, air-speed scale factor
 //! and a barometric height error δh_b "correlated in time with correlation time τ_b";
 //! eq. 23: GNSS position and velocity errors) but gives no values, so we pick:
-//! - barometric height error δh_b: first-order Gauss–Markov, σ_b = 5 m, τ_b = 60 s;
+//! - barometric height error δh_b: first-order Gauss–Markov, σ_b = 1 m, τ_b = 120 s
+//!   (after the barometric setting, a slowly wandering metre);
 //! - GNSS height error: white, σ_g = 2 m (a 10-satellite fix, as the paper's sky);
 //! - truth height: 1200 m plus an altitude-hold wander of
 //!   `15 sin(2πt/120) + 5 sin(2πt/37 + 0.7)` m — level flight is never perfectly flat, and
@@ -72,8 +73,8 @@ impl Default for AdsGnssParams {
             heading_deg: 135.0,
             speed_mps: 200.0,
             gnss_sigma_m: 2.0,
-            baro_sigma_m: 5.0,
-            baro_tau_s: 60.0,
+            baro_sigma_m: 1.0,
+            baro_tau_s: 120.0,
             faults: vec![FaultKind::Ramp { rate: 1.0 }],
             fault_interval_s: (FAULT_START_S, FAULT_END_S),
         }
@@ -247,9 +248,8 @@ mod tests {
         let dh = run.channel();
         let mean = dh.iter().sum::<f64>() / dh.len() as f64;
         let var = dh.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / dh.len() as f64;
-        // var(n_g − δh_b) = σ_g² + σ_b² = 4 + 25; the Gauss–Markov's slow wander makes the
-        // sample variance of a 20 000 s run uncertain by about 10 %.
-        assert!((var - 29.0).abs() < 6.0, "{var}");
+        // var(n_g − δh_b) = σ_g² + σ_b² = 4 + 1.
+        assert!((var - 5.0).abs() < 0.3, "{var}");
         // Heading 135°: the aircraft moves south-east.
         let (lat_end, lon_end) = run.lat_lon[run.t.len() - 1];
         assert!(lat_end < 34f64.to_radians() && lon_end > 109f64.to_radians());
