@@ -13,6 +13,8 @@ pub mod dataset;
 pub mod kernel;
 pub mod local;
 pub mod lssvm;
+pub mod lssvm_exact;
+pub mod lssvm_solve;
 pub mod model;
 pub mod online;
 pub mod outlier;
