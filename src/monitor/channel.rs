@@ -19,7 +19,9 @@
 //! - `predictor`: a stored model id (`lssvm` or `lw-lssvm`, input dimension m·dim) — for a
 //!   vector channel an array of ids, **one model per component**, each fed the whole
 //!   embedding — or `online`: a sliding-window LS-SVM per component (seed 001, raw units,
-//!   learning as it goes; it predicts once its window holds two samples).
+//!   learning as it goes; it predicts once its window holds two samples, and its residuals
+//!   are tested — and feed T_a's variance — once the window is full: before that they
+//!   measure the model's learning, not the channel's noise).
 //! - `outlier_filter` (optional, seed 001 §2.2.1): values entering the predictor's history
 //!   and window pass the third-difference filter first (the residual and the test always
 //!   use the raw value, so a fault cannot be filtered away).
@@ -484,7 +486,13 @@ impl Monitor for ChannelMonitor {
                     )));
                 }
                 let r: Vec<f64> = y.iter().zip(yhat).map(|(a, b)| a - b).collect();
-                match ch.ta.evaluate(&r) {
+                // An online window's residuals are tested (and feed V) once it is full:
+                // before that its predictions are still learning, not the channel's noise.
+                let ready = match &ch.predictor {
+                    Predictor::Online(w) => w.iter().all(|w| w.len() >= w.params().window),
+                    Predictor::Stored(_) => true,
+                };
+                match ch.ta.evaluate(&r).map(|t| t.filter(|_| ready)) {
                     Ok(Some(t)) => {
                         let (outcome, state) =
                             self.bank.preview(ch.test, t, ch.config.dim as u32)?;
@@ -502,7 +510,7 @@ impl Monitor for ChannelMonitor {
                 }
                 prediction.insert(ch.config.name.to_owned(), yhat.clone());
                 residuals.insert(ch.config.name.to_owned(), r.clone());
-                residual = Some((r, health == Health::Healthy));
+                residual = ready.then_some((r, health == Health::Healthy));
             }
             let healthy = health == Health::Healthy;
             // What enters the history (module doc): the measurement, through the outlier

@@ -6,9 +6,11 @@
 //!
 //! Signal. The paper's flight-control model (its eqs. 1–2) is not in the text we have,
 //! so the true pitch rate is a pitch oscillation of growing amplitude,
-//! `q(k) = A(k) (3 sin(2πk/40) + sin(2πk/20 + 0.5))` °/s with `A(k) = 0.6 + 0.8 k/135`
-//! (the growth is what a model trained once cannot follow and a sliding window can),
-//! measured with white noise σ = 0.1 °/s. Faults use [`FaultKind`] from [`super::faults`] on this scalar
+//! `q(k) = A(k) (3 sin(2πk/40 + 0.5) + sin(2πk/20 + 0.5))` °/s with `A(k) = 0.8 + 0.4 k/135`
+//! (the growth is what a model trained once cannot follow and a sliding window can; the
+//! phase puts k = 80 at q ≈ 2 °/s and rising, so a failure `out = 0` and a stuck output
+//! are real changes, not coincidences with the signal), measured with white noise
+//! σ = 0.3 °/s. Faults use [`FaultKind`] from [`super::faults`] on this scalar
 //! channel, as seed 001 §1 defines them: stuck `out = C` (the reading at the onset,
 //! held), constant gain `out = K·u` (K = 1.5), constant bias `out = u + M` (M = 1 °/s)
 //! and complete failure `out = 0`. Spikes (outliers): ±15 °/s on single samples every
@@ -28,7 +30,7 @@ pub const FAULT_K: usize = 80;
 /// The channel's name in the epochs.
 pub const CHANNEL: &str = "gyro";
 /// Measurement noise, °/s.
-pub const NOISE_DPS: f64 = 0.1;
+pub const NOISE_DPS: f64 = 0.3;
 /// Spike magnitude, °/s.
 pub const SPIKE_DPS: f64 = 15.0;
 
@@ -46,7 +48,7 @@ pub fn fault_modes() -> [(&'static str, FaultKind); 4] {
 pub fn truth(k: usize) -> f64 {
     use std::f64::consts::TAU;
     let k = k as f64;
-    (0.6 + 0.8 * k / 135.0) * (3.0 * (TAU * k / 40.0).sin() + (TAU * k / 20.0 + 0.5).sin())
+    (0.8 + 0.4 * k / 135.0) * (3.0 * (TAU * k / 40.0 + 0.5).sin() + (TAU * k / 20.0 + 0.5).sin())
 }
 
 /// One gyro record.

@@ -47,7 +47,9 @@ pub struct Seed001Params {
     pub reps: usize,
     /// False-alarm probability of T_a.
     pub p_fa: f64,
-    /// T_a window n.
+    /// T_a window n (default 1: seed 001 compares each residual with a threshold, its
+    /// step 8; with the short, still-learning window a 10-residual mean turns the online
+    /// model's slowly varying prediction error into false alarms).
     pub n: usize,
     /// Outlier filter factor c.
     pub c: f64,
@@ -64,7 +66,7 @@ impl Default for Seed001Params {
             embedding: 5,
             reps: 20,
             p_fa: 0.002,
-            n: crate::detect::ta::DEFAULT_N,
+            n: 1,
             c: 3.0,
         }
     }
