@@ -70,7 +70,9 @@ pub struct OnlineLsSvm {
     xs: Vec<f64>,
     /// Targets by slot.
     ys: Vec<f64>,
-    /// `H⁻¹` by slot, N × N row-major (symmetric); rows/columns of free slots are 0.
+    /// `H⁻¹` by slot, N × N row-major, symmetric: only the upper triangle (`j ≥ i`) is
+    /// kept current between refreshes (half the memory traffic per slide); rows and
+    /// columns of free slots are 0.
     p: Vec<f64>,
     /// `η = H⁻¹1` and `ν = H⁻¹y` by slot.
     eta: Vec<f64>,
@@ -84,6 +86,10 @@ pub struct OnlineLsSvm {
     oldest: usize,
     /// Updates since the last re-factorisation.
     since_refresh: usize,
+    /// The last add's rank-1 term `u uᵀ / s`, not yet applied to `p` (`pending_s` = 0:
+    /// none): it is folded into the next slide's single pass over `P`.
+    pending_u: Vec<f64>,
+    pending_s: f64,
     /// Scratch: kernel column of the newcomer, `u = P k`, leaver's row.
     k: Vec<f64>,
     u: Vec<f64>,
@@ -111,6 +117,8 @@ impl OnlineLsSvm {
             len: 0,
             oldest: 0,
             since_refresh: 0,
+            pending_u: vec![0.0; n],
+            pending_s: 0.0,
             k: vec![0.0; n],
             u: vec![0.0; n],
             q: vec![0.0; n],
@@ -198,7 +206,7 @@ impl OnlineLsSvm {
             self.project();
         }
         self.since_refresh += 1;
-        if self.since_refresh >= self.params.refresh || !self.add(slot) {
+        if self.since_refresh >= self.params.refresh || !self.add(slot, full) {
             self.refresh()?;
         }
         self.update_coefficients();
@@ -210,37 +218,58 @@ impl OnlineLsSvm {
     fn kernel_column(&mut self, slot: usize) {
         let (n, d) = (self.params.window, self.dim);
         let x = &self.xs[slot * d..(slot + 1) * d];
+        let scale = -1.0 / self.params.sigma2;
         for s in 0..n {
             let active = s != slot && (self.len == n || s < self.len);
             self.k[s] = if active {
-                self.kernel.eval(&self.xs[s * d..(s + 1) * d], x)
+                let d2: f64 = self.xs[s * d..(s + 1) * d]
+                    .iter()
+                    .zip(x)
+                    .map(|(a, b)| (a - b) * (a - b))
+                    .sum();
+                solve::exp_nonpos(d2 * scale)
             } else {
                 0.0
             };
         }
     }
 
-    /// `u = P k`, as `Σᵢ kᵢ P[i, :]` (P is symmetric): axpys, no dependency chain.
+    /// `u = P k` from the upper triangle: row `i` gives `kᵢ P[i, i..]` (axpy) to
+    /// `u[i..]` and `P[i, i+1..]·k[i+1..]` (dot) to `u[i]`.
     fn project(&mut self) {
         let n = self.params.window;
         self.u.iter_mut().for_each(|v| *v = 0.0);
         for i in 0..n {
+            let row = &self.p[i * n..(i + 1) * n];
             let ki = self.k[i];
             if ki != 0.0 {
-                for (u, pij) in self.u.iter_mut().zip(&self.p[i * n..(i + 1) * n]) {
+                for (u, pij) in self.u[i..].iter_mut().zip(&row[i..]) {
                     *u += ki * pij;
                 }
             }
+            self.u[i] += solve::dot(&row[i + 1..], &self.k[i + 1..]);
         }
     }
 
-    /// Schur-complement removal of the sample that held `slot`, fused with
-    /// [`Self::project`] in one pass over `P`: with `q` its row of `P` and `p = q[slot]`,
-    /// the inverse without it is `P − q qᵀ / p` on the other slots, and `u = P' k` is
+    /// Schur-complement removal of the sample that held `slot`, fused with the pending
+    /// rank-1 term of the previous add and with [`Self::project`], in one pass over `P`
+    /// (the step is bound by memory traffic, so one pass instead of three is what
+    /// makes it fast): with `q` the leaver's row of the true `P` and `p = q[slot]`, the
+    /// inverse without it is `P − q qᵀ / p` on the other slots, and `u = P' k` is
     /// accumulated from each updated row.
     fn remove_and_project(&mut self, slot: usize) {
         let n = self.params.window;
-        self.q.copy_from_slice(&self.p[slot * n..(slot + 1) * n]);
+        let ps = self.pending_s;
+        // The leaver's row of the symmetric P, gathered from the upper triangle.
+        for j in 0..n {
+            self.q[j] = self.p[j.min(slot) * n + j.max(slot)];
+        }
+        if ps != 0.0 {
+            let a = self.pending_u[slot] / ps;
+            for (qj, uj) in self.q.iter_mut().zip(&self.pending_u) {
+                *qj += a * uj;
+            }
+        }
         let pss = self.q[slot];
         // η' = η − q η_s / p (likewise ν), derived from η = P1 block-wise.
         let (fe, fn_) = (self.eta[slot] / pss, self.nu[slot] / pss);
@@ -249,15 +278,15 @@ impl OnlineLsSvm {
             self.nu[i] -= self.q[i] * fn_;
         }
         self.u.iter_mut().for_each(|v| *v = 0.0);
-        for i in 0..n {
-            let f = self.q[i] / pss;
-            let ki = self.k[i];
-            let row = &mut self.p[i * n..(i + 1) * n];
-            for ((pij, qj), u) in row.iter_mut().zip(&self.q).zip(self.u.iter_mut()) {
-                *pij -= f * qj;
-                *u += ki * *pij;
-            }
-        }
+        let pass = SlidePass {
+            q: &self.q,
+            pending_u: &self.pending_u,
+            k: &self.k,
+            ps,
+            pss,
+        };
+        pass.run(&mut self.p, &mut self.u);
+        self.pending_s = 0.0;
         self.clear_slot(slot);
         self.u[slot] = 0.0;
     }
@@ -279,7 +308,7 @@ impl OnlineLsSvm {
     /// `s = K(x, x) + 1/γ − kᵀu`, the new inverse is
     /// `[[P + u uᵀ/s, −u/s], [−uᵀ/s, 1/s]]`. False if `s` is not positive (then the
     /// caller re-factorises).
-    fn add(&mut self, slot: usize) -> bool {
+    fn add(&mut self, slot: usize, defer: bool) -> bool {
         let n = self.params.window;
         let schur = 1.0 + 1.0 / self.params.gamma - solve::dot(&self.k, &self.u);
         if !(schur > 0.0 && schur.is_finite()) {
@@ -295,14 +324,12 @@ impl OnlineLsSvm {
         }
         self.eta[slot] = (1.0 - sum_u) / schur;
         self.nu[slot] = (y - uy) / schur;
-        for i in 0..n {
-            let f = self.u[i] / schur;
-            if f == 0.0 {
-                continue;
-            }
-            for (pij, uj) in self.p[i * n..(i + 1) * n].iter_mut().zip(&self.u) {
-                *pij += f * uj;
-            }
+        if defer {
+            // u[slot] = 0, so the deferred term leaves row/column `slot` alone.
+            self.pending_u.copy_from_slice(&self.u);
+            self.pending_s = schur;
+        } else {
+            self.apply_rank1(schur);
         }
         for i in 0..n {
             self.p[i * n + slot] = -self.u[i] / schur;
@@ -312,11 +339,26 @@ impl OnlineLsSvm {
         true
     }
 
+    /// `P += u uᵀ / s` (upper triangle).
+    fn apply_rank1(&mut self, schur: f64) {
+        let n = self.params.window;
+        for i in 0..n {
+            let f = self.u[i] / schur;
+            if f == 0.0 {
+                continue;
+            }
+            for (pij, uj) in self.p[i * n + i..(i + 1) * n].iter_mut().zip(&self.u[i..]) {
+                *pij += f * uj;
+            }
+        }
+    }
+
     /// Re-factorises `H` of the current window from scratch (Cholesky, then the
     /// explicit inverse) and recomputes `η`, `ν`: O(N³), run every `refresh` updates.
     pub fn refresh(&mut self) -> Result<(), LearnError> {
         let (n, d) = (self.params.window, self.dim);
         self.since_refresh = 0;
+        self.pending_s = 0.0;
         if self.len == 0 {
             return Ok(());
         }
@@ -369,6 +411,60 @@ impl OnlineLsSvm {
             &self.kernel,
             x,
         ))
+    }
+}
+
+/// The one pass over `P`'s upper triangle of a slide: `P += a uₚᵀ − f qᵀ` row by row
+/// (`a = uₚ/s`, `f = q/p`), accumulating `u = P k` as `project` does.
+struct SlidePass<'a> {
+    q: &'a [f64],
+    pending_u: &'a [f64],
+    k: &'a [f64],
+    ps: f64,
+    pss: f64,
+}
+
+impl SlidePass<'_> {
+    /// Runs the pass with AVX2 when the CPU has it (the default x86-64 target only
+    /// assumes SSE2; twice the vector width matters for this bandwidth-bound loop).
+    fn run(&self, p: &mut [f64], u: &mut [f64]) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2, checked just above.
+            unsafe { self.run_avx2(p, u) };
+            return;
+        }
+        self.run_generic(p, u);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn run_avx2(&self, p: &mut [f64], u: &mut [f64]) {
+        self.run_generic(p, u);
+    }
+
+    #[inline(always)]
+    fn run_generic(&self, p: &mut [f64], u: &mut [f64]) {
+        let n = self.q.len();
+        for (i, row) in p.chunks_exact_mut(n).enumerate() {
+            let a = if self.ps != 0.0 {
+                self.pending_u[i] / self.ps
+            } else {
+                0.0
+            };
+            let f = self.q[i] / self.pss;
+            let ki = self.k[i];
+            for (((pij, qj), pu), uj) in row[i..]
+                .iter_mut()
+                .zip(&self.q[i..])
+                .zip(&self.pending_u[i..])
+                .zip(u[i..].iter_mut())
+            {
+                *pij += a * pu - f * qj;
+                *uj += ki * *pij;
+            }
+            u[i] += solve::dot(&row[i + 1..], &self.k[i + 1..]);
+        }
     }
 }
 
