@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
-use navguard::sim::experiment::{ramp, seed002, seed003, seed004};
+use navguard::sim::experiment::{ramp, seed000, seed001, seed002, seed003, seed004};
 
 /// The experiments.
 #[derive(Debug, clap::Subcommand)]
@@ -19,6 +19,44 @@ pub enum ExperimentCommand {
     Seed003(Seed003Args),
     /// GNSS position drifts of 0.5, 1, 2, 5 m/s: seconds and metres before the alarm.
     Ramp(RampArgs),
+    /// Seed 000: plain vs locally weighted LS-SVM prediction (Fig. 3) and missed detection (Table 2).
+    Seed000(Seed000Args),
+    /// Seed 001: online vs batch vs global LS-SVM, IMU fault modes, outlier filter.
+    Seed001(Seed001Args),
+}
+
+/// `navguard experiment seed000` flags.
+#[derive(Debug, clap::Args)]
+pub struct Seed000Args {
+    /// Base seed of the flights.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Monte Carlo runs per fault case.
+    #[arg(long, default_value_t = 200)]
+    pub runs: usize,
+    /// Worker threads for the Monte Carlo.
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
+    /// Directory for the SVG figures.
+    #[arg(long, default_value = "target/experiments/seed000")]
+    pub out_dir: PathBuf,
+}
+
+/// `navguard experiment seed001` flags.
+#[derive(Debug, clap::Args)]
+pub struct Seed001Args {
+    /// Scenario seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Online window N.
+    #[arg(long, default_value_t = 40)]
+    pub window: usize,
+    /// Repetitions for the timings.
+    #[arg(long, default_value_t = 20)]
+    pub reps: usize,
+    /// Directory for the SVG figures.
+    #[arg(long, default_value = "target/experiments/seed001")]
+    pub out_dir: PathBuf,
 }
 
 /// `navguard experiment seed004` flags.
@@ -222,6 +260,42 @@ pub fn run(command: ExperimentCommand) -> anyhow::Result<()> {
             };
             let result = ramp::run(params).context("ramp experiment")?;
             print!("{}", ramp::render(&result));
+            Ok(())
+        }
+        ExperimentCommand::Seed000(args) => {
+            let params = seed000::Seed000Params {
+                seed: args.seed,
+                runs: args.runs,
+                threads: args.threads,
+                ..seed000::Seed000Params::default()
+            };
+            let result = seed000::run(params).context("seed 000 experiment")?;
+            print!("{}", seed000::render(&result));
+            let plots = seed000::plots(&result);
+            write_all(&args.out_dir, &plots)?;
+            println!(
+                "\nwrote {} figures to {}",
+                plots.len(),
+                args.out_dir.display()
+            );
+            Ok(())
+        }
+        ExperimentCommand::Seed001(args) => {
+            let params = seed001::Seed001Params {
+                seed: args.seed,
+                window: args.window,
+                reps: args.reps,
+                ..seed001::Seed001Params::default()
+            };
+            let result = seed001::run(params).context("seed 001 experiment")?;
+            print!("{}", seed001::render(&result));
+            let plots = seed001::plots(&result);
+            write_all(&args.out_dir, &plots)?;
+            println!(
+                "\nwrote {} figures to {}",
+                plots.len(),
+                args.out_dir.display()
+            );
             Ok(())
         }
     }

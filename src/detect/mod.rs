@@ -7,6 +7,8 @@ pub mod hpl;
 pub mod parity;
 pub mod policy;
 pub mod statistic;
+pub mod ta;
 
 pub use policy::{Decision, Health, PolicyConfig, PolicyError, PolicyState};
 pub use statistic::{Statistic, ThresholdError, ThresholdSpec};
+pub use ta::{TaError, TaParams, TaStatistic};

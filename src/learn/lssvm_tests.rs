@@ -238,3 +238,34 @@ fn training_reports_cv_progress_and_honours_cancellation() {
         Err(LearnError::Cancelled)
     );
 }
+
+#[test]
+fn bench_system_matches_numpy_golden_numbers() {
+    // The system of benches/lssvm.rs at n = 250 (x[i][j] = 2 sin(0.7i + 1.3j),
+    // y[i] = sin(x[i][0]) + 0.1 cos(3.1i), σ² = 5, γ = 10). Golden values from
+    // `numpy.linalg.solve` of the bordered system built by benches/numpy_lssvm.py
+    // (numpy 2.4.6, OpenBLAS): b, α₀, α₁₂₄, α₂₄₉.
+    let mut rows = Vec::new();
+    let mut y = Vec::new();
+    for i in 0..250 {
+        let x: Vec<f64> = (0..5)
+            .map(|j| 2.0 * (0.7 * i as f64 + 1.3 * j as f64).sin())
+            .collect();
+        y.push(x[0].sin() + 0.1 * (3.1 * i as f64).cos());
+        rows.extend(x);
+    }
+    let sol =
+        crate::learn::lssvm_solve::fit(&rows, 5, &y, &Kernel::Rbf { sigma2: 5.0 }, 10.0).unwrap();
+    assert!((sol.b - 0.00035891082519630315).abs() < 1e-12, "{}", sol.b);
+    for (i, golden) in [
+        (0, 0.979960954088946),
+        (124, 0.41694118959163046),
+        (249, 0.608735069316306),
+    ] {
+        assert!(
+            (sol.alpha[i] - golden).abs() < 1e-10,
+            "α{i} {}",
+            sol.alpha[i]
+        );
+    }
+}

@@ -70,7 +70,9 @@ pub struct OnlineLsSvm {
     xs: Vec<f64>,
     /// Targets by slot.
     ys: Vec<f64>,
-    /// `H⁻¹` by slot, N × N row-major (symmetric); rows/columns of free slots are 0.
+    /// `H⁻¹` by slot, N × N row-major, symmetric: only the upper triangle (`j ≥ i`) is
+    /// kept current between refreshes (half the memory traffic per slide); rows and
+    /// columns of free slots are 0.
     p: Vec<f64>,
     /// `η = H⁻¹1` and `ν = H⁻¹y` by slot.
     eta: Vec<f64>,
@@ -216,27 +218,36 @@ impl OnlineLsSvm {
     fn kernel_column(&mut self, slot: usize) {
         let (n, d) = (self.params.window, self.dim);
         let x = &self.xs[slot * d..(slot + 1) * d];
+        let scale = -1.0 / self.params.sigma2;
         for s in 0..n {
             let active = s != slot && (self.len == n || s < self.len);
             self.k[s] = if active {
-                self.kernel.eval(&self.xs[s * d..(s + 1) * d], x)
+                let d2: f64 = self.xs[s * d..(s + 1) * d]
+                    .iter()
+                    .zip(x)
+                    .map(|(a, b)| (a - b) * (a - b))
+                    .sum();
+                solve::exp_nonpos(d2 * scale)
             } else {
                 0.0
             };
         }
     }
 
-    /// `u = P k`, as `Σᵢ kᵢ P[i, :]` (P is symmetric): axpys, no dependency chain.
+    /// `u = P k` from the upper triangle: row `i` gives `kᵢ P[i, i..]` (axpy) to
+    /// `u[i..]` and `P[i, i+1..]·k[i+1..]` (dot) to `u[i]`.
     fn project(&mut self) {
         let n = self.params.window;
         self.u.iter_mut().for_each(|v| *v = 0.0);
         for i in 0..n {
+            let row = &self.p[i * n..(i + 1) * n];
             let ki = self.k[i];
             if ki != 0.0 {
-                for (u, pij) in self.u.iter_mut().zip(&self.p[i * n..(i + 1) * n]) {
+                for (u, pij) in self.u[i..].iter_mut().zip(&row[i..]) {
                     *u += ki * pij;
                 }
             }
+            self.u[i] += solve::dot(&row[i + 1..], &self.k[i + 1..]);
         }
     }
 
@@ -249,7 +260,10 @@ impl OnlineLsSvm {
     fn remove_and_project(&mut self, slot: usize) {
         let n = self.params.window;
         let ps = self.pending_s;
-        self.q.copy_from_slice(&self.p[slot * n..(slot + 1) * n]);
+        // The leaver's row of the symmetric P, gathered from the upper triangle.
+        for j in 0..n {
+            self.q[j] = self.p[j.min(slot) * n + j.max(slot)];
+        }
         if ps != 0.0 {
             let a = self.pending_u[slot] / ps;
             for (qj, uj) in self.q.iter_mut().zip(&self.pending_u) {
@@ -325,7 +339,7 @@ impl OnlineLsSvm {
         true
     }
 
-    /// `P += u uᵀ / s`.
+    /// `P += u uᵀ / s` (upper triangle).
     fn apply_rank1(&mut self, schur: f64) {
         let n = self.params.window;
         for i in 0..n {
@@ -333,7 +347,7 @@ impl OnlineLsSvm {
             if f == 0.0 {
                 continue;
             }
-            for (pij, uj) in self.p[i * n..(i + 1) * n].iter_mut().zip(&self.u) {
+            for (pij, uj) in self.p[i * n + i..(i + 1) * n].iter_mut().zip(&self.u[i..]) {
                 *pij += f * uj;
             }
         }
@@ -400,8 +414,8 @@ impl OnlineLsSvm {
     }
 }
 
-/// The one pass over `P` of a slide: `P += a uₚᵀ − f qᵀ` row by row (`a = uₚ/s`,
-/// `f = q/p`), accumulating `u += kᵢ · P[i, :]`.
+/// The one pass over `P`'s upper triangle of a slide: `P += a uₚᵀ − f qᵀ` row by row
+/// (`a = uₚ/s`, `f = q/p`), accumulating `u = P k` as `project` does.
 struct SlidePass<'a> {
     q: &'a [f64],
     pending_u: &'a [f64],
@@ -440,15 +454,16 @@ impl SlidePass<'_> {
             };
             let f = self.q[i] / self.pss;
             let ki = self.k[i];
-            for (((pij, qj), pu), uj) in row
+            for (((pij, qj), pu), uj) in row[i..]
                 .iter_mut()
-                .zip(self.q)
-                .zip(self.pending_u)
-                .zip(u.iter_mut())
+                .zip(&self.q[i..])
+                .zip(&self.pending_u[i..])
+                .zip(u[i..].iter_mut())
             {
                 *pij += a * pu - f * qj;
                 *uj += ki * *pij;
             }
+            u[i] += solve::dot(&row[i + 1..], &self.k[i + 1..]);
         }
     }
 }

@@ -1,12 +1,859 @@
-//! The `channel` monitor: LS-SVM channel prediction with the T_a test (DESIGN §3.5, seeds 000 and 001).
-//! (Stub: not built yet.)
+//! The `channel` monitor (DESIGN §3.5, seeds 000 and 001): each named channel of the
+//! epoch (`channels {name: value}`, a filter innovation or a measurement difference such
+//! as GNSS minus barometric height) is predicted by an LS-SVM from its own past, and the
+//! prediction residual is tested with T_a ([`crate::detect::ta`]). One test per channel,
+//! named after it. Sits between the session actor and `learn/` + `detect/`.
+//!
+//! Config:
+//! ```json
+//! {"channels": [
+//!   {"name": "dh", "dim": 1, "embedding": 5,
+//!    "predictor": {"model": "m-0123456789abcdef"},
+//!    "outlier_filter": {"c": 3}, "n": 10, "min_differences": 10},
+//!   {"name": "gyro", "predictor": {"online": {"window": 50, "gamma": 30, "sigma2": 9, "refresh": 1000}}}
+//! ]}
+//! ```
+//! - `dim` (default 1): components of the channel's value. `embedding` m (default 5): the
+//!   input is `x_k = [y_{k−m}, …, y_{k−1}]` → `y_k`; for a vector channel the m past
+//!   values are concatenated oldest first (m·dim inputs).
+//! - `predictor`: a stored model id (`lssvm` or `lw-lssvm`, input dimension m·dim) — for a
+//!   vector channel an array of ids, **one model per component**, each fed the whole
+//!   embedding — or `online`: a sliding-window LS-SVM per component (seed 001, raw units,
+//!   learning as it goes; it predicts once its window holds two samples, and its residuals
+//!   are tested — and feed T_a's variance — once the window is full: before that they
+//!   measure the model's learning, not the channel's noise).
+//! - `outlier_filter` (optional, seed 001 §2.2.1): values entering the predictor's history
+//!   and window pass the third-difference filter first (the residual and the test always
+//!   use the raw value, so a fault cannot be filtered away).
+//! - `n`, `min_differences`: T_a's window and warm-up ([`TaParams`]).
+//!
+//! Per epoch and channel: ŷ_k from the history, `r_k = y_k − ŷ_k`, T_a, the policy. While
+//! the channel's decision is **not healthy** nothing is learned from it: no sample enters
+//! the online window (it keeps the model of the healthy past), T_a's V is frozen, and the
+//! outlier filter is bypassed (it restarts on the return to healthy). The measured value
+//! still enters the embedding history: feeding the prediction back instead (free-running
+//! through the fault) was tried and deadlocks — once the free-run drifts from the signal
+//! the residual stays large after the fault has ended, the channel never returns to
+//! healthy and so never sees real data again. With measured inputs a fault leaves the
+//! embedding m epochs after it ends and T_a's window n epochs after that. A channel absent
+//! from an epoch skips it. A singular V (a residual that never varies) leaves the test
+//! idle that epoch. A prediction that is not finite fails the step (state unchanged).
 
-use super::{BuildError, ModelSource, Monitor, MonitorSpec};
+use std::collections::{BTreeMap, HashSet, VecDeque};
+use std::sync::Arc;
 
-/// Builds a `channel` monitor from its spec.
-pub fn build(
-    _spec: &MonitorSpec,
-    _models: &dyn ModelSource,
-) -> Result<Box<dyn Monitor>, BuildError> {
-    Err(BuildError::Unsupported("channel"))
+use serde::Deserialize;
+use serde_json::Value;
+
+use super::{
+    BuildError, ConfigError, Epoch, EpochError, ModelSource, Monitor, MonitorKind, MonitorReport,
+    MonitorSpec, Outputs, StepError, TestBank, TestOutcome, intern,
+};
+use crate::detect::{Health, TaError, TaParams, TaStatistic, ta};
+use crate::filter::kalman::FilterError;
+use crate::learn::online::{OnlineLsSvm, OnlineParams};
+use crate::learn::outlier::OutlierFilter;
+use crate::learn::{AnyModel, LearnError, ModelKind};
+
+/// Default embedding length m (DESIGN §3.5).
+pub const DEFAULT_EMBEDDING: usize = 5;
+
+/// Default outlier-filter factor c (DESIGN §3.5).
+pub const DEFAULT_OUTLIER_C: f64 = 3.0;
+
+/// Longest accepted channel name.
+const MAX_NAME: usize = 64;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ConfigWire {
+    channels: Vec<Value>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ChannelWire {
+    name: String,
+    #[serde(default = "one")]
+    dim: usize,
+    #[serde(default = "default_embedding")]
+    embedding: usize,
+    predictor: Value,
+    #[serde(default)]
+    outlier_filter: Option<OutlierWire>,
+    #[serde(default)]
+    n: Option<usize>,
+    #[serde(default)]
+    min_differences: Option<usize>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct OutlierWire {
+    #[serde(default = "default_c")]
+    c: f64,
+}
+
+fn one() -> usize {
+    1
+}
+fn default_embedding() -> usize {
+    DEFAULT_EMBEDDING
+}
+fn default_c() -> f64 {
+    DEFAULT_OUTLIER_C
+}
+
+/// Where a channel's predictions come from.
+#[derive(Debug, Clone)]
+pub enum PredictorConfig {
+    /// Stored models, one per component.
+    Stored(Vec<Arc<AnyModel>>),
+    /// An online sliding-window LS-SVM per component.
+    Online(OnlineParams),
+}
+
+/// One validated channel.
+#[derive(Debug, Clone)]
+pub struct ChannelConfig {
+    /// The channel's (and its test's) name.
+    pub name: &'static str,
+    /// Components of the value.
+    pub dim: usize,
+    /// Embedding length m.
+    pub embedding: usize,
+    /// The predictor.
+    pub predictor: PredictorConfig,
+    /// Outlier-filter factor c, when the filter is on.
+    pub outlier_c: Option<f64>,
+    /// T_a's parameters.
+    pub ta: TaParams,
+}
+
+/// A validated `channel` monitor configuration.
+#[derive(Debug, Clone)]
+pub struct ChannelMonitorConfig {
+    /// The channels, in config order.
+    pub channels: Vec<ChannelConfig>,
+}
+
+fn positive(field: String, v: usize) -> Result<usize, ConfigError> {
+    if v == 0 {
+        Err(ConfigError::new(field, "must be ≥ 1"))
+    } else {
+        Ok(v)
+    }
+}
+
+fn learn_field(prefix: &str, e: LearnError) -> ConfigError {
+    match e {
+        LearnError::InvalidParams { field, reason } | LearnError::InvalidData { field, reason } => {
+            let field = if field.is_empty() {
+                prefix.to_owned()
+            } else {
+                format!("{prefix}.{field}")
+            };
+            ConfigError::new(field, reason)
+        }
+        other => ConfigError::new(prefix, other.to_string()),
+    }
+}
+
+fn parse_predictor(
+    at: &str,
+    value: &Value,
+    dim: usize,
+    embedding: usize,
+    models: &dyn ModelSource,
+) -> Result<PredictorConfig, ConfigError> {
+    let field = format!("{at}.predictor");
+    let obj = value.as_object().filter(|o| o.len() == 1).ok_or_else(|| {
+        ConfigError::new(&field, "must be {\"model\": id} or {\"online\": {...}}")
+    })?;
+    if let Some(ids) = obj.get("model") {
+        let field = format!("{field}.model");
+        let ids: Vec<&str> = match ids {
+            Value::String(s) => vec![s.as_str()],
+            Value::Array(a) => a
+                .iter()
+                .enumerate()
+                .map(|(i, v)| {
+                    v.as_str().ok_or_else(|| {
+                        ConfigError::new(format!("{field}[{i}]"), "must be a string")
+                    })
+                })
+                .collect::<Result<_, _>>()?,
+            _ => {
+                return Err(ConfigError::new(
+                    field,
+                    "must be a model id or an array of ids",
+                ));
+            }
+        };
+        if ids.len() != dim {
+            return Err(ConfigError::new(
+                field,
+                format!(
+                    "gives {} model ids, the channel has {dim} components (one model per component)",
+                    ids.len()
+                ),
+            ));
+        }
+        let want = dim * embedding;
+        let mut out = Vec::with_capacity(dim);
+        for (i, id) in ids.iter().enumerate() {
+            let f = if dim == 1 {
+                field.clone()
+            } else {
+                format!("{field}[{i}]")
+            };
+            let model = models
+                .model(id)
+                .ok_or_else(|| ConfigError::new(&f, format!("no ready model with id '{id}'")))?;
+            if !matches!(model.kind(), ModelKind::LsSvm | ModelKind::LwLsSvm) {
+                return Err(ConfigError::new(
+                    &f,
+                    format!(
+                        "model '{id}' is a {} model, a channel needs lssvm or lw-lssvm",
+                        model.kind().as_str()
+                    ),
+                ));
+            }
+            if model.input_dim() != want {
+                return Err(ConfigError::new(
+                    &f,
+                    format!(
+                        "model '{id}' takes {} inputs, the channel's embedding has {want} (embedding × dim)",
+                        model.input_dim()
+                    ),
+                ));
+            }
+            out.push(model);
+        }
+        return Ok(PredictorConfig::Stored(out));
+    }
+    if let Some(online) = obj.get("online") {
+        let field = format!("{field}.online");
+        let params: OnlineParams = serde_json::from_value(online.clone())
+            .map_err(|e| ConfigError::new(&field, e.to_string()))?;
+        params.check().map_err(|e| learn_field(&field, e))?;
+        return Ok(PredictorConfig::Online(params));
+    }
+    Err(ConfigError::new(
+        field,
+        "must be {\"model\": id} or {\"online\": {...}}",
+    ))
+}
+
+impl ChannelMonitorConfig {
+    /// Parses and validates the `config` JSON, resolving model ids in `models`.
+    pub fn from_json(value: &Value, models: &dyn ModelSource) -> Result<Self, ConfigError> {
+        let wire =
+            ConfigWire::deserialize(value).map_err(|e| ConfigError::new("", e.to_string()))?;
+        if wire.channels.is_empty() {
+            return Err(ConfigError::new(
+                "channels",
+                "must name at least one channel",
+            ));
+        }
+        let mut seen = HashSet::new();
+        let mut channels = Vec::with_capacity(wire.channels.len());
+        for (i, raw) in wire.channels.iter().enumerate() {
+            let at = format!("channels[{i}]");
+            let c =
+                ChannelWire::deserialize(raw).map_err(|e| ConfigError::new(&at, e.to_string()))?;
+            if c.name.is_empty() || c.name.len() > MAX_NAME {
+                return Err(ConfigError::new(
+                    format!("{at}.name"),
+                    format!("must have 1 to {MAX_NAME} characters"),
+                ));
+            }
+            if !seen.insert(c.name.clone()) {
+                return Err(ConfigError::new(
+                    format!("{at}.name"),
+                    format!("'{}' is used twice", c.name),
+                ));
+            }
+            let dim = positive(format!("{at}.dim"), c.dim)?;
+            let embedding = positive(format!("{at}.embedding"), c.embedding)?;
+            let predictor = parse_predictor(&at, &c.predictor, dim, embedding, models)?;
+            let outlier_c = match c.outlier_filter {
+                Some(o) if !(o.c.is_finite() && o.c > 0.0) => {
+                    return Err(ConfigError::new(
+                        format!("{at}.outlier_filter.c"),
+                        "must be finite and > 0",
+                    ));
+                }
+                Some(o) => Some(o.c),
+                None => None,
+            };
+            let mut ta = TaParams::new(dim);
+            if let Some(n) = c.n {
+                ta.n = positive(format!("{at}.n"), n)?;
+            }
+            if let Some(m) = c.min_differences {
+                ta.min_differences = positive(format!("{at}.min_differences"), m)?;
+            }
+            channels.push(ChannelConfig {
+                name: intern(&c.name),
+                dim,
+                embedding,
+                predictor,
+                outlier_c,
+                ta,
+            });
+        }
+        Ok(ChannelMonitorConfig { channels })
+    }
+}
+
+/// The running predictor of one channel.
+#[derive(Debug, Clone)]
+enum Predictor {
+    Stored(Vec<Arc<AnyModel>>),
+    Online(Vec<OnlineLsSvm>),
+}
+
+/// The state of one channel.
+#[derive(Debug, Clone)]
+struct ChannelState {
+    config: ChannelConfig,
+    predictor: Predictor,
+    filters: Option<Vec<OutlierFilter>>,
+    /// The last m values that entered the history, oldest first.
+    history: VecDeque<Vec<f64>>,
+    ta: TaStatistic,
+    /// Index of the channel's test in the bank.
+    test: usize,
+}
+
+impl ChannelState {
+    fn new(config: ChannelConfig, test: usize) -> Result<Self, LearnError> {
+        let predictor = match &config.predictor {
+            PredictorConfig::Stored(models) => Predictor::Stored(models.clone()),
+            PredictorConfig::Online(p) => Predictor::Online(
+                (0..config.dim)
+                    .map(|_| OnlineLsSvm::new(p.clone()))
+                    .collect::<Result<_, _>>()?,
+            ),
+        };
+        Ok(ChannelState {
+            filters: config
+                .outlier_c
+                .map(|c| vec![OutlierFilter::new(c); config.dim]),
+            history: VecDeque::with_capacity(config.embedding),
+            ta: TaStatistic::new(config.ta),
+            predictor,
+            test,
+            config,
+        })
+    }
+
+    /// The embedding `x_k` (m·dim values, oldest first), once the history is full.
+    fn input(&self) -> Option<Vec<f64>> {
+        (self.history.len() == self.config.embedding)
+            .then(|| self.history.iter().flatten().copied().collect())
+    }
+
+    /// ŷ_k per component, when the predictor can predict.
+    fn predict(&self, x: &[f64]) -> Option<Vec<f64>> {
+        match &self.predictor {
+            Predictor::Stored(models) => Some(models.iter().map(|m| m.predict_one(x)).collect()),
+            Predictor::Online(windows) => windows.iter().map(|w| w.predict(x)).collect(),
+        }
+    }
+}
+
+/// Builds the embedding training set of a scalar series: rows `[y_{k−m}, …, y_{k−1}]`
+/// and targets `y_k` for k = m … len−1 (what a stored channel model is trained on).
+pub fn embed_series(series: &[f64], m: usize) -> (Vec<Vec<f64>>, Vec<f64>) {
+    if m == 0 || series.len() <= m {
+        return (Vec::new(), Vec::new());
+    }
+    let x = series.windows(m + 1).map(|w| w[..m].to_vec()).collect();
+    let y = series[m..].to_vec();
+    (x, y)
+}
+
+/// The `channel` monitor.
+pub struct ChannelMonitor {
+    channels: Vec<ChannelState>,
+    bank: TestBank,
+}
+
+impl ChannelMonitor {
+    /// Builds the monitor from a validated config: one test per channel with dof = dim.
+    pub fn new(
+        config: ChannelMonitorConfig,
+        policy: crate::detect::PolicyConfig,
+        spec: crate::detect::ThresholdSpec,
+    ) -> Result<Self, BuildError> {
+        let tests: Vec<(&'static str, u32)> = config
+            .channels
+            .iter()
+            .map(|c| (c.name, c.dim as u32))
+            .collect();
+        let bank = TestBank::new(&tests, spec, policy)?;
+        let channels = config
+            .channels
+            .into_iter()
+            .enumerate()
+            .map(|(i, c)| {
+                ChannelState::new(c, i).map_err(|e| {
+                    BuildError::Config(learn_field(&format!("channels[{i}].predictor.online"), e))
+                })
+            })
+            .collect::<Result<_, _>>()?;
+        Ok(ChannelMonitor { channels, bank })
+    }
+}
+
+/// One channel's pending changes, applied once every channel's step has succeeded.
+struct Pending {
+    channel: usize,
+    /// The value entering the history.
+    value: Vec<f64>,
+    /// Online windows with the sample learned (None: keep the current ones).
+    windows: Option<Vec<OnlineLsSvm>>,
+    /// Filters after filtering (None: restart them).
+    filters: Option<Vec<OutlierFilter>>,
+    residual: Option<(Vec<f64>, bool)>,
+    policy: Option<crate::detect::PolicyState>,
+}
+
+impl Monitor for ChannelMonitor {
+    fn kind(&self) -> MonitorKind {
+        MonitorKind::Channel
+    }
+
+    fn tests(&self) -> &TestBank {
+        &self.bank
+    }
+
+    fn tests_mut(&mut self) -> &mut TestBank {
+        &mut self.bank
+    }
+
+    fn check_epoch(&self, name: &str, epoch: &Epoch) -> Result<(), EpochError> {
+        for (cname, value) in epoch.channels.iter().flatten() {
+            if let Some(c) = self.channels.iter().find(|c| c.config.name == cname) {
+                if value.len() != c.config.dim {
+                    return Err(EpochError::WrongLength {
+                        monitor: name.to_owned(),
+                        field: intern(&format!("channels.{cname}")),
+                        got: value.len(),
+                        want: c.config.dim,
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn step(&mut self, epoch: &Epoch) -> Result<MonitorReport, StepError> {
+        let mut prediction = BTreeMap::new();
+        let mut residuals = BTreeMap::new();
+        let mut tests: Vec<TestOutcome> = Vec::new();
+        let mut pending = Vec::new();
+        for (ci, ch) in self.channels.iter().enumerate() {
+            let Some(y) = epoch
+                .channels
+                .iter()
+                .flatten()
+                .find(|(n, _)| n == ch.config.name)
+                .map(|(_, v)| v)
+            else {
+                continue;
+            };
+            if y.len() != ch.config.dim {
+                return Err(StepError::Filter(FilterError::Dimension {
+                    what: "channel value",
+                    got_rows: y.len(),
+                    got_cols: 1,
+                    want_rows: ch.config.dim,
+                    want_cols: 1,
+                }));
+            }
+            let x = ch.input();
+            let yhat = x.as_deref().and_then(|x| ch.predict(x));
+            let mut health = self.bank.slots()[ch.test].policy.health();
+            let mut residual = None;
+            let mut policy = None;
+            if let Some(yhat) = &yhat {
+                if yhat.iter().any(|v| !v.is_finite()) {
+                    return Err(StepError::Filter(FilterError::NonFinite(
+                        "channel prediction",
+                    )));
+                }
+                let r: Vec<f64> = y.iter().zip(yhat).map(|(a, b)| a - b).collect();
+                // An online window's residuals are tested (and feed V) once it is full:
+                // before that its predictions are still learning, not the channel's noise.
+                let ready = match &ch.predictor {
+                    Predictor::Online(w) => w.iter().all(|w| w.len() >= w.params().window),
+                    Predictor::Stored(_) => true,
+                };
+                match ch.ta.evaluate(&r).map(|t| t.filter(|_| ready)) {
+                    Ok(Some(t)) => {
+                        let (outcome, state) =
+                            self.bank.preview(ch.test, t, ch.config.dim as u32)?;
+                        health = outcome.decision.health;
+                        tests.push(outcome);
+                        policy = Some(state);
+                    }
+                    // Warm-up, or a residual that never varies: the test does not run.
+                    Ok(None) | Err(TaError::Singular) => {}
+                    Err(TaError::NonFinite | TaError::Dimension { .. }) => {
+                        return Err(StepError::Filter(FilterError::NonFinite(
+                            "channel residual",
+                        )));
+                    }
+                }
+                prediction.insert(ch.config.name.to_owned(), yhat.clone());
+                residuals.insert(ch.config.name.to_owned(), r.clone());
+                residual = ready.then_some((r, health == Health::Healthy));
+            }
+            let healthy = health == Health::Healthy;
+            // What enters the history (module doc): the measurement, through the outlier
+            // filter while healthy.
+            let (value, filters) = match (&ch.filters, healthy) {
+                (Some(f), true) => {
+                    let mut f = f.clone();
+                    let v = y
+                        .iter()
+                        .zip(f.iter_mut())
+                        .map(|(&v, f)| f.filter(v).0)
+                        .collect();
+                    (v, Some(f))
+                }
+                _ => (y.clone(), None),
+            };
+            let windows = match (&ch.predictor, &x, healthy) {
+                (Predictor::Online(w), Some(x), true) => {
+                    let mut w = w.clone();
+                    for (win, &v) in w.iter_mut().zip(&value) {
+                        win.push(x, v)
+                            .map_err(|_| StepError::Filter(FilterError::NotPositiveDefinite))?;
+                    }
+                    Some(w)
+                }
+                _ => None,
+            };
+            pending.push(Pending {
+                channel: ci,
+                value,
+                windows,
+                filters,
+                residual,
+                policy,
+            });
+        }
+        // Every channel succeeded: commit.
+        for p in pending {
+            let ch = &mut self.channels[p.channel];
+            if let Some(state) = p.policy {
+                self.bank.commit(ch.test, state);
+            }
+            if let Some((r, healthy)) = &p.residual {
+                // Cannot fail: the residual was checked by `evaluate` above.
+                let _ = ch.ta.commit(r, *healthy);
+            }
+            if let Some(w) = p.windows {
+                ch.predictor = Predictor::Online(w);
+            }
+            match (p.filters, ch.config.outlier_c) {
+                (Some(f), _) => ch.filters = Some(f),
+                (None, Some(c)) if p.residual.as_ref().is_some_and(|(_, h)| !h) => {
+                    ch.filters = Some(vec![OutlierFilter::new(c); ch.config.dim]);
+                }
+                _ => {}
+            }
+            if ch.history.len() == ch.config.embedding {
+                ch.history.pop_front();
+            }
+            ch.history.push_back(p.value);
+        }
+        Ok(MonitorReport {
+            tests,
+            outputs: Outputs::Channel {
+                prediction,
+                residual: residuals,
+            },
+        })
+    }
+
+    fn reset(&mut self) {
+        for ch in &mut self.channels {
+            if let Ok(fresh) = ChannelState::new(ch.config.clone(), ch.test) {
+                *ch = fresh;
+            }
+        }
+        self.bank.reset();
+    }
+}
+
+/// Builds a `channel` monitor from its spec, resolving stored models in `models`.
+pub fn build(spec: &MonitorSpec, models: &dyn ModelSource) -> Result<Box<dyn Monitor>, BuildError> {
+    let config = ChannelMonitorConfig::from_json(&spec.config, models)?;
+    Ok(Box::new(ChannelMonitor::new(
+        config,
+        spec.policy,
+        spec.threshold,
+    )?))
+}
+
+/// T_a's default window, re-exported for the config docs.
+pub const DEFAULT_N: usize = ta::DEFAULT_N;
+
+#[cfg(test)]
+mod tests {
+    use std::collections::HashMap;
+
+    use super::*;
+    use crate::detect::{PolicyConfig, ThresholdSpec};
+    use crate::learn::{Dataset, ModelParams, NoProgress, train};
+    use crate::monitor::NoModels;
+    use rand::SeedableRng;
+    use rand::rngs::StdRng;
+    use rand_distr::{Distribution, Normal};
+    use serde_json::json;
+
+    fn spec(config: Value) -> MonitorSpec {
+        MonitorSpec {
+            kind: MonitorKind::Channel,
+            config,
+            policy: PolicyConfig::Classic,
+            threshold: ThresholdSpec::PFa(1e-5),
+        }
+    }
+
+    fn config_error(config: Value, models: &dyn ModelSource) -> ConfigError {
+        match build(&spec(config), models) {
+            Err(BuildError::Config(e)) => e,
+            Err(other) => panic!("expected a config error, got {other:?}"),
+            Ok(_) => panic!("expected a config error, got a monitor"),
+        }
+    }
+
+    /// A sinusoid with white noise of σ = 0.05, plus `step` from sample `at` on.
+    fn signal(len: usize, at: usize, step: f64, seed: u64) -> Vec<f64> {
+        let mut rng = StdRng::seed_from_u64(seed);
+        let noise = Normal::new(0.0, 0.05).unwrap();
+        (0..len)
+            .map(|k| {
+                let s =
+                    (2.0 * std::f64::consts::PI * k as f64 / 25.0).sin() + noise.sample(&mut rng);
+                if k >= at { s + step } else { s }
+            })
+            .collect()
+    }
+
+    fn epoch(k: usize, name: &str, v: Vec<f64>) -> Epoch {
+        Epoch {
+            t: k as f64,
+            channels: Some(vec![(name.to_owned(), v)]),
+            ..Default::default()
+        }
+    }
+
+    /// Runs the series through the monitor; returns the k of every non-healthy epoch.
+    fn alarms(monitor: &mut dyn Monitor, series: &[f64]) -> Vec<usize> {
+        let mut out = Vec::new();
+        for (k, &y) in series.iter().enumerate() {
+            let report = monitor.step(&epoch(k, "s", vec![y])).unwrap();
+            if report
+                .tests
+                .iter()
+                .any(|t| t.decision.health != Health::Healthy)
+            {
+                out.push(k);
+            }
+        }
+        out
+    }
+
+    fn online_config() -> Value {
+        json!({"channels": [{"name": "s", "predictor":
+            {"online": {"window": 50, "gamma": 30.0, "sigma2": 9.0, "refresh": 1000}}}]})
+    }
+
+    #[test]
+    fn config_errors_name_the_field() {
+        let e = config_error(json!({}), &NoModels);
+        assert!(e.reason.contains("channels"), "{e}");
+        let e = config_error(json!({"channels": []}), &NoModels);
+        assert_eq!(e.field, "channels");
+        let e = config_error(
+            json!({"channels": [{"name": "a", "embedding": 0, "predictor": {"model": "x"}}]}),
+            &NoModels,
+        );
+        assert_eq!(e.field, "channels[0].embedding");
+        let e = config_error(
+            json!({"channels": [{"name": "a", "predictor": {"model": "nope"}}]}),
+            &NoModels,
+        );
+        assert_eq!(e.field, "channels[0].predictor.model");
+        assert!(e.reason.contains("nope"), "{e}");
+        let e = config_error(
+            json!({"channels": [{"name": "a", "dim": 2, "predictor": {"model": "x"}}]}),
+            &NoModels,
+        );
+        assert_eq!(e.field, "channels[0].predictor.model");
+        assert!(e.reason.contains("one model per component"), "{e}");
+        let e = config_error(
+            json!({"channels": [{"name": "a", "predictor": {"kalman": 1}}]}),
+            &NoModels,
+        );
+        assert_eq!(e.field, "channels[0].predictor");
+        let mut c = online_config();
+        let first = c["channels"][0].clone();
+        c["channels"].as_array_mut().unwrap().push(first);
+        let e = config_error(c, &NoModels);
+        assert_eq!(e.field, "channels[1].name");
+        let mut c = online_config();
+        c["channels"][0]["outlier_filter"] = json!({"c": -1.0});
+        assert_eq!(
+            config_error(c, &NoModels).field,
+            "channels[0].outlier_filter.c"
+        );
+        let mut c = online_config();
+        c["channels"][0]["n"] = json!(0);
+        assert_eq!(config_error(c, &NoModels).field, "channels[0].n");
+        let mut c = online_config();
+        c["channels"][0]["extra"] = json!(0);
+        let e = config_error(c, &NoModels);
+        assert_eq!(e.field, "channels[0]");
+        assert!(e.reason.contains("unknown field"), "{e}");
+    }
+
+    #[test]
+    fn stored_model_of_the_wrong_dimension_is_refused() {
+        let (x, y) = embed_series(&signal(120, usize::MAX, 0.0, 1), 3);
+        let data = Dataset::new(&x, Some(&y)).unwrap();
+        let params =
+            ModelParams::from_json(ModelKind::LsSvm, &json!({"gamma": 10.0, "sigma2": 5.0}))
+                .unwrap();
+        let model = train(&params, None, &data, &NoProgress).unwrap().model;
+        let models: HashMap<String, Arc<AnyModel>> =
+            HashMap::from([("m3".to_owned(), Arc::new(model))]);
+        let e = config_error(
+            json!({"channels": [{"name": "s", "embedding": 5, "predictor": {"model": "m3"}}]}),
+            &models,
+        );
+        assert_eq!(e.field, "channels[0].predictor.model");
+        assert!(e.reason.contains("takes 3 inputs"), "{e}");
+    }
+
+    #[test]
+    fn embedding_pairs_the_last_m_values_with_the_next() {
+        let (x, y) = embed_series(&[1.0, 2.0, 3.0, 4.0], 2);
+        assert_eq!(x, vec![vec![1.0, 2.0], vec![2.0, 3.0]]);
+        assert_eq!(y, vec![3.0, 4.0]);
+        assert!(embed_series(&[1.0], 2).0.is_empty());
+    }
+
+    #[test]
+    fn clean_sinusoid_on_an_online_predictor_stays_healthy() {
+        let mut m = build(&spec(online_config()), &NoModels).unwrap();
+        let series = signal(500, usize::MAX, 0.0, 2);
+        assert_eq!(alarms(m.as_mut(), &series), Vec::<usize>::new());
+    }
+
+    #[test]
+    fn step_fault_on_an_online_predictor_is_detected_at_once() {
+        let mut m = build(&spec(online_config()), &NoModels).unwrap();
+        let series = signal(500, 400, 1.0, 2);
+        let a = alarms(m.as_mut(), &series);
+        assert!(
+            a.first().is_some_and(|&k| (400..=402).contains(&k)),
+            "{a:?}"
+        );
+        // The window did not learn the faulty values: the fault stays flagged.
+        assert!(a.contains(&499), "{a:?}");
+    }
+
+    #[test]
+    fn stored_model_predictor_detects_a_step_and_not_the_clean_signal() {
+        let train_series = signal(300, usize::MAX, 0.0, 3);
+        let (x, y) = embed_series(&train_series, 5);
+        let data = Dataset::new(&x, Some(&y)).unwrap();
+        let params =
+            ModelParams::from_json(ModelKind::LsSvm, &json!({"gamma": 10.0, "sigma2": 5.0}))
+                .unwrap();
+        let model = train(&params, None, &data, &NoProgress).unwrap().model;
+        let models: HashMap<String, Arc<AnyModel>> =
+            HashMap::from([("m".to_owned(), Arc::new(model))]);
+        let config = json!({"channels": [{"name": "s", "predictor": {"model": "m"}}]});
+        let mut m = build(&spec(config.clone()), &models).unwrap();
+        assert!(alarms(m.as_mut(), &signal(400, usize::MAX, 0.0, 4)).is_empty());
+        let mut m = build(&spec(config), &models).unwrap();
+        let a = alarms(m.as_mut(), &signal(400, 300, 1.0, 4));
+        assert!(a.first().is_some_and(|&k| (300..303).contains(&k)), "{a:?}");
+    }
+
+    #[test]
+    fn vector_channel_predicts_each_component_and_checks_its_length() {
+        let config = json!({"channels": [{"name": "v", "dim": 2, "embedding": 3, "predictor":
+            {"online": {"window": 30, "gamma": 30.0, "sigma2": 9.0}}}]});
+        let mut m = build(&spec(config), &NoModels).unwrap();
+        assert_eq!(m.tests().slots()[0].dof, 2);
+        let a = signal(60, usize::MAX, 0.0, 5);
+        let b = signal(60, usize::MAX, 0.0, 6);
+        let mut last = None;
+        for k in 0..60 {
+            let e = Epoch {
+                t: k as f64,
+                channels: Some(vec![("v".to_owned(), vec![a[k], 2.0 * b[k]])]),
+                ..Default::default()
+            };
+            m.check_epoch("mon", &e).unwrap();
+            last = Some(m.step(&e).unwrap());
+        }
+        let Some(MonitorReport {
+            outputs:
+                Outputs::Channel {
+                    prediction,
+                    residual,
+                },
+            ..
+        }) = last
+        else {
+            panic!("channel outputs")
+        };
+        assert_eq!(prediction["v"].len(), 2);
+        assert_eq!(residual["v"].len(), 2);
+        let bad = epoch(60, "v", vec![1.0]);
+        assert!(matches!(
+            m.check_epoch("mon", &bad),
+            Err(EpochError::WrongLength {
+                got: 1,
+                want: 2,
+                ..
+            })
+        ));
+    }
+
+    #[test]
+    fn reset_restarts_predictor_and_test() {
+        let mut m = build(&spec(online_config()), &NoModels).unwrap();
+        let series = signal(200, 150, 5.0, 7);
+        assert!(!alarms(m.as_mut(), &series).is_empty());
+        m.reset();
+        assert_eq!(m.tests().slots()[0].policy.health(), Health::Healthy);
+        let report = m.step(&epoch(0, "s", vec![0.0])).unwrap();
+        assert_eq!(
+            report.outputs,
+            Outputs::Channel {
+                prediction: BTreeMap::new(),
+                residual: BTreeMap::new()
+            },
+            "no prediction before the history is refilled"
+        );
+        // Other names in the epoch are ignored.
+        assert!(
+            m.step(&epoch(1, "other", vec![1.0, 2.0]))
+                .unwrap()
+                .tests
+                .is_empty()
+        );
+    }
 }

@@ -15,8 +15,10 @@
 //! identical for a given seed **and build** (`rand`'s `StdRng` algorithm may
 //! change between `rand` releases; the seed → stream mapping is ours and fixed).
 
+pub mod ads_gnss;
 pub mod experiment;
 pub mod faults;
+pub mod imu_channel;
 pub mod ins_truth;
 pub mod rimu;
 pub mod rng;

@@ -10,6 +10,10 @@
 //!   noise variances 5, 10, 20 m² (its Fig. 6).
 //! - [`seed004`]: seed 004's comparison of the classic and counter policies at
 //!   thresholds 13 and 20 on the `ship` scenario (its Tables 1–3, Figs. 3–10).
+//! - [`seed000`]: seed 000's plain vs locally weighted LS-SVM channel prediction and
+//!   missed-detection rates (its Fig. 3 and Table 2) on the `ads-gnss` scenario.
+//! - [`seed001`]: seed 001's online vs batch vs global LS-SVM, IMU fault modes and
+//!   outlier filter on the `imu-channel` scenario.
 //! - [`ramp`]: DESIGN §3.9's slow GNSS drift benchmark.
 //! - [`scorecard`]: the per-detector figures every experiment ends with.
 //! - [`plot`]: the SVG line charts.
@@ -17,6 +21,8 @@
 pub mod plot;
 pub mod ramp;
 pub mod scorecard;
+pub mod seed000;
+pub mod seed001;
 pub mod seed002;
 pub mod seed003;
 pub mod seed004;
