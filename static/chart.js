@@ -2,7 +2,8 @@
 // over epoch time, with shaded bands where the test was suspect or isolated.
 // Drawn by hand (no library): downsampled to min/max per pixel column so a
 // 6000-point history costs the same as the chart is wide; redrawn only when
-// the data, the time range or the hover position changed.
+// the data, the time range or the hover position changed. Also TrackChart:
+// a federated monitor's corrected and raw INS tracks in local ENU metres.
 
 import { fmtNum, fmtT, isNum } from "./dom.js";
 
@@ -247,5 +248,165 @@ export class StripChart {
     this.tip.hidden = false;
     const w = this.canvas.clientWidth;
     this.tip.style.left = Math.min(Math.max(0, x + 8), Math.max(0, w - 260)) + "px";
+  }
+}
+
+const TRACK_COLORS = { solution: "#0a7d4f", ins: "#d9730d" };
+const TRACK_PAD = { left: 56, right: 10, top: 8, bottom: 22 };
+
+/**
+ * The corrected track against the raw INS track, east/north metres from the
+ * first point received (a `Track` from live.js). Equal scales on both axes so
+ * a turn looks like a turn and a drift's direction reads true. Points closer
+ * than a pixel to the last one drawn are skipped, so 20,000 points cost about
+ * as much as the path is long on screen.
+ */
+export class TrackChart {
+  constructor() {
+    this.canvas = document.createElement("canvas");
+    this.canvas.className = "chart track-chart";
+    this.canvas.setAttribute("role", "img");
+    this.canvas.setAttribute("aria-label", "corrected track against the raw INS track, east and north in metres");
+    this.canvas.dataset.points = "0";
+    this.el = document.createElement("div");
+    this.el.className = "chart-wrap";
+    this.el.append(this.canvas);
+    this.track = null;
+    this.drawnKey = "";
+  }
+
+  setTrack(track) { this.track = track; this.drawnKey = ""; }
+  invalidate() { this.drawnKey = ""; }
+
+  /** Draws when the track or the canvas size changed; returns true if it drew. */
+  draw() {
+    const c = this.canvas;
+    const cssW = c.clientWidth, cssH = c.clientHeight;
+    if (!cssW || !cssH) return false; // not laid out (hidden view)
+    const tr = this.track;
+    const n = tr ? tr.length : 0;
+    const key = (tr ? tr.version : 0) + ":" + cssW + "x" + cssH;
+    if (key === this.drawnKey) return false;
+    this.drawnKey = key;
+    const dpr = window.devicePixelRatio || 1;
+    if (c.width !== Math.round(cssW * dpr) || c.height !== Math.round(cssH * dpr)) {
+      c.width = Math.round(cssW * dpr);
+      c.height = Math.round(cssH * dpr);
+    }
+    const g = c.getContext("2d");
+    g.setTransform(dpr, 0, 0, dpr, 0, 0);
+    g.clearRect(0, 0, cssW, cssH);
+    g.font = "11px system-ui, sans-serif";
+    const P = TRACK_PAD;
+    const plotW = cssW - P.left - P.right, plotH = cssH - P.top - P.bottom;
+    if (n === 0) {
+      g.fillStyle = COLORS.axis;
+      g.fillText("waiting for the first INS epoch\u2026", P.left + 8, P.top + plotH / 2);
+      c.dataset.points = "0";
+      return true;
+    }
+
+    // Extent of both tracks, then one scale (m per pixel) for both axes: the
+    // tighter of the two fits, the other axis is centred with room to spare.
+    let e0 = Infinity, e1 = -Infinity, n0 = Infinity, n1 = -Infinity;
+    for (const [E, N] of [[tr.sE, tr.sN], [tr.iE, tr.iN]]) {
+      for (let i = 0; i < n; i++) {
+        const e = E[i], nn = N[i];
+        if (e < e0) e0 = e; if (e > e1) e1 = e;
+        if (nn < n0) n0 = nn; if (nn > n1) n1 = nn;
+      }
+    }
+    const span = Math.max(e1 - e0, n1 - n0, 1) * 1.12; // ≥ 1 m so a standing start still draws
+    const scale = Math.min(plotW, plotH) / span;      // px per m
+    const ec = (e0 + e1) / 2, nc = (n0 + n1) / 2;
+    const cx = P.left + plotW / 2, cy = P.top + plotH / 2;
+    const xOf = (e) => cx + (e - ec) * scale;
+    const yOf = (v) => cy - (v - nc) * scale;
+
+    // Grid in round metres, the same step on both axes.
+    const step = ticks(0, Math.max(plotW, plotH) / scale, Math.max(2, Math.floor(Math.max(plotW, plotH) / 90)));
+    const d = step.length > 1 ? step[1] - step[0] : 1;
+    g.strokeStyle = COLORS.grid; g.fillStyle = COLORS.axis; g.lineWidth = 1;
+    const eLo = ec - (plotW / 2) / scale, eHi = ec + (plotW / 2) / scale;
+    const nLo = nc - (plotH / 2) / scale, nHi = nc + (plotH / 2) / scale;
+    g.textAlign = "center"; g.textBaseline = "top";
+    for (let e = Math.ceil(eLo / d) * d; e <= eHi; e += d) {
+      const x = Math.round(xOf(e)) + 0.5;
+      g.beginPath(); g.moveTo(x, P.top); g.lineTo(x, P.top + plotH); g.stroke();
+      g.fillText(fmtNum(Number(e.toPrecision(12))), x, P.top + plotH + 5);
+    }
+    g.textAlign = "right"; g.textBaseline = "middle";
+    for (let v = Math.ceil(nLo / d) * d; v <= nHi; v += d) {
+      const y = Math.round(yOf(v)) + 0.5;
+      g.beginPath(); g.moveTo(P.left, y); g.lineTo(P.left + plotW, y); g.stroke();
+      g.fillText(fmtNum(Number(v.toPrecision(12))), P.left - 4, y);
+    }
+    g.textAlign = "left"; g.textBaseline = "bottom";
+    g.fillText("E (m) \u2192", P.left + plotW - 60, P.top + plotH - 2);
+    g.textBaseline = "top";
+    g.fillText("\u2191 N (m)", P.left + 4, P.top + 2);
+
+    // The corrected track wide, the raw INS thin on top of it: over a short
+    // run they lie within metres of each other, and the other way round the
+    // INS would vanish under the corrected line. Where they part, both show.
+    g.save();
+    g.beginPath(); g.rect(P.left, P.top, plotW, plotH); g.clip();
+    let drawn = 0;
+    for (const [E, N, color, width] of [[tr.sE, tr.sN, TRACK_COLORS.solution, 4], [tr.iE, tr.iN, TRACK_COLORS.ins, 1.5]]) {
+      g.strokeStyle = color; g.lineWidth = width; g.lineJoin = "round";
+      g.beginPath();
+      let lx = xOf(E[0]), ly = yOf(N[0]);
+      g.moveTo(lx, ly);
+      for (let i = 1; i < n; i++) {
+        const x = xOf(E[i]), y = yOf(N[i]);
+        if (i < n - 1 && Math.abs(x - lx) < 1 && Math.abs(y - ly) < 1) continue;
+        g.lineTo(x, y); lx = x; ly = y; drawn++;
+      }
+      g.stroke();
+      // The last point, ringed, is where the vehicle is now.
+      g.fillStyle = color;
+      g.beginPath(); g.arc(lx, ly, width > 2 ? 5 : 3, 0, 2 * Math.PI); g.fill();
+      g.strokeStyle = "#ffffff"; g.lineWidth = 1.5; g.stroke();
+    }
+    g.restore();
+    g.strokeStyle = COLORS.axis; g.lineWidth = 1;
+    g.strokeRect(P.left + 0.5, P.top + 0.5, plotW, plotH);
+
+    // Legend inside the plot, in the corner the track crosses least: a fixed
+    // corner would sooner or later sit on the vehicle's latest position.
+    const items = [["corrected", TRACK_COLORS.solution], ["raw INS", TRACK_COLORS.ins]];
+    g.font = "11px system-ui, sans-serif"; g.textAlign = "left"; g.textBaseline = "middle";
+    const lw = 96, lh = 16 * items.length + 6;
+    const corners = [
+      [P.left + plotW - lw - 6, P.top + 6], [P.left + 6, P.top + 20],
+      [P.left + plotW - lw - 6, P.top + plotH - lh - 20], [P.left + 6, P.top + plotH - lh - 6],
+    ];
+    let lx0 = corners[0][0], ly0 = corners[0][1], fewest = Infinity;
+    const stride = Math.max(1, Math.floor(n / 2000)); // a sample is enough to rank four boxes
+    for (const [x0, y0] of corners) {
+      const inside = (i) => {
+        const x = xOf(tr.sE[i]), y = yOf(tr.sN[i]);
+        return x >= x0 - 8 && x <= x0 + lw + 8 && y >= y0 - 8 && y <= y0 + lh + 8;
+      };
+      let hits = inside(n - 1) ? n : 0; // never over the latest position
+      for (let i = 0; i < n; i += stride) if (inside(i)) hits++;
+      if (hits < fewest) { fewest = hits; lx0 = x0; ly0 = y0; }
+      if (hits === 0) break;
+    }
+    g.fillStyle = "rgba(255, 255, 255, 0.9)"; g.fillRect(lx0, ly0, lw, lh);
+    g.strokeStyle = COLORS.grid; g.strokeRect(lx0 + 0.5, ly0 + 0.5, lw, lh);
+    items.forEach(([label, color], k) => {
+      const y = ly0 + 11 + 16 * k;
+      g.strokeStyle = color; g.lineWidth = k === 0 ? 4 : 1.5;
+      g.beginPath(); g.moveTo(lx0 + 6, y); g.lineTo(lx0 + 24, y); g.stroke();
+      g.fillStyle = COLORS.axis; g.fillText(label, lx0 + 30, y);
+    });
+
+    // For tests and the curious: points held, segments drawn, the last offset.
+    c.dataset.points = String(n);
+    c.dataset.drawn = String(drawn);
+    c.dataset.lastE = String(tr.sE[n - 1]);
+    c.dataset.lastN = String(tr.sN[n - 1]);
+    return true;
   }
 }

@@ -14,6 +14,11 @@ const BACKOFF_MAX_MS = 30000;
 const STABLE_OPEN_MS = 10000;
 /** Points kept per test: 20 stats/s for 5 minutes. Trimmed in chunks (amortised O(1)). */
 const HISTORY_CAP = 6000;
+/** Track points kept per federated monitor (about 17 minutes at 20 stats/s). Trimmed in chunks. */
+const TRACK_CAP = 20000;
+/** WGS84 semi-major axis (m) and first eccentricity squared, for the local ENU frame. */
+const WGS84_A = 6378137.0;
+const WGS84_E2 = 6.69437999014e-3;
 /** Recent alarms kept in memory for the overview and session views. */
 const RECENT_ALARMS = 200;
 
@@ -88,6 +93,50 @@ export class Series {
   }
 }
 
+/**
+ * One federated monitor's corrected and raw INS tracks, as the `stats`
+ * messages sample them (≤ 20/s, so a 10 Hz INS is thinned, never invented).
+ * Stored as east/north metres from the first point received: converting once
+ * on arrival keeps redraws to plain arithmetic. The frame is the tangent
+ * plane at that origin with the ellipsoid's radii there — metre-accurate over
+ * the tens of kilometres a session covers, which is all a track plot needs.
+ */
+export class Track {
+  constructor() { this.clear(); }
+  clear() {
+    this.t = []; this.sE = []; this.sN = []; this.iE = []; this.iN = [];
+    this.origin = null; // {lat, lon (deg), rn, re (m per rad)}
+    this.version = (this.version || 0) + 1; // lets a chart tell new data from a redraw
+  }
+  get length() { return this.t.length; }
+  /** Adds the `track` of one stats message; repeats (no new INS epoch) are skipped. */
+  push(tr) {
+    const n = this.t.length;
+    if (n && tr.t === this.t[n - 1]) return false;
+    if (n && tr.t < this.t[n - 1]) this.clear(); // stream restarted (t went back)
+    if (!this.origin) {
+      const lat = tr.solution.lat * Math.PI / 180, sin = Math.sin(lat);
+      const w = Math.sqrt(1 - WGS84_E2 * sin * sin);
+      const h = tr.solution.h;
+      // Meridian and prime-vertical radii of curvature at the origin.
+      const rn = WGS84_A * (1 - WGS84_E2) / (w * w * w) + h;
+      const re = (WGS84_A / w + h) * Math.cos(lat);
+      this.origin = { lat: tr.solution.lat, lon: tr.solution.lon, rn, re };
+    }
+    const o = this.origin, k = Math.PI / 180;
+    this.t.push(tr.t);
+    this.sE.push((tr.solution.lon - o.lon) * k * o.re); this.sN.push((tr.solution.lat - o.lat) * k * o.rn);
+    this.iE.push((tr.ins.lon - o.lon) * k * o.re); this.iN.push((tr.ins.lat - o.lat) * k * o.rn);
+    if (this.t.length > TRACK_CAP + TRACK_CAP / 4) {
+      // Drop the oldest in one splice per TRACK_CAP / 4 points (amortised O(1)); the origin stays.
+      const drop = this.t.length - TRACK_CAP;
+      for (const a of [this.t, this.sE, this.sN, this.iE, this.iN]) a.splice(0, drop);
+    }
+    this.version++;
+    return true;
+  }
+}
+
 /** Everything the page knows about one session. */
 class SessionLive {
   constructor(id) {
@@ -96,6 +145,7 @@ class SessionLive {
     this.stats = null;     // last `stats` message
     this.statsAt = 0;      // our clock when it arrived
     this.series = new Map(); // "monitor/test" → Series
+    this.tracks = new Map(); // federated monitor name → Track
     this.ws = null; this.openedAt = 0; this.delay = BACKOFF_MIN_MS;
     this.retryTimer = null; this.retryAt = 0; this.removed = false;
     this.maxAlarmId = 0;
@@ -105,6 +155,11 @@ class SessionLive {
     let s = this.series.get(key);
     if (!s) { s = new Series(); this.series.set(key, s); }
     return s;
+  }
+  trackFor(monitor) {
+    let tr = this.tracks.get(monitor);
+    if (!tr) { tr = new Track(); this.tracks.set(monitor, tr); }
+    return tr;
   }
   /** "live", "connecting…", "reconnecting in N s" or "off". */
   liveText() {
@@ -293,6 +348,10 @@ export class Live {
           series.push(t, ts.last, ts.threshold, ts.state);
         }
       }
+    }
+    // Federated monitors carry their latest corrected and INS positions.
+    for (const [mname, m] of Object.entries(st.monitors || {})) {
+      if (m.track && isNum(m.track.t)) s.trackFor(mname).push(m.track);
     }
     this.emit("stats", s);
   }

@@ -1,10 +1,11 @@
 // session.js — one session in detail: for each monitor a strip chart per
 // test (statistic against threshold, suspect/isolated bands), HPL against HAL
-// for federated monitors, the threshold controls, and the session's alarms.
+// for federated monitors with their corrected track against the raw INS
+// track, the threshold controls, and the session's alarms.
 // All charts of the session share one time range, so zooming one zooms all.
 
 import { el, setText, badge, setBadge, fmtNum, fmtRatio, fmtT, fmtClock, policyText, isNum } from "./dom.js";
-import { StripChart } from "./chart.js";
+import { StripChart, TrackChart } from "./chart.js";
 import { ThresholdControls } from "./controls.js";
 
 const SESSION_ALARMS = 50;
@@ -16,6 +17,7 @@ export class SessionView {
     this.id = null;
     this.shape = "";
     this.charts = [];       // {chart, monitor, test, caption}
+    this.tracks = [];       // {chart, track, value}: one per federated monitor
     this.range = null;      // shared zoom [t0, t1]
     this.paused = false;
     this.log = false;
@@ -60,6 +62,7 @@ export class SessionView {
       this.setPaused(false);
       this.body.replaceChildren();
       this.charts = [];
+      this.tracks = [];
     }
     this.headDirty = true;
     this.alarmsDirty = true;
@@ -102,12 +105,19 @@ export class SessionView {
     if (shape !== this.shape) { this.shape = shape; this.build(s, monitors); }
     if (this.headDirty) { this.headDirty = false; this.fillHead(s, monitors); }
     for (const c of this.charts) c.chart.draw();
+    // Tracks ignore pause and zoom: they are a map of where the vehicle went, not a time window.
+    for (const tc of this.tracks) {
+      if (!tc.chart.draw()) continue;
+      const tr = tc.track, n = tr.length;
+      setText(tc.value, n ? "INS \u2212 corrected " + fmtNum(Math.hypot(tr.iE[n - 1] - tr.sE[n - 1], tr.iN[n - 1] - tr.sN[n - 1])) + " m \u00b7 " + n + " points" : "");
+    }
     if (this.alarmsDirty) { this.alarmsDirty = false; this.fillAlarms(); }
   }
 
   build(s, monitors) {
     setText(this.title, "Session " + s.id);
     this.charts = [];
+    this.tracks = [];
     const cards = monitors.map((m) => {
       const tests = Object.keys(m.tests);
       // The HPL chart first: for a federated monitor it is the integrity headline.
@@ -144,12 +154,20 @@ export class SessionView {
       });
       const extra = [];
       if (m.type === "federated") {
+        const chart = new TrackChart();
+        chart.canvas.dataset.session = s.id;
+        chart.canvas.dataset.monitor = m.name;
+        const track = s.trackFor(m.name);
+        chart.setTrack(track);
+        const value = el("span", { class: "num muted" });
+        this.tracks.push({ chart, track, value });
         extra.push(el("figure", { class: "strip track" },
-          el("figcaption", null, el("strong", null, "Track (local ENU, m)")),
+          el("figcaption", null, el("strong", null, "Track (local ENU, m)"), " ", value),
+          chart.el,
           el("p", { class: "muted note" },
-            "Corrected vs raw INS track: not drawn. The public API carries no positions to an observer " +
-            "(the federated solution is only in the per-epoch `result` messages sent back on the ingest socket " +
-            "when the session has echo: true; the events socket's `stats` carry statistics only).")));
+            "Corrected solution vs raw INS, east/north metres from the first point received. " +
+            "Sampled from the session's stats messages (\u2264 20 per second, so a faster INS is thinned); " +
+            "the last 20,000 points are kept.")));
       }
       const wide = tests.length > 1 || extra.length > 0;
       return el("section", { class: "card monitor" + (wide ? " wide" : ""), "data-monitor": m.name },

@@ -2,8 +2,8 @@
 //! (chromedriver) against a server started in this process on port 0. A
 //! shortened ship scenario with a GNSS position step is streamed into the
 //! ingest socket at 20× real time while the page is open; the test checks that
-//! the session appears, the alarm row appears, the charts have been drawn with
-//! data, and that a threshold change made through the page's controls is what
+//! the session appears, the alarm row appears, the charts (the federated
+//! monitor's track plot included) have been drawn with data, and that a threshold change made through the page's controls is what
 //! the REST API then reports. It also feeds 10 monitors at 20 stats messages a
 //! second and prints the page's own frame-time figures (never asserted: no
 //! test asserts wall-clock time), and saves screenshots under `target/`.
@@ -338,6 +338,40 @@ async fn the_dashboard_shows_a_faulty_replay_and_applies_a_threshold_change() {
     )
     .await;
     assert!(hpl.as_f64().unwrap() >= 100.0, "HPL chart points: {hpl}");
+
+    // The track plot holds the sampled corrected and INS tracks and has inked both.
+    let track_points = wait_js(
+        &client,
+        r#"(() => { const c = document.querySelector('canvas.track-chart[data-monitor="federated"]'); return c && Number(c.dataset.points) >= 100 && Number(c.dataset.points); })()"#,
+        "the track plot to hold at least 100 points",
+    )
+    .await;
+    let track_ink = js(
+        &client,
+        r#"const c = document.querySelector('canvas.track-chart[data-monitor="federated"]');
+           const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+           const near = (i, r, g, b) => Math.abs(d[i] - r) < 40 && Math.abs(d[i + 1] - g) < 40 && Math.abs(d[i + 2] - b) < 40 && d[i + 3] > 200;
+           let corrected = 0, ins = 0;
+           for (let i = 0; i < d.length; i += 4) {
+             if (near(i, 0x0a, 0x7d, 0x4f)) corrected++;   // the corrected track
+             if (near(i, 0xd9, 0x73, 0x0d)) ins++;         // the raw INS track
+           }
+           return {corrected, ins, drawn: Number(c.dataset.drawn), lastE: Number(c.dataset.lastE), lastN: Number(c.dataset.lastN)};"#,
+    )
+    .await;
+    println!("track plot: {track_points} points, {track_ink}");
+    // Well beyond the legend's swatches (about 40 pixels each at DPR 1).
+    assert!(
+        track_ink["corrected"].as_u64().unwrap() > 200,
+        "{track_ink}"
+    );
+    assert!(track_ink["ins"].as_u64().unwrap() > 200, "{track_ink}");
+    // The ship moves: the last corrected point is well away from the origin.
+    let (e, n) = (
+        track_ink["lastE"].as_f64().unwrap(),
+        track_ink["lastN"].as_f64().unwrap(),
+    );
+    assert!(e.hypot(n) > 100.0, "{track_ink}");
 
     // The page's alarm matches the log.
     let log: Value = rest

@@ -1214,3 +1214,93 @@ fn learned_monitor_outputs_match_the_result_schema() {
         c.assert_valid(c.schema("MonitorResult"), &v, "monitor result");
     }
 }
+
+#[tokio::test]
+async fn federated_stats_with_a_track_match_their_schemas() {
+    use navguard::service::wire::epoch_to_wire;
+    use navguard::sim::scenario::ship_with;
+    let doc = spec();
+    let checker = Checker { doc: &doc };
+    let events_schema =
+        &operation(&doc, "/api/v1/sessions/{id}/events", "GET")["x-websocket"]["server"];
+
+    let dir = tempfile::tempdir().unwrap();
+    let server = navguard::service::start(ServiceConfig::new(
+        "127.0.0.1:0".parse().unwrap(),
+        dir.path().join("t.db"),
+    ))
+    .await
+    .unwrap();
+    let addr = server.addr;
+    let scenario = ship_with(2, vec![], 1.0).unwrap();
+    let created = reqwest::Client::new()
+        .post(format!("http://{addr}/api/v1/sessions"))
+        .json(&json!({"id": "fed", "monitors": [{
+            "name": "nav", "type": "federated", "config": scenario.default_monitor_config()
+        }]}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(created.status(), 201);
+    let stats_url = format!("http://{addr}/api/v1/sessions/fed/stats");
+    let get_stats = || async {
+        reqwest::Client::new()
+            .get(&stats_url)
+            .send()
+            .await
+            .unwrap()
+            .json::<Value>()
+            .await
+            .unwrap()
+    };
+    // Without a track (no epoch yet), then with one.
+    let before = get_stats().await;
+    assert!(before["monitors"]["nav"].get("track").is_none(), "{before}");
+    checker.assert_valid(
+        checker.schema("SessionStats"),
+        &before,
+        "stats before any epoch",
+    );
+
+    let (mut ingest, _) =
+        tokio_tungstenite::connect_async(format!("ws://{addr}/api/v1/sessions/fed/ingest"))
+            .await
+            .unwrap();
+    assert_eq!(next_json(&mut ingest).await["type"], "ready");
+    let epochs: Vec<String> = scenario
+        .epochs
+        .iter()
+        .map(|e| epoch_to_wire(&e.epoch).unwrap())
+        .collect();
+    let n = epochs.len() as u64;
+    ingest
+        .send(Message::Text(format!("[{}]", epochs.join(",")).into()))
+        .await
+        .unwrap();
+    let mut after = get_stats().await;
+    for _ in 0..500 {
+        if after["epochs"].as_u64() == Some(n) {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+        after = get_stats().await;
+    }
+    assert!(after["monitors"]["nav"]["track"].is_object(), "{after}");
+    checker.assert_valid(checker.schema("SessionStats"), &after, "stats with a track");
+
+    let (mut events, _) =
+        tokio_tungstenite::connect_async(format!("ws://{addr}/api/v1/sessions/fed/events"))
+            .await
+            .unwrap();
+    let first = next_json(&mut events).await;
+    assert!(first["monitors"]["nav"]["track"].is_object(), "{first}");
+    checker.assert_valid(events_schema, &first, "stats message with a track");
+    // The schema holds the track to its shape.
+    let mut bad = after.clone();
+    bad["monitors"]["nav"]["track"]["solution"]["vel"] = json!([0.0, 0.0, 0.0]);
+    assert!(!checker.matches(checker.schema("SessionStats"), &bad));
+
+    let _ = ingest.close(None).await;
+    let _ = events.close(None).await;
+    server.shutdown().await;
+}

@@ -1115,3 +1115,82 @@ async fn the_last_frame_of_a_burst_reaches_observers_while_the_stream_stays_open
     assert_eq!(stats["monitors"]["cv"]["epochs"], 20, "{stats}");
     drop(socket);
 }
+
+/// A short federated stream with echo: the `track` of the stats is the last INS
+/// epoch's corrected solution (as the last echoed `result` carries it) and the
+/// INS position as sent; an epoch without `ins` leaves it where it was.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn federated_stats_track_is_the_last_echoed_solution_and_ins_position() {
+    use navguard::service::wire::epoch_to_wire;
+    use navguard::sim::scenario::ship_with;
+
+    let dir = tempfile::tempdir().unwrap();
+    let server = start(&dir.path().join("t.db"), None, Limits::default()).await;
+    let scenario = ship_with(3, vec![], 3.0).unwrap();
+    let body = json!({"id": "fed", "echo": true, "monitors": [{
+        "name": "nav", "type": "federated",
+        "config": scenario.default_monitor_config(),
+        "policy": {"kind": "classic"}, "p_fa": 1e-3
+    }]});
+    create_session(&client(), &server, &body).await;
+
+    // Before any epoch: no track.
+    let (_, stats) = get_json(&format!("{}/api/v1/sessions/fed/stats", http(&server))).await;
+    assert!(stats["monitors"]["nav"].get("track").is_none(), "{stats}");
+
+    let mut frames: Vec<Value> = scenario
+        .epochs
+        .iter()
+        .map(|e| serde_json::from_str(&epoch_to_wire(&e.epoch).unwrap()).unwrap())
+        .collect();
+    let last_ins = frames.last().unwrap().clone();
+    let last_ins_t = last_ins["t"].as_f64().unwrap();
+    // A trailing epoch without `ins`: the monitor repeats its solution, the track stays.
+    frames.push(json!({"t": last_ins_t + 0.05}));
+    let n = frames.len();
+
+    let mut socket = ingest(&server, "fed").await;
+    stream(&mut socket, &frames, 7).await;
+    let mut results = Vec::new();
+    while results.len() < n {
+        let message = recv(&mut socket).await;
+        assert_ne!(message["type"], "error", "{message}");
+        if message["type"] == "result" {
+            results.push(message);
+        }
+    }
+    let stats = wait_for_epochs(&server, "fed", n as u64).await;
+    let track = &stats["monitors"]["nav"]["track"];
+    assert_eq!(track["t"], json!(last_ins_t), "{track}");
+
+    // The last `result` repeats the last INS epoch's solution.
+    let solution = &results[n - 1]["monitors"]["nav"]["solution"];
+    assert_eq!(solution, &results[n - 2]["monitors"]["nav"]["solution"]);
+    for k in ["lat", "lon", "h"] {
+        assert_eq!(
+            track["solution"][k], solution[k],
+            "{k}: {track} vs {solution}"
+        );
+    }
+    // The raw INS position is the one sent (degrees on the wire, round-tripped through radians).
+    for k in ["lat", "lon", "h"] {
+        let (got, sent) = (
+            track["ins"][k].as_f64().unwrap(),
+            last_ins["ins"][k].as_f64().unwrap(),
+        );
+        assert!(
+            (got - sent).abs() <= 1e-9 * sent.abs().max(1.0),
+            "{k}: {got} vs {sent}"
+        );
+    }
+    // The correction is small but real.
+    let dlat = track["solution"]["lat"].as_f64().unwrap() - track["ins"]["lat"].as_f64().unwrap();
+    assert!(dlat.abs() < 1e-3, "{track}");
+
+    // The events socket's `stats` carries the same track.
+    let mut events = connect(&format!("{}/api/v1/sessions/fed/events", ws(&server))).await;
+    let first = recv(&mut events).await;
+    assert_eq!(first["type"], "stats");
+    assert_eq!(&first["monitors"]["nav"]["track"], track);
+    server.shutdown().await;
+}

@@ -13,9 +13,9 @@ use tokio::sync::{mpsc, watch};
 
 use super::handle::{ControlCommand, FrameCommand, IngestLink, SessionHandle, SessionShared};
 use super::spec::{NamedMonitors, build_monitors};
-use super::stats::{MonitorStats, SessionStats, TestStats};
+use super::stats::{MonitorStats, Position, SessionStats, TestStats, Track};
 use crate::detect::{Health, ThresholdSpec};
-use crate::monitor::{Epoch, Monitor, MonitorReport, TestOutcome};
+use crate::monitor::{Epoch, Monitor, MonitorReport, Outputs, TestOutcome};
 use crate::service::error::ApiError;
 use crate::service::metrics::Metrics;
 use crate::service::now_ms;
@@ -132,6 +132,7 @@ fn initial_stats(id: &str, monitors: &NamedMonitors) -> SessionStats {
                         epochs: 0,
                         worst_test_ratio: None,
                         tests,
+                        track: None,
                     },
                 )
             })
@@ -463,7 +464,7 @@ impl Actor {
                 let text = self.result_frame(epoch.t, &reports);
                 self.send_ingest(text).await;
             }
-            changed |= self.record(epoch.t, &reports).await;
+            changed |= self.record(epoch, &reports).await;
         }
         self.finish_frame(&frame, changed);
     }
@@ -498,7 +499,8 @@ impl Actor {
     }
 
     /// Updates statistics; announces state changes and alarms. Returns true if any state changed.
-    async fn record(&mut self, t: f64, reports: &[MonitorReport]) -> bool {
+    async fn record(&mut self, epoch: &Epoch, reports: &[MonitorReport]) -> bool {
+        let t = epoch.t;
         let mut transitions: Vec<(usize, TestOutcome, f64)> = Vec::new();
         for (index, (m, report)) in self.monitors.iter().zip(reports).enumerate() {
             let Some(monitor_stats) = self.stats.monitors.get_mut(&m.name) else {
@@ -519,6 +521,29 @@ impl Actor {
             }
             if worst.is_some() {
                 monitor_stats.worst_test_ratio = worst;
+            }
+            // The track moves only on INS epochs: on the others the monitor repeats
+            // its last solution, which is already recorded with its own time.
+            if let (
+                Outputs::Federated {
+                    solution: Some(s), ..
+                },
+                Some(ins),
+            ) = (&report.outputs, &epoch.ins)
+            {
+                monitor_stats.track = Some(Track {
+                    t,
+                    solution: Position {
+                        lat: s.lat,
+                        lon: s.lon,
+                        h: s.h,
+                    },
+                    ins: Position {
+                        lat: ins.lat.to_degrees(),
+                        lon: ins.lon.to_degrees(),
+                        h: ins.h,
+                    },
+                });
             }
         }
         let changed = !transitions.is_empty();

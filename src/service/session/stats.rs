@@ -126,6 +126,31 @@ impl TestStats {
     }
 }
 
+/// A geodetic position: latitude and longitude in degrees, height in m.
+#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+pub struct Position {
+    /// Latitude, degrees.
+    pub lat: f64,
+    /// Longitude, degrees.
+    pub lon: f64,
+    /// Ellipsoidal height, m.
+    pub h: f64,
+}
+
+/// The latest position of a `federated` monitor: its corrected solution and the
+/// raw INS position it corrected, at the last INS epoch. Plain `Copy` data, so
+/// the actor updates it per epoch without allocating; observers sample it at the
+/// stats rate to draw the tracks.
+#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+pub struct Track {
+    /// Time of the INS epoch, s.
+    pub t: f64,
+    /// Corrected solution (the `result` frame's `solution`, without velocity).
+    pub solution: Position,
+    /// The epoch's INS position as received.
+    pub ins: Position,
+}
+
 /// Statistics of one monitor.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct MonitorStats {
@@ -138,6 +163,10 @@ pub struct MonitorStats {
     pub worst_test_ratio: Option<f64>,
     /// Per test.
     pub tests: BTreeMap<&'static str, TestStats>,
+    /// `federated` only: the latest corrected and raw INS positions; absent
+    /// before the first INS epoch and for other kinds.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub track: Option<Track>,
 }
 
 /// Statistics of one session.
