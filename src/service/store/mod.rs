@@ -2,6 +2,7 @@
 //! the alarm log and trained models ([`models`]), in SQLite through sqlx (WAL).
 //! An alarm is committed here before anyone is told about it.
 
+mod alarm_writer;
 pub mod models;
 
 use std::path::Path;
@@ -64,6 +65,8 @@ pub struct AlarmQuery {
 #[derive(Debug, Clone)]
 pub struct Store {
     pool: SqlitePool,
+    /// Alarms go through one writer task that commits them in groups.
+    alarms: alarm_writer::AlarmWriter,
 }
 
 const SCHEMA: &[&str] = &[
@@ -108,7 +111,8 @@ impl Store {
         for statement in SCHEMA.iter().chain(models::SCHEMA) {
             sqlx::query(statement).execute(&pool).await?;
         }
-        Ok(Store { pool })
+        let alarms = alarm_writer::AlarmWriter::spawn(pool.clone());
+        Ok(Store { pool, alarms })
     }
 
     /// Flushes the WAL into the main file and closes every connection.
@@ -154,25 +158,10 @@ impl Store {
             .collect()
     }
 
-    /// Commits an alarm and returns it with its id.
+    /// Commits an alarm and returns it with its id. Alarms raised at the same
+    /// moment share one transaction (group commit); this returns after the commit.
     pub async fn insert_alarm(&self, mut alarm: AlarmRecord) -> Result<AlarmRecord, StoreError> {
-        let done = sqlx::query(
-            "INSERT INTO alarms (session, monitor, test, state, t, statistic, threshold, dof, delay_s, raised_at_ms, cleared_t)
-             VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, NULL)",
-        )
-        .bind(&alarm.session)
-        .bind(&alarm.monitor)
-        .bind(&alarm.test)
-        .bind(alarm.state.as_str())
-        .bind(alarm.t)
-        .bind(alarm.statistic)
-        .bind(alarm.threshold)
-        .bind(alarm.dof)
-        .bind(alarm.delay_s)
-        .bind(alarm.raised_at_ms)
-        .execute(&self.pool)
-        .await?;
-        alarm.id = done.last_insert_rowid();
+        alarm.id = self.alarms.insert(alarm.clone()).await?;
         Ok(alarm)
     }
 
@@ -295,6 +284,46 @@ mod tests {
             raised_at_ms: 1000 + t as i64,
             cleared_t: None,
         }
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn alarms_raised_together_share_commits_and_keep_per_session_order() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = Store::open(&dir.path().join("g.db")).await.unwrap();
+        // 200 sessions each raise 5 alarms at once, as a common fault would.
+        let tasks: Vec<_> = (0..200)
+            .map(|s| {
+                let store = store.clone();
+                tokio::spawn(async move {
+                    let mut ids = Vec::new();
+                    for k in 0..5 {
+                        let a = store
+                            .insert_alarm(alarm(&format!("s{s}"), k as f64))
+                            .await
+                            .unwrap();
+                        ids.push(a.id);
+                    }
+                    ids
+                })
+            })
+            .collect();
+        let mut all = Vec::new();
+        for task in tasks {
+            let ids = task.await.unwrap();
+            assert!(ids.windows(2).all(|w| w[0] < w[1]), "in order per session");
+            all.extend(ids);
+        }
+        all.sort_unstable();
+        all.dedup();
+        assert_eq!(all.len(), 1000, "every alarm got its own id");
+        // Every one is committed: a fresh connection sees them all.
+        store.close().await;
+        let reopened = Store::open(&dir.path().join("g.db")).await.unwrap();
+        let q = AlarmQuery {
+            limit: 1000,
+            ..AlarmQuery::default()
+        };
+        assert_eq!(reopened.alarms(&q).await.unwrap().len(), 1000);
     }
 
     #[tokio::test]
