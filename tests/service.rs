@@ -943,7 +943,7 @@ async fn a_new_stream_resets_the_filters_and_closes_what_the_old_one_left_open()
 
     // Reconnect: filters start afresh (t may restart), the test is announced
     // healthy, and the open alarms are closed in the log.
-    let mut socket = ingest(&server, "re").await;
+    let mut socket = reingest(&server, "re").await;
     let (change, _) = recv_until(&mut events, |v| {
         v["type"] == "state" && v["to"] == "healthy"
     })

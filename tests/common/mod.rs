@@ -94,6 +94,22 @@ pub async fn ingest(server: &Server, session: &str) -> Socket {
     socket
 }
 
+/// Opens the ingest socket of `session` again right after the client dropped its
+/// previous one. The server notices the old stream's close asynchronously and
+/// answers 409 until then, so this retries as a reconnecting client would.
+pub async fn reingest(server: &Server, session: &str) -> Socket {
+    let url = format!("{}/api/v1/sessions/{session}/ingest", ws(server));
+    for _ in 0..250 {
+        if let Ok((mut socket, _)) = tokio_tungstenite::connect_async(&url).await {
+            let ready = recv(&mut socket).await;
+            assert_eq!(ready["type"], "ready", "{ready}");
+            return socket;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    }
+    panic!("the ingest socket of {session} stayed taken for 5 s after its client left");
+}
+
 /// SplitMix64 with Box–Muller: a small, seeded, dependency-free Gaussian source.
 pub struct Gauss {
     state: u64,
