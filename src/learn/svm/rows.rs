@@ -6,6 +6,7 @@
 
 use super::cache::RowCache;
 use crate::learn::Kernel;
+use crate::learn::kernel::exp_nonpos;
 
 /// `Q` for the solver.
 pub(super) struct QMatrix {
@@ -137,63 +138,14 @@ fn kernel_tail_body(
         let sqi = sq[i];
         for (o, &sqj) in out.iter_mut().zip(&sq[start..end]) {
             let dist2 = (sqi + sqj - 2.0 * *o).max(0.0);
-            *o = exp_nonpositive(dist2 * scale);
+            *o = exp_nonpos(dist2 * scale);
         }
     }
-}
-
-/// `eˣ` for `x ≤ 0` (RBF arguments), relative error below 1e-15, without branches
-/// or calls so that a row's loop vectorises. Cody–Waite reduction `x = k ln 2 + r`,
-/// `|r| ≤ ln2/2`, then Taylor to degree 12 (remainder `r¹³/13! < 2e-16`), then the
-/// exponent `2ᵏ` built in the bits. Below −708 it returns `e⁻⁷⁰⁸ ≈ 3e-308` (0 as f32).
-#[inline(always)]
-pub(super) fn exp_nonpositive(x: f64) -> f64 {
-    const MAGIC: f64 = 6_755_399_441_055_744.0; // 1.5·2⁵²: adding it rounds to an integer
-    // fdlibm's split of ln 2: LN2_HI has 32 trailing zero bits, so k·LN2_HI is exact.
-    const LN2_HI: f64 = f64::from_bits(0x3FE6_2E42_FEE0_0000);
-    const LN2_LO: f64 = f64::from_bits(0x3DEA_39EF_3579_3C76);
-    let x = x.max(-708.0);
-    let t = x * std::f64::consts::LOG2_E + MAGIC;
-    let k = t - MAGIC;
-    let r = x - k * LN2_HI - k * LN2_LO;
-    let mut p = 1.0 / 479_001_600.0; // 1/12!
-    for c in [
-        1.0 / 39_916_800.0,
-        1.0 / 3_628_800.0,
-        1.0 / 362_880.0,
-        1.0 / 40_320.0,
-        1.0 / 5_040.0,
-        1.0 / 720.0,
-        1.0 / 120.0,
-        1.0 / 24.0,
-        1.0 / 6.0,
-        0.5,
-        1.0,
-        1.0,
-    ] {
-        p = p * r + c;
-    }
-    // The low bits of t hold k (two's complement); k ∈ [−1022, 0] here.
-    let two_k = f64::from_bits(t.to_bits().wrapping_add(1023) << 52);
-    p * two_k
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn the_branch_free_exponential_matches_the_library_one() {
-        let mut worst = 0.0f64;
-        for i in 0..=200_000 {
-            let x = -700.0 * i as f64 / 200_000.0;
-            let (a, b) = (exp_nonpositive(x), x.exp());
-            worst = worst.max(((a - b) / b).abs());
-        }
-        assert!(worst < 1e-15, "worst relative error {worst:e}");
-        assert_eq!(exp_nonpositive(0.0), 1.0);
-        assert!(exp_nonpositive(-1e6) < 1e-300);
-    }
 
     #[test]
     fn rows_hold_signed_kernel_values_in_the_permuted_order() {
