@@ -41,8 +41,7 @@
 //!   outside the boundary; counters (N1, N2) debounce isolated windows and isolate
 //!   the TACAN after more than N2 windows outside.
 //!
-//! `ρ` and `scale` are read once, at build, from the model's stored form (the
-//! `ocsvm` model exposes no accessor for `scale`); a model with `ρ ≤ 0` (no positive
+//! `ρ` and `scale` are read once, at build, from the model; a model with `ρ ≤ 0` (no positive
 //! boundary mass, a degenerate training set) falls back to `test_ratio = 1 − g`,
 //! which still fails exactly when `g < 0`.
 //!
@@ -222,17 +221,17 @@ pub struct TacanMonitor {
     decision_scale: Option<f64>,
 }
 
-/// Reads the standardiser and `scale · ρ` from the model's stored form (module doc).
+/// The standardiser and the decision scale `scale · ρ` (when positive) of a one-class
+/// model (module doc).
 fn model_internals(model: &AnyModel) -> (Option<Standardizer>, Option<f64>) {
-    let Ok(v) = serde_json::to_value(model) else {
+    let AnyModel::OcSvm(m) = model else {
         return (None, None);
     };
-    let standardizer = serde_json::from_value::<Standardizer>(v["standardizer"].clone())
-        .ok()
-        .filter(|s| s.dim() == model.input_dim());
-    let scale = v["scale"].as_f64().unwrap_or(1.0);
-    let s = v["rho"].as_f64().map(|rho| scale * rho);
-    (standardizer, s.filter(|s| s.is_finite() && *s > 0.0))
+    let s = m.scale() * m.rho();
+    (
+        Some(m.standardizer().clone()),
+        Some(s).filter(|s| s.is_finite() && *s > 0.0),
+    )
 }
 
 /// The `range` test's ratio for decision `g` (module doc).
@@ -539,7 +538,7 @@ mod tests {
     #[test]
     fn a_model_of_the_wrong_dimension_is_refused() {
         let models = HashMap::from([("m".to_owned(), small_model(false))]);
-        // The right one: ρ, scale and the standardiser are read from its stored form.
+        // The right one: ρ, scale and the standardiser are read from the model.
         let m = TacanMonitor::new(
             TacanConfig::from_json(&config("m")).unwrap(),
             models["m"].clone(),

@@ -241,6 +241,17 @@ impl OcSvmModel {
         self.rho
     }
 
+    /// The factor the decision carries: 1 (ν form) or 2C (SVDD).
+    pub fn scale(&self) -> f64 {
+        self.scale
+    }
+
+    /// The input standardisation fitted on the training set (identity when the
+    /// model was trained with `"standardize": false`).
+    pub fn standardizer(&self) -> &Standardizer {
+        &self.standardizer
+    }
+
     /// Decision value; ≥ 0 means inside the boundary (normal). NaN for an input
     /// of the wrong dimension.
     pub fn decision_one(&self, x: &[f64]) -> f64 {
