@@ -34,7 +34,9 @@ use serde_json::Value;
 
 use super::{Aid, Fault, Scenario, SimError};
 use crate::detect::Health;
+use crate::features::FeatureError;
 use crate::geo::{self, Lla};
+use crate::learn::LearnError;
 use crate::monitor::{self, BuildError, MonitorSpec, StepError};
 use scorecard::FaultWindow;
 
@@ -44,6 +46,12 @@ pub enum ExperimentError {
     /// The scenario could not be built.
     #[error("scenario: {0}")]
     Sim(#[from] SimError),
+    /// Features could not be computed.
+    #[error("features: {0}")]
+    Features(#[from] FeatureError),
+    /// A model could not be trained.
+    #[error("training: {0}")]
+    Learn(#[from] LearnError),
     /// The monitor could not be built from its spec.
     #[error("monitor: {0}")]
     Build(#[from] BuildError),

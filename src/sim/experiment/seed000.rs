@@ -28,13 +28,13 @@ use std::time::Instant;
 
 use serde_json::json;
 
+use super::ExperimentError;
 use super::plot::{Chart, Series};
 use super::scorecard::{self, FaultWindow, Scorecard};
 use crate::detect::{Health, PolicyConfig, ThresholdSpec, chi2};
 use crate::learn::{AnyModel, Dataset, LearnError, ModelKind, ModelParams, NoProgress, train};
 use crate::monitor::channel::embed_series;
-use crate::monitor::{self, BuildError, Epoch, MonitorKind, MonitorSpec, Outputs, StepError};
-use crate::sim::SimError;
+use crate::monitor::{self, Epoch, MonitorKind, MonitorSpec, Outputs};
 use crate::sim::ads_gnss::{self, AdsGnssParams, FAULT_END_S, FAULT_START_S};
 use crate::sim::faults::FaultKind;
 
@@ -49,28 +49,6 @@ pub const PAPER_TABLE2: [(f64, f64); 4] = [
 
 /// The paper's time in false alarm after the fault ends for the plain method, s.
 pub const PAPER_PLAIN_TAIL_S: f64 = 20.0;
-
-/// Why a channel experiment (seed 000 or 001) could not run.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum ChannelExperimentError {
-    /// The scenario could not be built.
-    #[error("scenario: {0}")]
-    Sim(#[from] SimError),
-    /// A model could not be trained.
-    #[error("training: {0}")]
-    Learn(#[from] LearnError),
-    /// The monitor could not be built.
-    #[error("monitor: {0}")]
-    Build(#[from] BuildError),
-    /// The monitor failed on an epoch.
-    #[error("monitor failed at t = {t} s: {source}")]
-    Step {
-        /// Epoch time, s.
-        t: f64,
-        /// The failure.
-        source: StepError,
-    },
-}
 
 /// What to run.
 #[derive(Debug, Clone, PartialEq)]
@@ -153,7 +131,7 @@ impl PredictionResult {
 pub fn train_pair(
     series: &[f64],
     p: &Seed000Params,
-) -> Result<(AnyModel, AnyModel), ChannelExperimentError> {
+) -> Result<(AnyModel, AnyModel), ExperimentError> {
     let (x, y) = embed_series(series, p.embedding);
     let data = Dataset::new(&x, Some(&y))?;
     let plain = ModelParams::from_json(
@@ -171,7 +149,7 @@ pub fn train_pair(
 }
 
 /// Part (a) on the flight of `p.seed`: 300 samples, 200 train, 100 predicted.
-pub fn prediction(p: &Seed000Params) -> Result<PredictionResult, ChannelExperimentError> {
+pub fn prediction(p: &Seed000Params) -> Result<PredictionResult, ExperimentError> {
     let flight = ads_gnss::simulate(&AdsGnssParams {
         seed: p.seed,
         faults: vec![],
@@ -216,7 +194,7 @@ pub fn run_channel(
     models: &HashMap<String, Arc<AnyModel>>,
     p_fa: f64,
     epochs: &[Epoch],
-) -> Result<ChannelTrace, ChannelExperimentError> {
+) -> Result<ChannelTrace, ExperimentError> {
     let spec = MonitorSpec {
         kind: MonitorKind::Channel,
         config,
@@ -233,7 +211,7 @@ pub fn run_channel(
     for e in epochs {
         let report = monitor
             .step(e)
-            .map_err(|source| ChannelExperimentError::Step { t: e.t, source })?;
+            .map_err(|source| ExperimentError::Step { t: e.t, source })?;
         if let Some(o) = report.tests.first() {
             trace
                 .samples
@@ -251,7 +229,7 @@ fn run_seed(base: u64, r: usize) -> u64 {
 }
 
 /// One run: per fault case, per method, the trace.
-fn one_run(p: &Seed000Params, r: usize) -> Result<Vec<[ChannelTrace; 2]>, ChannelExperimentError> {
+fn one_run(p: &Seed000Params, r: usize) -> Result<Vec<[ChannelTrace; 2]>, ExperimentError> {
     let seed = run_seed(p.seed, r);
     let training = ads_gnss::simulate(&AdsGnssParams {
         seed: seed ^ 0x5EED_0000_7EA1_0000,
@@ -315,9 +293,9 @@ pub struct Seed000Result {
 /// Runs the Monte Carlo part only.
 pub fn monte_carlo(
     p: &Seed000Params,
-) -> Result<(Vec<CaseResult>, Option<[ChannelTrace; 2]>), ChannelExperimentError> {
+) -> Result<(Vec<CaseResult>, Option<[ChannelTrace; 2]>), ExperimentError> {
     let threads = p.threads.clamp(1, 8);
-    let mut per_run: Vec<Option<Result<Vec<[ChannelTrace; 2]>, ChannelExperimentError>>> =
+    let mut per_run: Vec<Option<Result<Vec<[ChannelTrace; 2]>, ExperimentError>>> =
         (0..p.runs).map(|_| None).collect();
     std::thread::scope(|s| {
         let chunks: Vec<_> = per_run
@@ -383,7 +361,7 @@ pub fn monte_carlo(
 }
 
 /// Runs both parts.
-pub fn run(params: Seed000Params) -> Result<Seed000Result, ChannelExperimentError> {
+pub fn run(params: Seed000Params) -> Result<Seed000Result, ExperimentError> {
     let prediction = prediction(&params)?;
     let (cases, example) = monte_carlo(&params)?;
     let threshold = chi2::threshold(1, params.p_fa).unwrap_or(f64::NAN);

@@ -19,8 +19,9 @@ use std::time::Instant;
 
 use serde_json::json;
 
+use super::ExperimentError;
 use super::scorecard::{self, FaultWindow, Scorecard};
-use super::seed000::{ChannelExperimentError, run_channel};
+use super::seed000::run_channel;
 use crate::detect::Health;
 use crate::learn::lssvm::LsSvmModel;
 use crate::learn::online::{OnlineLsSvm, OnlineParams};
@@ -139,7 +140,7 @@ fn rmse(pairs: &[(f64, f64)]) -> f64 {
 }
 
 /// Part 1.
-pub fn predictors(p: &Seed001Params) -> Result<Vec<PredictorRow>, ChannelExperimentError> {
+pub fn predictors(p: &Seed001Params) -> Result<Vec<PredictorRow>, ExperimentError> {
     let run = imu_channel::simulate(p.seed, p.samples, None, false)?;
     let (y, m, n) = (&run.measured, p.embedding, p.window);
     let start = m + n;
@@ -210,7 +211,7 @@ pub fn predictors(p: &Seed001Params) -> Result<Vec<PredictorRow>, ChannelExperim
 }
 
 /// Part 2: every fault mode through the channel monitor with the online predictor.
-pub fn faults(p: &Seed001Params) -> Result<Vec<FaultRow>, ChannelExperimentError> {
+pub fn faults(p: &Seed001Params) -> Result<Vec<FaultRow>, ExperimentError> {
     let config = json!({"channels": [{"name": imu_channel::CHANNEL, "embedding": p.embedding, "n": p.n,
         "predictor": {"online": {"window": p.window, "gamma": p.gamma, "sigma2": p.sigma2}}}]});
     let mut rows = Vec::new();
@@ -254,7 +255,7 @@ pub fn faults(p: &Seed001Params) -> Result<Vec<FaultRow>, ChannelExperimentError
 
 /// Part 3: online predictions on a spiky record, without and with the outlier filter.
 /// Returns (RMSE without, RMSE with, values replaced, spikes).
-pub fn outliers(p: &Seed001Params) -> Result<(f64, f64, u64, usize), ChannelExperimentError> {
+pub fn outliers(p: &Seed001Params) -> Result<(f64, f64, u64, usize), ExperimentError> {
     let run = imu_channel::simulate(p.seed, p.samples, None, true)?;
     let m = p.embedding;
     let mut result = [0.0; 2];
@@ -284,7 +285,7 @@ pub fn outliers(p: &Seed001Params) -> Result<(f64, f64, u64, usize), ChannelExpe
 }
 
 /// Runs the three parts.
-pub fn run(params: Seed001Params) -> Result<Seed001Result, ChannelExperimentError> {
+pub fn run(params: Seed001Params) -> Result<Seed001Result, ExperimentError> {
     let predictors = predictors(&params)?;
     let faults = faults(&params)?;
     let (without, with, replaced, spikes) = outliers(&params)?;

@@ -16,14 +16,13 @@ use rand::rngs::StdRng;
 use rand::seq::SliceRandom;
 use serde_json::{Value, json};
 
+use super::ExperimentError;
 use super::plot::{Chart, Series};
 use super::scorecard::{self, FaultWindow, Scorecard};
 use crate::detect::{Health, PolicyConfig, ThresholdSpec};
-use crate::features::FeatureError;
 use crate::features::wavelet::{self, WaveletPacketParams};
 use crate::learn::{self, AnyModel, Dataset, LearnError, ModelKind, ModelParams, NoProgress};
-use crate::monitor::{self, BuildError, Epoch, MonitorKind, MonitorSpec, Outputs};
-use crate::sim::SimError;
+use crate::monitor::{self, Epoch, MonitorKind, MonitorSpec, Outputs};
 use crate::sim::rimu::{self as rsim, GyroFaultKind, RimuSimParams};
 
 /// Seed 002's detection threshold T_D for the FSS test (l' = 6).
@@ -31,23 +30,6 @@ pub const T_D: f64 = 39.81;
 
 /// The id the experiment stores its classifier under for `monitor::build`.
 const MODEL_ID: &str = "seed002-svc";
-
-/// Why the experiment could not run.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum Seed002Error {
-    /// The simulator refused its parameters.
-    #[error("scenario: {0}")]
-    Sim(#[from] SimError),
-    /// Features could not be computed.
-    #[error("features: {0}")]
-    Feature(#[from] FeatureError),
-    /// The classifier could not be trained.
-    #[error("classifier: {0}")]
-    Learn(#[from] LearnError),
-    /// The monitor could not be built.
-    #[error("monitor: {0}")]
-    Build(#[from] BuildError),
-}
 
 /// What to run.
 #[derive(Debug, Clone, PartialEq)]
@@ -111,7 +93,7 @@ pub struct TrainingSummary {
 /// Trains the isolation classifier on simulated windows (features by `wavelet`).
 pub fn train_classifier(
     p: &Seed002Params,
-) -> Result<(Arc<AnyModel>, TrainingSummary), Seed002Error> {
+) -> Result<(Arc<AnyModel>, TrainingSummary), ExperimentError> {
     let (windows, labels) = rsim::training_windows(
         p.seed,
         rsim::default_sigma(),
@@ -252,7 +234,7 @@ pub fn run_case(
     sim: &RimuSimParams,
     spec: &MonitorSpec,
     models: &dyn monitor::ModelSource,
-) -> Result<RunOutcome, Seed002Error> {
+) -> Result<RunOutcome, ExperimentError> {
     let run = rsim::simulate(sim)?;
     let mut m = monitor::build(spec, models)?;
     let onset = sim.fault.map_or(f64::INFINITY, |f| f.onset_s);
@@ -305,7 +287,7 @@ fn mean(v: &[f64]) -> Option<f64> {
 type MakeScenario = fn(u64, Option<(usize, GyroFaultKind)>) -> RimuSimParams;
 
 /// Runs the experiment.
-pub fn run(params: Seed002Params) -> Result<Seed002Result, Seed002Error> {
+pub fn run(params: Seed002Params) -> Result<Seed002Result, ExperimentError> {
     let (model, training) = train_classifier(&params)?;
     let models: HashMap<String, Arc<AnyModel>> = [(MODEL_ID.to_owned(), model)].into();
     let sigma = rsim::default_sigma();

@@ -33,15 +33,14 @@ use std::time::Instant;
 
 use serde_json::json;
 
+use super::ExperimentError;
 use super::plot::{Chart, Series};
 use super::scorecard::{self, FaultWindow, Scorecard};
 use crate::detect::{Health, PolicyConfig, ThresholdSpec};
-use crate::features::FeatureError;
 use crate::features::tacan::{TacanFeatureParams, series_features};
 use crate::geo::Lla;
-use crate::learn::{self, AnyModel, Dataset, LearnError, ModelKind, ModelParams, NoProgress};
-use crate::monitor::{self, BuildError, MonitorKind, MonitorSpec, StepError};
-use crate::sim::SimError;
+use crate::learn::{self, AnyModel, Dataset, ModelKind, ModelParams, NoProgress};
+use crate::monitor::{self, MonitorKind, MonitorSpec};
 use crate::sim::tacan::{TacanFlight, TacanFlightParams, default_station, simulate_flight};
 
 /// The paper's figures (seed 003 §4, Fig. 6).
@@ -54,31 +53,6 @@ pub mod paper {
     pub const P_VAR20_MIN: f64 = 0.9797;
     /// Mean at 20 m² is above this.
     pub const P_VAR20_MEAN_ABOVE: f64 = 0.99;
-}
-
-/// Why the experiment could not run.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum Seed003Error {
-    /// A flight could not be simulated.
-    #[error("scenario: {0}")]
-    Sim(#[from] SimError),
-    /// Features could not be computed.
-    #[error("features: {0}")]
-    Features(#[from] FeatureError),
-    /// The model could not be trained.
-    #[error("training: {0}")]
-    Learn(#[from] LearnError),
-    /// The monitor could not be built.
-    #[error("monitor: {0}")]
-    Build(#[from] BuildError),
-    /// The monitor failed on an epoch.
-    #[error("monitor failed at t = {t} s: {source}")]
-    Step {
-        /// Epoch time, s.
-        t: f64,
-        /// The failure.
-        source: StepError,
-    },
 }
 
 /// What to run.
@@ -282,7 +256,7 @@ pub struct TrainedLevel {
 }
 
 /// Trains the one-class model on the training flights' windows at one noise level.
-pub fn train_model(p: &Seed003Params, noise_var_m2: f64) -> Result<TrainedLevel, Seed003Error> {
+pub fn train_model(p: &Seed003Params, noise_var_m2: f64) -> Result<TrainedLevel, ExperimentError> {
     let mut all = Vec::new();
     for i in 0..p.train_flights {
         let f = simulate_flight(&TacanFlightParams {
@@ -328,7 +302,7 @@ fn run_flight(
     flight: &TacanFlight,
     spec: &MonitorSpec,
     models: &HashMap<String, Arc<AnyModel>>,
-) -> Result<FlightRun, Seed003Error> {
+) -> Result<FlightRun, ExperimentError> {
     let mut monitor = monitor::build(spec, models)?;
     let mut flags = Vec::with_capacity(flight.epochs.len());
     let mut decisions = Vec::with_capacity(flight.epochs.len());
@@ -337,7 +311,7 @@ fn run_flight(
         let started = Instant::now();
         let report = monitor
             .step(e)
-            .map_err(|source| Seed003Error::Step { t: e.t, source })?;
+            .map_err(|source| ExperimentError::Step { t: e.t, source })?;
         busy += started.elapsed().as_secs_f64();
         if let Some(o) = report.tests.first() {
             flags.push(o.decision.health != Health::Healthy);
@@ -371,7 +345,7 @@ fn spec(p: &Seed003Params, policy: PolicyConfig) -> MonitorSpec {
 }
 
 /// Runs the experiment.
-pub fn run(p: Seed003Params) -> Result<Seed003Result, Seed003Error> {
+pub fn run(p: Seed003Params) -> Result<Seed003Result, ExperimentError> {
     let k = p.features.window;
     let mut levels = Vec::new();
     for &var in &p.noise_vars_m2 {
