@@ -16,13 +16,14 @@ use std::hint::black_box;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use nalgebra::Vector3;
 use navguard::detect::{Decision, Health, PolicyConfig, ThresholdSpec};
+use navguard::epoch::Epoch;
+use navguard::epoch::{CnsBlock, GnssBlock, InsBlock};
 use navguard::filter::aiding;
 use navguard::filter::federated::{FederatedFilter, Observation, equal_betas, ins_transition};
 use navguard::filter::ins::{ImuErrors, NavSolution};
 use navguard::geo::{self, Lla};
-use navguard::monitor::epoch::{CnsBlock, GnssBlock, InsBlock};
+use navguard::monitor::Monitor;
 use navguard::monitor::federated::{FederatedConfig, FederatedMonitor};
-use navguard::monitor::{Epoch, Monitor};
 use serde_json::json;
 
 const DT: f64 = 0.1;

@@ -7,8 +7,9 @@ use std::hint::black_box;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use navguard::detect::{PolicyConfig, ThresholdSpec};
+use navguard::epoch::Epoch;
+use navguard::monitor::Monitor;
 use navguard::monitor::linear::{LinearConfig, LinearMonitor};
-use navguard::monitor::{Epoch, Monitor};
 use serde_json::json;
 
 fn bench(c: &mut Criterion) {

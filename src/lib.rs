@@ -6,8 +6,12 @@
 //! # Layout
 //!
 //! Data flows one way; the folders follow it. Everything above `service` is a
-//! pure numerical core: no async, no I/O, usable as a library.
+//! pure numerical core: no async, no I/O, usable as a library. A module may use
+//! the ones listed before it, never one after it (`tests/layering.rs` checks this
+//! for production code; tests may cross layers).
 //!
+//! - [`epoch`]: the domain epoch (sensor blocks in SI units and radians) and the
+//!   federated aids: a leaf that every layer may use.
 //! - [`geo`]: WGS84 geodesy (frames, radii, Earth and transport rates).
 //! - [`filter`]: the generic Kalman filter (fixed- and dynamic-size), and the
 //!   INS error model and federated fusion built on it.
@@ -22,6 +26,7 @@
 //!   session, the SQLite store, auth and limits.
 
 pub mod detect;
+pub mod epoch;
 pub mod features;
 pub mod filter;
 pub mod geo;

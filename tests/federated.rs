@@ -17,6 +17,7 @@ use std::sync::OnceLock;
 
 use nalgebra::{SMatrix, SVector};
 use navguard::detect::{Health, PolicyConfig, ThresholdSpec};
+use navguard::epoch::Aid;
 use navguard::filter::ins::{POS, VEL};
 use navguard::geo::{self, Lla};
 use navguard::monitor::federated::{FederatedConfig, FederatedMonitor};
@@ -25,7 +26,7 @@ use navguard::service::Limits;
 use navguard::service::wire::{epoch_to_wire, parse_frame};
 use navguard::sim::experiment::{run_monitor, seed004};
 use navguard::sim::scenario::{ScenarioParams, ship_params};
-use navguard::sim::{self, Aid, Channel, Fault, FaultKind, Scenario};
+use navguard::sim::{self, Channel, Fault, FaultKind, Scenario};
 use serde_json::{Value, json};
 use statrs::distribution::{Binomial, ChiSquared, ContinuousCDF, DiscreteCDF};
 
@@ -399,7 +400,7 @@ fn a_fault_free_3000_s_run_is_consistent_in_nees_and_nis() {
 
 /// Alarms as the server raises them: transitions of a test into suspect or isolated.
 fn in_process_alarms(
-    epochs: &[navguard::monitor::Epoch],
+    epochs: &[navguard::epoch::Epoch],
     spec: &MonitorSpec,
 ) -> Vec<(String, String, f64)> {
     let mut m = navguard::monitor::build(spec, &navguard::monitor::NoModels).unwrap();

@@ -9,10 +9,11 @@ use std::sync::Arc;
 use nalgebra::DMatrix;
 use navguard::detect::parity::SKEW;
 use navguard::detect::{PolicyConfig, ThresholdSpec};
+use navguard::epoch::Epoch;
 use navguard::learn::{self, AnyModel, Dataset, ModelKind, ModelParams, NoProgress};
-use navguard::monitor::{self, BuildError, Epoch, MonitorKind, MonitorSpec, Outputs};
+use navguard::monitor::{self, BuildError, MonitorKind, MonitorSpec, Outputs};
 use navguard::sim::experiment::seed002::{self, Seed002Params};
-use navguard::sim::rimu::{self as rsim, GyroFaultKind, RimuSimParams};
+use navguard::sim::rimu::{GyroFaultKind, RimuSimParams};
 use serde_json::{Value, json};
 
 /// A reduced version of the paper's training set (400 + 288 windows).
@@ -59,7 +60,10 @@ fn steady_flight_isolates_each_gyros_bias_fault() {
             // (RMS 2.65σ or 1.73σ), not the fault's 5–6σ.
             let tail = &out.omega_sq[out.omega_sq.len() - 100..];
             let rms = (tail.iter().sum::<f64>() / tail.len() as f64).sqrt();
-            assert!(rms < 3.5 * rsim::default_sigma(), "gyro {gyro}: {rms}");
+            assert!(
+                rms < 3.5 * navguard::monitor::rimu::default_sigma(),
+                "gyro {gyro}: {rms}"
+            );
         }
     }
 }
@@ -111,7 +115,8 @@ fn five_and_six_gyro_sets_detect_and_isolate_through_monitor_build() {
     for (rows, bad) in [(five_gyros(), 3), (six_gyros(), 4)] {
         let m = rows.len();
         let h = DMatrix::from_fn(m, 3, |i, j| rows[i][j]);
-        let config = json!({"h": rows, "sigma": rsim::default_sigma(), "model": "svc"});
+        let config =
+            json!({"h": rows, "sigma": navguard::monitor::rimu::default_sigma(), "model": "svc"});
         let spec = spec(config);
         let built = monitor::build(&spec, &models).unwrap();
         assert_eq!(built.tests().slots()[0].dof, 6 * (m as u32 - 3));

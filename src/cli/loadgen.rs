@@ -20,8 +20,9 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use futures_util::StreamExt;
+use navguard::epoch::Aid;
 use navguard::service::wire::epoch_to_wire;
-use navguard::sim::{self, Aid, Channel, Fault, FaultKind};
+use navguard::sim::{self, Channel, Fault, FaultKind};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, Normal};

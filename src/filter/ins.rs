@@ -19,8 +19,8 @@
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use serde::{Deserialize, Serialize};
 
+use crate::epoch::InsBlock;
 use crate::geo::{self, Lla};
-use crate::monitor::epoch::InsBlock;
 
 /// Number of error states.
 pub const N: usize = 15;

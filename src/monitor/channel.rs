@@ -46,10 +46,11 @@ use serde::Deserialize;
 use serde_json::Value;
 
 use super::{
-    BuildError, ConfigError, Epoch, EpochError, ModelSource, Monitor, MonitorKind, MonitorReport,
+    BuildError, ConfigError, EpochError, ModelSource, Monitor, MonitorKind, MonitorReport,
     MonitorSpec, Outputs, StepError, TestBank, TestOutcome, intern,
 };
 use crate::detect::{Health, TaError, TaParams, TaStatistic, ta};
+use crate::epoch::Epoch;
 use crate::filter::kalman::FilterError;
 use crate::learn::online::{OnlineLsSvm, OnlineParams};
 use crate::learn::outlier::OutlierFilter;

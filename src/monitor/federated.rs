@@ -42,11 +42,12 @@ use serde::Serialize;
 use serde_json::{Map, Value};
 
 use super::{
-    BuildError, ConfigError, Epoch, EpochError, Monitor, MonitorKind, MonitorReport, Outputs,
-    StepError, TestBank, TestOutcome,
+    BuildError, ConfigError, EpochError, Monitor, MonitorKind, MonitorReport, Outputs, StepError,
+    TestBank, TestOutcome,
 };
 use crate::detect::hpl::{self, DetectionNoncentrality, HplError};
 use crate::detect::{Health, PolicyConfig, PolicyState, ThresholdError, ThresholdSpec};
+use crate::epoch::{Aid, Epoch};
 use crate::filter::aiding;
 use crate::filter::federated::{
     self, ErrorEstimate, FederatedFilter, LocalTest, MAX_AIDS, Observation,
@@ -64,38 +65,6 @@ pub const MAX_GAP_S: f64 = 3600.0;
 /// navigation (seed 004 states none). With seed 004's aids (GNSS 10 m at 1 Hz, DVL 0.1 m/s)
 /// the fault-free HPL is a few metres; it reaches 25 m after a long loss of GNSS.
 pub const DEFAULT_HAL_M: f64 = 25.0;
-
-/// An aid of the federated filter (also the simulator's aid sensors).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Aid {
-    /// GNSS position (and velocity when reported).
-    Gnss,
-    /// Doppler velocity log, body-frame velocity.
-    Dvl,
-    /// Celestial fix, latitude and longitude.
-    Cns,
-}
-
-impl Aid {
-    /// The wire name, also the test name.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Aid::Gnss => "gnss",
-            Aid::Dvl => "dvl",
-            Aid::Cns => "cns",
-        }
-    }
-
-    fn parse(s: &str) -> Option<Self> {
-        match s {
-            "gnss" => Some(Aid::Gnss),
-            "dvl" => Some(Aid::Dvl),
-            "cns" => Some(Aid::Cns),
-            _ => None,
-        }
-    }
-}
 
 /// A validated `federated` config; every field but `aids` defaults to seed 004's values.
 #[derive(Debug, Clone, PartialEq)]
@@ -628,8 +597,8 @@ impl Monitor for FederatedMonitor {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::epoch::{CnsBlock, GnssBlock, InsBlock};
     use crate::filter::federated::ins_transition;
-    use crate::monitor::epoch::{CnsBlock, GnssBlock, InsBlock};
     use nalgebra::{Rotation3, SVector};
     use rand::rngs::StdRng;
     use rand::{Rng, SeedableRng};

@@ -7,10 +7,10 @@ use nalgebra::{DMatrix, DVector};
 use serde::Deserialize;
 
 use super::{
-    ConfigError, Epoch, EpochError, Monitor, MonitorKind, MonitorReport, Outputs, StepError,
-    TestBank,
+    ConfigError, EpochError, Monitor, MonitorKind, MonitorReport, Outputs, StepError, TestBank,
 };
 use crate::detect::{PolicyConfig, ThresholdError, ThresholdSpec};
+use crate::epoch::Epoch;
 use crate::filter::kalman::{self, LinearObservation, LinearTransition, StateEstimate};
 
 /// The wire form of the model: row-major nested arrays.

@@ -3,7 +3,6 @@
 //! Pure and synchronous; the session actor in `service/session` drives them.
 
 pub mod channel;
-pub mod epoch;
 pub mod federated;
 pub mod linear;
 pub mod rimu;
@@ -15,10 +14,10 @@ use std::sync::{Arc, Mutex, OnceLock};
 
 use serde::Serialize;
 
-pub use epoch::Epoch;
 pub use tests_bank::{TestBank, TestOutcome};
 
 use crate::detect::{PolicyConfig, PolicyError, ThresholdError, ThresholdSpec};
+use crate::epoch::Epoch;
 use crate::filter::kalman::FilterError;
 use crate::learn::AnyModel;
 

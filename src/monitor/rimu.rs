@@ -19,13 +19,32 @@ use nalgebra::DMatrix;
 use serde::Deserialize;
 
 use super::{
-    BuildError, ConfigError, Epoch, EpochError, ModelSource, Monitor, MonitorKind, MonitorReport,
+    BuildError, ConfigError, EpochError, ModelSource, Monitor, MonitorKind, MonitorReport,
     MonitorSpec, Outputs, StepError, TestBank,
 };
 use crate::detect::parity::{self, FssWindow, ParitySpace};
 use crate::detect::{Health, PolicyConfig, ThresholdError, ThresholdSpec};
+use crate::epoch::Epoch;
 use crate::features::wavelet::{self, WaveletPacketParams};
 use crate::learn::ModelKind;
+
+/// Gyro sample rate, Hz, that the default σ assumes (seed 002: sample period 0.01 s).
+pub const RATE_HZ: f64 = 100.0;
+
+/// Gyro angle random walk, °/√h (seed 002 §3).
+pub const ARW_DEG_PER_SQRT_H: f64 = 0.5;
+
+/// The per-sample standard deviation (rad/s) of white rate noise with angle random
+/// walk `arw_deg_per_sqrt_h` sampled every `dt_s`: `σ = ARW/√dt`.
+pub fn sigma_per_sample(arw_deg_per_sqrt_h: f64, dt_s: f64) -> f64 {
+    let arw_rad_per_sqrt_s = arw_deg_per_sqrt_h.to_radians() / 60.0;
+    arw_rad_per_sqrt_s / dt_s.sqrt()
+}
+
+/// The default gyro noise: 0.5 °/√h at 100 Hz, ≈ 1.4544e-3 rad/s.
+pub fn default_sigma() -> f64 {
+    sigma_per_sample(ARW_DEG_PER_SQRT_H, 1.0 / RATE_HZ)
+}
 
 /// A gyro classifier: wavelet-packet features → decision value (> `T_I` = fault).
 pub type GyroClassifier = Arc<dyn Fn(&[f64]) -> f64 + Send + Sync>;
@@ -132,7 +151,7 @@ impl RimuConfig {
         let m = parity.gyros();
         let positive = |s: f64| s.is_finite() && s > 0.0;
         let sigma = match wire.sigma {
-            None => vec![crate::sim::rimu::default_sigma(); m],
+            None => vec![default_sigma(); m],
             Some(SigmaWire::Scalar(s)) if positive(s) => vec![s; m],
             Some(SigmaWire::Scalar(_)) => {
                 return Err(ConfigError::new("sigma", "must be finite and > 0"));
@@ -523,7 +542,7 @@ mod tests {
             // With the faulty gyro out, ω's error is noise only: a few σ at most
             // (a 6σ bias left in would put ≥ 1.5σ on the affected axes).
             let w = omega.unwrap();
-            let s = crate::sim::rimu::default_sigma();
+            let s = default_sigma();
             let truth = crate::sim::rimu::Flight::Steady.omega(27.99);
             for k in 0..3 {
                 assert!((w[k] - truth[k]).abs() < 4.0 * s, "gyro {gyro}: {w:?}");

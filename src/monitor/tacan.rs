@@ -57,10 +57,11 @@ use nalgebra::Vector3;
 use serde_json::{Map, Value};
 
 use super::{
-    BuildError, ConfigError, Epoch, EpochError, ModelSource, Monitor, MonitorKind, MonitorReport,
+    BuildError, ConfigError, EpochError, ModelSource, Monitor, MonitorKind, MonitorReport,
     MonitorSpec, Outputs, StepError, TestBank,
 };
 use crate::detect::{PolicyConfig, ThresholdSpec};
+use crate::epoch::Epoch;
 use crate::features::tacan::{TacanFeatureParams, window_features};
 use crate::filter::kalman::FilterError;
 use crate::geo::{self, Lla};

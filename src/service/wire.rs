@@ -7,8 +7,9 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 
 use crate::detect::{Health, PolicyConfig, Statistic};
-use crate::monitor::epoch::{AdsBlock, CnsBlock, GnssBlock, InsBlock};
-use crate::monitor::{Epoch, MonitorKind, MonitorReport};
+use crate::epoch::Epoch;
+use crate::epoch::{AdsBlock, CnsBlock, GnssBlock, InsBlock};
+use crate::monitor::{MonitorKind, MonitorReport};
 
 /// `POST /api/v1/sessions` body.
 #[derive(Debug, Clone, Deserialize)]

@@ -21,12 +21,13 @@
 
 use rand_distr::{Distribution, Normal};
 
-use super::faults::{Aid, Channel, Fault, FaultInjector, FaultKind};
+use super::faults::{Channel, Fault, FaultInjector, FaultKind};
 use super::rng::{self, Stream};
 use super::{SimError, check_non_negative, check_positive};
+use crate::epoch::Aid;
+use crate::epoch::Epoch;
+use crate::epoch::{AdsBlock, GnssBlock};
 use crate::geo;
-use crate::monitor::Epoch;
-use crate::monitor::epoch::{AdsBlock, GnssBlock};
 
 /// The channel's name in the epochs.
 pub const CHANNEL: &str = "dh";

@@ -26,7 +26,7 @@ use super::SimError;
 use crate::geo;
 
 /// The aiding sensors: the federated monitor's aids.
-pub use crate::monitor::federated::Aid;
+use crate::epoch::Aid;
 
 /// A channel of an aid.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]

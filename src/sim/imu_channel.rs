@@ -21,7 +21,7 @@ use rand_distr::{Distribution, Normal};
 use super::SimError;
 use super::faults::FaultKind;
 use super::rng::{self, Stream};
-use crate::monitor::Epoch;
+use crate::epoch::Epoch;
 
 /// Samples in the paper's run.
 pub const SAMPLES: usize = 135;

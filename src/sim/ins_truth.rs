@@ -40,11 +40,11 @@ use serde::{Deserialize, Serialize};
 use super::rng::{Stream, stream};
 use super::truth::Truth;
 use super::{SimError, check_non_negative};
+use crate::epoch::InsBlock;
 use crate::filter::ins::{
     ACC, ATT, ErrorVector, GYRO, ImuErrors, NavSolution, POS, VEL, error_dynamics, noise_input,
 };
 use crate::geo;
-use crate::monitor::epoch::InsBlock;
 
 /// Arc-seconds → radians.
 const ARCSEC: f64 = std::f64::consts::PI / 180.0 / 3600.0;

@@ -6,7 +6,7 @@
 //! [`track`]), corrupts it
 //! with the INS error model of `filter::ins` ([`ins_truth`]) and with noisy aid
 //! sensors ([`sensors`]), injects faults ([`faults`]) and hands the resulting
-//! domain [`crate::monitor::Epoch`]s, each with its truth, to the monitors, the
+//! domain [`crate::epoch::Epoch`]s, each with its truth, to the monitors, the
 //! CLI (`navguard simulate`, which writes them as ingest frames) and the
 //! experiments ([`experiment`]).
 //!
@@ -29,7 +29,7 @@ pub mod track;
 pub mod trajectory;
 pub mod truth;
 
-pub use faults::{Aid, Channel, Fault, FaultInjector, FaultKind};
+pub use faults::{Channel, Fault, FaultInjector, FaultKind};
 pub use ins_truth::{InsErrorConfig, InsErrorSim};
 pub use scenario::{
     SHIP_DURATION_S, SHIP_INS_RATE_HZ, SHIP_START_LAT_DEG, SHIP_START_LON_DEG, Scenario,

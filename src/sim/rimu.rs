@@ -18,29 +18,12 @@ use serde::Serialize;
 use super::SimError;
 use super::rng::{self, Stream};
 use crate::detect::parity;
-
-/// Sample rate, Hz (seed 002: sample period 0.01 s).
-pub const RATE_HZ: f64 = 100.0;
-
-/// Gyro angle random walk, °/√h (seed 002 §3).
-pub const ARW_DEG_PER_SQRT_H: f64 = 0.5;
+use crate::monitor::rimu::{RATE_HZ, default_sigma};
 
 /// Earth rate at seed 002's start latitude 50.25° N, rad/s, as (north, up): the rate a
 /// level, north-heading vehicle in steady flight senses (x forward = north, z up).
 const EARTH_RATE: f64 = 7.292_115e-5;
 const START_LAT_DEG: f64 = 50.25;
-
-/// The per-sample standard deviation (rad/s) of white rate noise with angle random
-/// walk `arw_deg_per_sqrt_h` sampled every `dt_s`: `σ = ARW/√dt`.
-pub fn sigma_per_sample(arw_deg_per_sqrt_h: f64, dt_s: f64) -> f64 {
-    let arw_rad_per_sqrt_s = arw_deg_per_sqrt_h.to_radians() / 60.0;
-    arw_rad_per_sqrt_s / dt_s.sqrt()
-}
-
-/// The default gyro noise: 0.5 °/√h at 100 Hz, ≈ 1.4544e-3 rad/s.
-pub fn default_sigma() -> f64 {
-    sigma_per_sample(ARW_DEG_PER_SQRT_H, 1.0 / RATE_HZ)
-}
 
 /// A gyro fault, in multiples of the gyro's σ (seed 002 Table 2).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]

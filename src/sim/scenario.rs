@@ -11,15 +11,16 @@
 
 use serde_json::json;
 
-use super::faults::{Aid, Channel, Fault, FaultInjector, FaultKind, arcmin_to_metres};
+use super::faults::{Channel, Fault, FaultInjector, FaultKind, arcmin_to_metres};
 use super::ins_truth::{InsErrorConfig, InsErrorSim};
 use super::sensors::{AidSensors, SensorConfig};
 use super::track::Track;
 use super::trajectory::{Trajectory, TrajectoryBuilder};
 use super::truth::Truth;
 use super::{SimError, check_non_negative};
+use crate::epoch::Aid;
+use crate::epoch::Epoch;
 use crate::geo::Lla;
-use crate::monitor::Epoch;
 
 /// The ship's start latitude, degrees (DESIGN §3.9; the seed gives none — a
 /// mid-latitude sea area, 30°N 114°E).

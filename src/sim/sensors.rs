@@ -22,12 +22,13 @@ use rand::rngs::StdRng;
 use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
 
-use super::faults::{Aid, Channel, FaultInjector};
+use super::faults::{Channel, FaultInjector};
 use super::rng::{Stream, stream};
 use super::truth::Truth;
 use super::{SimError, check_non_negative, check_positive};
+use crate::epoch::Aid;
+use crate::epoch::{CnsBlock, Epoch, GnssBlock};
 use crate::geo::{self, Lla};
-use crate::monitor::epoch::{CnsBlock, Epoch, GnssBlock};
 
 /// GNSS receiver.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

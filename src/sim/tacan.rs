@@ -34,9 +34,9 @@ use rand::{Rng, SeedableRng};
 use rand_distr::StandardNormal;
 
 use super::{SimError, check_non_negative, check_positive};
+use crate::epoch::Epoch;
+use crate::epoch::InsBlock;
 use crate::geo::{self, Lla};
-use crate::monitor::Epoch;
-use crate::monitor::epoch::InsBlock;
 use crate::monitor::tacan::slant_range_m;
 
 /// Default station: latitude 34.25°, longitude 108.95°, 400 m (an arbitrary inland site).

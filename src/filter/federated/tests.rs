@@ -4,12 +4,12 @@
 use super::solver::{bias_columns_zero, inverse_cholesky_factor, kalman_update};
 use super::*;
 use crate::detect::{Health, PolicyConfig, PolicyState};
+use crate::epoch::InsBlock;
 use crate::filter::aiding;
 use crate::filter::ins::{ACC, ATT, GYRO, VEL};
 use crate::filter::ins::{ErrorMatrix, ErrorVector, N, POS};
 use crate::filter::kalman::{self, LinearObservation};
 use crate::geo::Lla;
-use crate::monitor::epoch::InsBlock;
 use nalgebra::SMatrix;
 use nalgebra::{DMatrix, DVector, Dyn};
 use rand::rngs::StdRng;

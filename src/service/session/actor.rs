@@ -15,7 +15,8 @@ use super::handle::{ControlCommand, FrameCommand, IngestLink, SessionHandle, Ses
 use super::spec::{NamedMonitors, build_monitors};
 use super::stats::{MonitorStats, Position, SessionStats, TestStats, Track};
 use crate::detect::{Health, ThresholdSpec};
-use crate::monitor::{Epoch, Monitor, MonitorReport, Outputs, TestOutcome};
+use crate::epoch::Epoch;
+use crate::monitor::{Monitor, MonitorReport, Outputs, TestOutcome};
 use crate::service::error::ApiError;
 use crate::service::metrics::Metrics;
 use crate::service::now_ms;

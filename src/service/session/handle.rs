@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 use tokio::sync::{mpsc, oneshot, watch};
 
 use super::stats::SessionStats;
-use crate::monitor::Epoch;
+use crate::epoch::Epoch;
 use crate::service::error::ApiError;
 use crate::service::store::StoredSession;
 use crate::service::wire::{ThresholdUpdate, ThresholdView};

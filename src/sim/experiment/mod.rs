@@ -32,8 +32,9 @@ use std::time::Instant;
 
 use serde_json::Value;
 
-use super::{Aid, Fault, Scenario, SimError};
+use super::{Fault, Scenario, SimError};
 use crate::detect::Health;
+use crate::epoch::Aid;
 use crate::features::FeatureError;
 use crate::geo::{self, Lla};
 use crate::learn::LearnError;

@@ -21,7 +21,8 @@ use std::fmt::Write as _;
 
 use super::{ExperimentError, run_monitor};
 use crate::detect::{Health, PolicyConfig};
-use crate::sim::{self, Aid, Channel, Fault, FaultKind, Scenario, SimError};
+use crate::epoch::Aid;
+use crate::sim::{self, Channel, Fault, FaultKind, Scenario, SimError};
 
 /// The drift rates, m/s.
 pub const RATES_MPS: [f64; 4] = [0.5, 1.0, 2.0, 5.0];

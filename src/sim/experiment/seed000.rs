@@ -32,9 +32,10 @@ use super::ExperimentError;
 use super::plot::{Chart, Series};
 use super::scorecard::{self, FaultWindow, Scorecard};
 use crate::detect::{Health, PolicyConfig, ThresholdSpec, chi2};
+use crate::epoch::Epoch;
 use crate::learn::{AnyModel, Dataset, LearnError, ModelKind, ModelParams, NoProgress, train};
 use crate::monitor::channel::embed_series;
-use crate::monitor::{self, Epoch, MonitorKind, MonitorSpec, Outputs};
+use crate::monitor::{self, MonitorKind, MonitorSpec, Outputs};
 use crate::sim::ads_gnss::{self, AdsGnssParams, FAULT_END_S, FAULT_START_S};
 use crate::sim::faults::FaultKind;
 

@@ -20,9 +20,10 @@ use super::ExperimentError;
 use super::plot::{Chart, Series};
 use super::scorecard::{self, FaultWindow, Scorecard};
 use crate::detect::{Health, PolicyConfig, ThresholdSpec};
+use crate::epoch::Epoch;
 use crate::features::wavelet::{self, WaveletPacketParams};
 use crate::learn::{self, AnyModel, Dataset, LearnError, ModelKind, ModelParams, NoProgress};
-use crate::monitor::{self, Epoch, MonitorKind, MonitorSpec, Outputs};
+use crate::monitor::{self, MonitorKind, MonitorSpec, Outputs};
 use crate::sim::rimu::{self as rsim, GyroFaultKind, RimuSimParams};
 
 /// Seed 002's detection threshold T_D for the FSS test (l' = 6).
@@ -96,7 +97,7 @@ pub fn train_classifier(
 ) -> Result<(Arc<AnyModel>, TrainingSummary), ExperimentError> {
     let (windows, labels) = rsim::training_windows(
         p.seed,
-        rsim::default_sigma(),
+        crate::monitor::rimu::default_sigma(),
         p.feature_window,
         p.n_normal,
         p.n_fault,
@@ -290,7 +291,7 @@ type MakeScenario = fn(u64, Option<(usize, GyroFaultKind)>) -> RimuSimParams;
 pub fn run(params: Seed002Params) -> Result<Seed002Result, ExperimentError> {
     let (model, training) = train_classifier(&params)?;
     let models: HashMap<String, Arc<AnyModel>> = [(MODEL_ID.to_owned(), model)].into();
-    let sigma = rsim::default_sigma();
+    let sigma = crate::monitor::rimu::default_sigma();
     let scenarios: [(&'static str, MakeScenario); 2] = [
         ("steady", RimuSimParams::steady),
         ("manoeuvring", RimuSimParams::manoeuvring),
@@ -467,7 +468,7 @@ pub fn render(r: &Seed002Result) -> String {
         s,
         "Seed 002: 4-gyro RIMU (3 orthogonal + 1 skewed), 100 Hz, ARW 0.5°/√h (σ = {:.4e} rad/s), \
          FSS l' = 6, T_D = {T_D}, l = {}, {:?} level {}, T_I = {}, {} runs per case",
-        rsim::default_sigma(),
+        crate::monitor::rimu::default_sigma(),
         r.params.feature_window,
         r.params.wavelet.wavelet,
         r.params.wavelet.level,

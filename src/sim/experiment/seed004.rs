@@ -12,8 +12,9 @@ use super::plot::{Chart, Series};
 use super::scorecard::{self, FaultWindow, Scorecard};
 use super::{ErrorStats, ExperimentError, MonitorRun, fault_windows, run_monitor};
 use crate::detect::{PolicyConfig, ThresholdSpec};
+use crate::epoch::Aid;
 use crate::monitor::{MonitorKind, MonitorSpec};
-use crate::sim::{self, Aid, Scenario};
+use crate::sim::{self, Scenario};
 
 /// Seed 004's two thresholds.
 pub const THRESHOLDS: [f64; 2] = [13.0, 20.0];

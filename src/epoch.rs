@@ -1,5 +1,7 @@
 //! The domain epoch: one instant of sensor data, already validated at the edge
-//! (finite numbers, SI units, radians). Monitors read the blocks they need.
+//! (finite numbers, SI units, radians), and the aids a federated filter fuses.
+//! A leaf of the crate: every layer may use it, it uses none of them. Monitors
+//! read the blocks they need; the simulator produces epochs; the wire parses them.
 
 /// INS solution (navigation frame ENU). Angles in radians.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -74,4 +76,37 @@ pub struct Epoch {
     pub z: Option<Vec<f64>>,
     /// Control input for the `linear` monitor (with its `b` matrix).
     pub u: Option<Vec<f64>>,
+}
+
+/// An aid of the federated filter (also the simulator's aid sensors).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Aid {
+    /// GNSS position (and velocity when reported).
+    Gnss,
+    /// Doppler velocity log, body-frame velocity.
+    Dvl,
+    /// Celestial fix, latitude and longitude.
+    Cns,
+}
+
+impl Aid {
+    /// The wire name, also the test name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Aid::Gnss => "gnss",
+            Aid::Dvl => "dvl",
+            Aid::Cns => "cns",
+        }
+    }
+
+    /// The aid named `s` on the wire, if any.
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "gnss" => Some(Aid::Gnss),
+            "dvl" => Some(Aid::Dvl),
+            "cns" => Some(Aid::Cns),
+            _ => None,
+        }
+    }
 }
