@@ -70,7 +70,7 @@ fn monitor(scenario: &Scenario, policy: PolicyConfig, spec: ThresholdSpec) -> Fe
 #[test]
 fn counters_suspect_a_gnss_jump_at_once_isolate_it_within_n2_plus_2_and_readmit_it_after() {
     let scenario = ship_1hz(1, position_jump(), 1400.0);
-    let spec = seed004::spec(&scenario, COUNTERS, 20.0);
+    let spec = seed004::spec(&scenario, COUNTERS, 20.0).unwrap();
     let run = run_monitor(&scenario, &spec).unwrap();
     let gnss = &run.tests["gnss"];
     let onset = gnss.iter().position(|s| s.t >= 1080.0).unwrap();
@@ -136,7 +136,11 @@ fn no_aid_is_isolated_without_faults_at_p_fa_1e_5() {
     let scenario = fault_free();
     let spec = |policy| MonitorSpec {
         kind: navguard::monitor::MonitorKind::Federated,
-        config: scenario.default_monitor_config(),
+        config: navguard::monitor::MonitorConfig::parse(
+            navguard::monitor::MonitorKind::Federated,
+            &scenario.default_monitor_config(),
+        )
+        .unwrap(),
         policy,
         threshold: ThresholdSpec::PFa(1e-5),
     };
@@ -315,18 +319,18 @@ fn a_fault_free_3000_s_run_is_consistent_in_nees_and_nis() {
     let config = m.config().clone();
     let betas = m.filter().betas().to_vec();
     // Per aid: Σλ, Σ E λ, Σ Var λ, count.
-    let mut nis: std::collections::BTreeMap<&str, [f64; 4]> = Default::default();
+    let mut nis: std::collections::BTreeMap<std::sync::Arc<str>, [f64; 4]> = Default::default();
     let (mut nees_fused, mut nees_local, mut samples) = (0.0, vec![0.0; betas.len()], 0usize);
     for e in &scenario.epochs {
         // The prior P_g⁻ ≈ the last posterior (one second of INS noise is negligible).
         let prior = m.filter().master().p;
         let report = m.step(&e.epoch).unwrap();
         for o in &report.tests {
-            let Some(i) = config.aids.iter().position(|a| a.as_str() == o.name) else {
+            let Some(i) = config.aids.iter().position(|a| a.as_str() == &*o.name) else {
                 continue; // the hpl test
             };
-            let (mean, var) = local_nis_moments(o.name, &prior, &config, betas[i]);
-            let acc = nis.entry(o.name).or_default();
+            let (mean, var) = local_nis_moments(&o.name, &prior, &config, betas[i]);
+            let acc = nis.entry(o.name.clone()).or_default();
             acc[0] += o.statistic.value;
             acc[1] += mean;
             acc[2] += var;
@@ -409,7 +413,7 @@ fn in_process_alarms(
         for o in m.step(e).unwrap().tests {
             if o.previous != o.decision.health && o.decision.health != Health::Healthy {
                 alarms.push((
-                    o.name.to_owned(),
+                    o.name.to_string(),
                     o.decision.health.as_str().to_owned(),
                     e.t,
                 ));
@@ -439,7 +443,7 @@ async fn replay_through_the_real_server_raises_the_in_process_alarms() {
         .collect();
     let file = dir.path().join("ship.jsonl");
     std::fs::write(&file, lines.join("\n") + "\n").unwrap();
-    let spec = seed004::spec(&scenario, COUNTERS, 20.0);
+    let spec = seed004::spec(&scenario, COUNTERS, 20.0).unwrap();
     let body = json!({"monitors": [{
         "name": "federated", "type": "federated", "config": spec.config,
         "policy": {"kind": "counters", "n1": 10, "n2": 5}, "threshold": 20.0

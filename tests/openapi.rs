@@ -1184,8 +1184,8 @@ fn learned_monitor_outputs_match_the_result_schema() {
     let c = Checker { doc: &doc };
     let outputs = [
         Outputs::Channel {
-            prediction: [("h".to_owned(), vec![1.0])].into(),
-            residual: [("h".to_owned(), vec![0.5])].into(),
+            prediction: [("h".into(), vec![1.0])].into(),
+            residual: [("h".into(), vec![0.5])].into(),
         },
         Outputs::Rimu {
             parity: Some(vec![0.1]),

@@ -31,7 +31,7 @@ fn small_classifier() -> HashMap<String, Arc<AnyModel>> {
 fn spec(config: Value) -> MonitorSpec {
     MonitorSpec {
         kind: MonitorKind::Rimu,
-        config,
+        config: navguard::monitor::MonitorConfig::parse(MonitorKind::Rimu, &config).unwrap(),
         policy: PolicyConfig::Classic,
         threshold: ThresholdSpec::Threshold(seed002::T_D),
     }
@@ -166,6 +166,7 @@ fn a_model_of_the_wrong_kind_or_dimension_is_refused_naming_model() {
     for config in [json!({"model": "four"}), json!({"model": "missing"})] {
         match monitor::build(&spec(config), &models) {
             Err(BuildError::Config(e)) => assert_eq!(e.field, "model"),
+            Err(BuildError::ModelNotFound { field, .. }) => assert_eq!(field, "model"),
             Err(other) => panic!("{other}"),
             Ok(_) => panic!("built"),
         }

@@ -741,6 +741,96 @@ async fn threshold_and_policy_changes_apply_live_and_persist() {
     server.shutdown().await;
 }
 
+/// Every monitor's 422 names the exact path of the bad field inside its `config`: a value
+/// of the wrong type, an unknown key and an out-of-range value each.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_monitor_names_the_field_path_of_a_bad_config() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = start(&dir.path().join("s.db"), None, Limits::default()).await;
+    let base = http(&server);
+    let c = client();
+    let linear = MODEL.config();
+    let with = |mut base: Value, pointer: &str, v: Value| {
+        *base.pointer_mut(pointer).unwrap() = v;
+        base
+    };
+    let add = |mut base: Value, key: &str, v: Value| {
+        base[key] = v;
+        base
+    };
+    let channel = json!({"channels": [{"name": "s", "predictor":
+        {"online": {"window": 50, "gamma": 30.0, "sigma2": 9.0, "refresh": 1000}}}]});
+    let station = json!({"lat": 34.25, "lon": 108.95, "h": 400.0});
+    let tacan = json!({"station": station, "model": "m-0"});
+    let cases = [
+        (
+            "linear",
+            with(linear.clone(), "/q/1/0", json!("x")),
+            "q[1][0]",
+        ),
+        ("linear", add(linear.clone(), "extra", json!(1)), "extra"),
+        ("linear", with(linear.clone(), "/r/0/0", json!(-1.0)), "r"),
+        (
+            "federated",
+            json!({"aids": ["gnss"], "gnss": {"pos_sigma_m": "x"}}),
+            "gnss.pos_sigma_m",
+        ),
+        (
+            "federated",
+            json!({"aids": ["gnss"], "gnss": {"pos_sigma": 1}}),
+            "gnss.pos_sigma",
+        ),
+        ("federated", json!({"aids": ["gnss"], "p_md": 1}), "p_md"),
+        (
+            "channel",
+            with(channel.clone(), "/channels/0/dim", json!("two")),
+            "channels[0].dim",
+        ),
+        (
+            "channel",
+            with(
+                channel.clone(),
+                "/channels/0/predictor/online/window",
+                json!(true),
+            ),
+            "channels[0].predictor.online.window",
+        ),
+        ("channel", add(channel.clone(), "extra", json!(1)), "extra"),
+        (
+            "channel",
+            with(channel.clone(), "/channels/0/embedding", json!(0)),
+            "channels[0].embedding",
+        ),
+        ("rimu", json!({"h": [[1, 0, "x"]]}), "h[0][2]"),
+        ("rimu", json!({"windw": 3}), "windw"),
+        ("rimu", json!({"fss_window": 0}), "fss_window"),
+        (
+            "tacan",
+            with(tacan.clone(), "/station/lon", json!("x")),
+            "station.lon",
+        ),
+        ("tacan", add(tacan.clone(), "windw", json!(10)), "windw"),
+        ("tacan", add(tacan.clone(), "window", json!(1)), "window"),
+    ];
+    for (kind, config, field) in cases {
+        let body = json!({"monitors": [{"name": "m", "type": kind, "config": config}]});
+        let resp = c
+            .post(format!("{base}/api/v1/sessions"))
+            .json(&body)
+            .send()
+            .await
+            .unwrap();
+        let status = resp.status().as_u16();
+        let err = resp.json::<Value>().await.unwrap();
+        assert_eq!(
+            (status, err["error"]["field"].as_str()),
+            (422, Some(format!("monitors[0].config.{field}").as_str())),
+            "{kind}: {config} -> {err}"
+        );
+    }
+    server.shutdown().await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn sessions_are_validated_listed_and_deleted() {
     let dir = tempfile::tempdir().unwrap();

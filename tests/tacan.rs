@@ -56,7 +56,7 @@ fn seed_003_reaches_99_percent_mean_detection_at_noise_variance_20() {
 fn spec(config: serde_json::Value) -> MonitorSpec {
     MonitorSpec {
         kind: MonitorKind::Tacan,
-        config,
+        config: navguard::monitor::MonitorConfig::parse(MonitorKind::Tacan, &config).unwrap(),
         policy: PolicyConfig::Classic,
         threshold: ThresholdSpec::default(),
     }
@@ -65,6 +65,7 @@ fn spec(config: serde_json::Value) -> MonitorSpec {
 fn config_field(e: BuildError) -> String {
     match e {
         BuildError::Config(c) => c.field,
+        BuildError::ModelNotFound { field, .. } => field,
         other => panic!("{other:?}"),
     }
 }

@@ -42,12 +42,11 @@
 use std::collections::{BTreeMap, HashSet, VecDeque};
 use std::sync::Arc;
 
-use serde::Deserialize;
-use serde_json::Value;
+use serde::{Deserialize, Serialize};
 
 use super::{
-    BuildError, ConfigError, EpochError, ModelSource, Monitor, MonitorKind, MonitorReport,
-    MonitorSpec, Outputs, StepError, TestBank, TestOutcome, intern,
+    BuildError, ConfigError, EpochError, ModelSource, Monitor, MonitorKind, MonitorReport, Outputs,
+    StepError, TestBank, TestName, TestOutcome,
 };
 use crate::detect::{Health, TaError, TaParams, TaStatistic, ta};
 use crate::epoch::Epoch;
@@ -65,34 +64,73 @@ pub const DEFAULT_OUTLIER_C: f64 = 3.0;
 /// Longest accepted channel name.
 const MAX_NAME: usize = 64;
 
-#[derive(Debug, Deserialize)]
+/// The `config` of a `channel` monitor as the user writes it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct ConfigWire {
-    channels: Vec<Value>,
+pub struct ChannelConfigWire {
+    /// The channels, each with its own test.
+    pub channels: Vec<ChannelWire>,
 }
 
-#[derive(Debug, Deserialize)]
+/// One channel as the user writes it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct ChannelWire {
-    name: String,
+pub struct ChannelWire {
+    /// The channel's (and its test's) name.
+    pub name: String,
+    /// Components of the value (default 1).
     #[serde(default = "one")]
-    dim: usize,
+    pub dim: usize,
+    /// Embedding length m (default [`DEFAULT_EMBEDDING`]).
     #[serde(default = "default_embedding")]
-    embedding: usize,
-    predictor: Value,
-    #[serde(default)]
-    outlier_filter: Option<OutlierWire>,
-    #[serde(default)]
-    n: Option<usize>,
-    #[serde(default)]
-    min_differences: Option<usize>,
+    pub embedding: usize,
+    /// Where predictions come from.
+    pub predictor: PredictorWire,
+    /// The third-difference outlier filter, when on.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub outlier_filter: Option<OutlierWire>,
+    /// T_a's window (default [`DEFAULT_N`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub n: Option<usize>,
+    /// T_a's warm-up.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub min_differences: Option<usize>,
 }
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct OutlierWire {
-    #[serde(default = "default_c")]
-    c: f64,
+/// `predictor`: `{"model": id | [ids]}` or `{"online": {...}}`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PredictorWire {
+    /// Stored model ids: one, or one per component.
+    Model(ModelIds),
+    /// An online sliding-window LS-SVM per component.
+    Online(OnlineParams),
+}
+
+/// One model id or an array of them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum ModelIds {
+    /// A single id (scalar channels).
+    One(String),
+    /// One id per component.
+    Many(Vec<String>),
+}
+
+/// The outlier filter's settings.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OutlierWire {
+    /// Factor c (default [`DEFAULT_OUTLIER_C`]).
+    pub c: f64,
+}
+
+impl Default for OutlierWire {
+    fn default() -> Self {
+        OutlierWire {
+            c: DEFAULT_OUTLIER_C,
+        }
+    }
 }
 
 fn one() -> usize {
@@ -100,9 +138,6 @@ fn one() -> usize {
 }
 fn default_embedding() -> usize {
     DEFAULT_EMBEDDING
-}
-fn default_c() -> f64 {
-    DEFAULT_OUTLIER_C
 }
 
 /// Where a channel's predictions come from.
@@ -118,7 +153,7 @@ pub enum PredictorConfig {
 #[derive(Debug, Clone)]
 pub struct ChannelConfig {
     /// The channel's (and its test's) name.
-    pub name: &'static str,
+    pub name: TestName,
     /// Components of the value.
     pub dim: usize,
     /// Embedding length m.
@@ -162,34 +197,17 @@ fn learn_field(prefix: &str, e: LearnError) -> ConfigError {
 
 fn parse_predictor(
     at: &str,
-    value: &Value,
+    value: &PredictorWire,
     dim: usize,
     embedding: usize,
     models: &dyn ModelSource,
-) -> Result<PredictorConfig, ConfigError> {
+) -> Result<PredictorConfig, BuildError> {
     let field = format!("{at}.predictor");
-    let obj = value.as_object().filter(|o| o.len() == 1).ok_or_else(|| {
-        ConfigError::new(&field, "must be {\"model\": id} or {\"online\": {...}}")
-    })?;
-    if let Some(ids) = obj.get("model") {
+    if let PredictorWire::Model(ids) = value {
         let field = format!("{field}.model");
         let ids: Vec<&str> = match ids {
-            Value::String(s) => vec![s.as_str()],
-            Value::Array(a) => a
-                .iter()
-                .enumerate()
-                .map(|(i, v)| {
-                    v.as_str().ok_or_else(|| {
-                        ConfigError::new(format!("{field}[{i}]"), "must be a string")
-                    })
-                })
-                .collect::<Result<_, _>>()?,
-            _ => {
-                return Err(ConfigError::new(
-                    field,
-                    "must be a model id or an array of ids",
-                ));
-            }
+            ModelIds::One(s) => vec![s.as_str()],
+            ModelIds::Many(a) => a.iter().map(String::as_str).collect(),
         };
         if ids.len() != dim {
             return Err(ConfigError::new(
@@ -198,7 +216,8 @@ fn parse_predictor(
                     "gives {} model ids, the channel has {dim} components (one model per component)",
                     ids.len()
                 ),
-            ));
+            )
+            .into());
         }
         let want = dim * embedding;
         let mut out = Vec::with_capacity(dim);
@@ -208,9 +227,10 @@ fn parse_predictor(
             } else {
                 format!("{field}[{i}]")
             };
-            let model = models
-                .model(id)
-                .ok_or_else(|| ConfigError::new(&f, format!("no ready model with id '{id}'")))?;
+            let model = models.model(id).ok_or_else(|| BuildError::ModelNotFound {
+                field: f.clone(),
+                id: (*id).to_owned(),
+            })?;
             if !matches!(model.kind(), ModelKind::LsSvm | ModelKind::LwLsSvm) {
                 return Err(ConfigError::new(
                     &f,
@@ -218,7 +238,8 @@ fn parse_predictor(
                         "model '{id}' is a {} model, a channel needs lssvm or lw-lssvm",
                         model.kind().as_str()
                     ),
-                ));
+                )
+                .into());
             }
             if model.input_dim() != want {
                 return Err(ConfigError::new(
@@ -227,53 +248,57 @@ fn parse_predictor(
                         "model '{id}' takes {} inputs, the channel's embedding has {want} (embedding × dim)",
                         model.input_dim()
                     ),
-                ));
+                )
+                .into());
             }
             out.push(model);
         }
         return Ok(PredictorConfig::Stored(out));
     }
-    if let Some(online) = obj.get("online") {
-        let field = format!("{field}.online");
-        let params: OnlineParams = serde_json::from_value(online.clone())
-            .map_err(|e| ConfigError::new(&field, e.to_string()))?;
-        params.check().map_err(|e| learn_field(&field, e))?;
-        return Ok(PredictorConfig::Online(params));
-    }
-    Err(ConfigError::new(
-        field,
-        "must be {\"model\": id} or {\"online\": {...}}",
-    ))
+    let PredictorWire::Online(params) = value else {
+        unreachable!("a predictor is a model or online")
+    };
+    let field = format!("{field}.online");
+    params.check().map_err(|e| learn_field(&field, e))?;
+    Ok(PredictorConfig::Online(params.clone()))
 }
 
 impl ChannelMonitorConfig {
-    /// Parses and validates the `config` JSON, resolving model ids in `models`.
-    pub fn from_json(value: &Value, models: &dyn ModelSource) -> Result<Self, ConfigError> {
-        let wire =
-            ConfigWire::deserialize(value).map_err(|e| ConfigError::new("", e.to_string()))?;
+    /// Parses and validates the `config` JSON, resolving model ids in `models`; errors
+    /// name the field path.
+    pub fn from_json(
+        value: &serde_json::Value,
+        models: &dyn ModelSource,
+    ) -> Result<Self, BuildError> {
+        Self::from_wire(&super::parse_config(value)?, models)
+    }
+
+    /// Validates a typed config, resolving model ids in `models` (the model lookup is why
+    /// this is not a `TryFrom`).
+    pub fn from_wire(
+        wire: &ChannelConfigWire,
+        models: &dyn ModelSource,
+    ) -> Result<Self, BuildError> {
         if wire.channels.is_empty() {
-            return Err(ConfigError::new(
-                "channels",
-                "must name at least one channel",
-            ));
+            return Err(ConfigError::new("channels", "must name at least one channel").into());
         }
         let mut seen = HashSet::new();
         let mut channels = Vec::with_capacity(wire.channels.len());
-        for (i, raw) in wire.channels.iter().enumerate() {
+        for (i, c) in wire.channels.iter().enumerate() {
             let at = format!("channels[{i}]");
-            let c =
-                ChannelWire::deserialize(raw).map_err(|e| ConfigError::new(&at, e.to_string()))?;
             if c.name.is_empty() || c.name.len() > MAX_NAME {
                 return Err(ConfigError::new(
                     format!("{at}.name"),
                     format!("must have 1 to {MAX_NAME} characters"),
-                ));
+                )
+                .into());
             }
             if !seen.insert(c.name.clone()) {
                 return Err(ConfigError::new(
                     format!("{at}.name"),
                     format!("'{}' is used twice", c.name),
-                ));
+                )
+                .into());
             }
             let dim = positive(format!("{at}.dim"), c.dim)?;
             let embedding = positive(format!("{at}.embedding"), c.embedding)?;
@@ -283,7 +308,8 @@ impl ChannelMonitorConfig {
                     return Err(ConfigError::new(
                         format!("{at}.outlier_filter.c"),
                         "must be finite and > 0",
-                    ));
+                    )
+                    .into());
                 }
                 Some(o) => Some(o.c),
                 None => None,
@@ -296,7 +322,7 @@ impl ChannelMonitorConfig {
                 ta.min_differences = positive(format!("{at}.min_differences"), m)?;
             }
             channels.push(ChannelConfig {
-                name: intern(&c.name),
+                name: TestName::from(c.name.as_str()),
                 dim,
                 embedding,
                 predictor,
@@ -389,10 +415,10 @@ impl ChannelMonitor {
         policy: crate::detect::PolicyConfig,
         spec: crate::detect::ThresholdSpec,
     ) -> Result<Self, BuildError> {
-        let tests: Vec<(&'static str, u32)> = config
+        let tests: Vec<(&str, u32)> = config
             .channels
             .iter()
-            .map(|c| (c.name, c.dim as u32))
+            .map(|c| (&*c.name, c.dim as u32))
             .collect();
         let bank = TestBank::new(&tests, spec, policy)?;
         let channels = config
@@ -437,11 +463,11 @@ impl Monitor for ChannelMonitor {
 
     fn check_epoch(&self, name: &str, epoch: &Epoch) -> Result<(), EpochError> {
         for (cname, value) in epoch.channels.iter().flatten() {
-            if let Some(c) = self.channels.iter().find(|c| c.config.name == cname) {
+            if let Some(c) = self.channels.iter().find(|c| *c.config.name == **cname) {
                 if value.len() != c.config.dim {
                     return Err(EpochError::WrongLength {
                         monitor: name.to_owned(),
-                        field: intern(&format!("channels.{cname}")),
+                        field: format!("channels.{cname}").into(),
                         got: value.len(),
                         want: c.config.dim,
                     });
@@ -461,7 +487,7 @@ impl Monitor for ChannelMonitor {
                 .channels
                 .iter()
                 .flatten()
-                .find(|(n, _)| n == ch.config.name)
+                .find(|(n, _)| **n == *ch.config.name)
                 .map(|(_, v)| v)
             else {
                 continue;
@@ -509,8 +535,8 @@ impl Monitor for ChannelMonitor {
                         )));
                     }
                 }
-                prediction.insert(ch.config.name.to_owned(), yhat.clone());
-                residuals.insert(ch.config.name.to_owned(), r.clone());
+                prediction.insert(ch.config.name.clone(), yhat.clone());
+                residuals.insert(ch.config.name.clone(), r.clone());
                 residual = ready.then_some((r, health == Health::Healthy));
             }
             let healthy = health == Health::Healthy;
@@ -593,13 +619,14 @@ impl Monitor for ChannelMonitor {
 }
 
 /// Builds a `channel` monitor from its spec, resolving stored models in `models`.
-pub fn build(spec: &MonitorSpec, models: &dyn ModelSource) -> Result<Box<dyn Monitor>, BuildError> {
-    let config = ChannelMonitorConfig::from_json(&spec.config, models)?;
-    Ok(Box::new(ChannelMonitor::new(
-        config,
-        spec.policy,
-        spec.threshold,
-    )?))
+pub fn build(
+    wire: &ChannelConfigWire,
+    policy: crate::detect::PolicyConfig,
+    threshold: crate::detect::ThresholdSpec,
+    models: &dyn ModelSource,
+) -> Result<Box<dyn Monitor>, BuildError> {
+    let config = ChannelMonitorConfig::from_wire(wire, models)?;
+    Ok(Box::new(ChannelMonitor::new(config, policy, threshold)?))
 }
 
 /// T_a's default window, re-exported for the config docs.
@@ -612,24 +639,36 @@ mod tests {
     use super::*;
     use crate::detect::{PolicyConfig, ThresholdSpec};
     use crate::learn::{Dataset, ModelParams, NoProgress, train};
+    use crate::monitor::MonitorSpec;
     use crate::monitor::NoModels;
     use rand::SeedableRng;
     use rand::rngs::StdRng;
     use rand_distr::{Distribution, Normal};
-    use serde_json::json;
+    use serde_json::{Value, json};
 
     fn spec(config: Value) -> MonitorSpec {
         MonitorSpec {
             kind: MonitorKind::Channel,
-            config,
+            config: crate::monitor::MonitorConfig::parse(MonitorKind::Channel, &config).unwrap(),
             policy: PolicyConfig::Classic,
             threshold: ThresholdSpec::PFa(1e-5),
         }
     }
 
     fn config_error(config: Value, models: &dyn ModelSource) -> ConfigError {
-        match build(&spec(config), models) {
+        let parsed = match crate::monitor::MonitorConfig::parse(MonitorKind::Channel, &config) {
+            Ok(p) => p,
+            Err(e) => return e,
+        };
+        let spec = MonitorSpec {
+            config: parsed,
+            ..spec(json!({"channels": []}))
+        };
+        match crate::monitor::build(&spec, models) {
             Err(BuildError::Config(e)) => e,
+            Err(BuildError::ModelNotFound { field, id }) => {
+                ConfigError::new(field, format!("no stored model '{id}'"))
+            }
             Err(other) => panic!("expected a config error, got {other:?}"),
             Ok(_) => panic!("expected a config error, got a monitor"),
         }
@@ -722,7 +761,7 @@ mod tests {
         let mut c = online_config();
         c["channels"][0]["extra"] = json!(0);
         let e = config_error(c, &NoModels);
-        assert_eq!(e.field, "channels[0]");
+        assert!(e.field.starts_with("channels[0]."), "{e}");
         assert!(e.reason.contains("unknown field"), "{e}");
     }
 
@@ -754,14 +793,14 @@ mod tests {
 
     #[test]
     fn clean_sinusoid_on_an_online_predictor_stays_healthy() {
-        let mut m = build(&spec(online_config()), &NoModels).unwrap();
+        let mut m = crate::monitor::build(&spec(online_config()), &NoModels).unwrap();
         let series = signal(500, usize::MAX, 0.0, 2);
         assert_eq!(alarms(m.as_mut(), &series), Vec::<usize>::new());
     }
 
     #[test]
     fn step_fault_on_an_online_predictor_is_detected_at_once() {
-        let mut m = build(&spec(online_config()), &NoModels).unwrap();
+        let mut m = crate::monitor::build(&spec(online_config()), &NoModels).unwrap();
         let series = signal(500, 400, 1.0, 2);
         let a = alarms(m.as_mut(), &series);
         assert!(
@@ -784,9 +823,9 @@ mod tests {
         let models: HashMap<String, Arc<AnyModel>> =
             HashMap::from([("m".to_owned(), Arc::new(model))]);
         let config = json!({"channels": [{"name": "s", "predictor": {"model": "m"}}]});
-        let mut m = build(&spec(config.clone()), &models).unwrap();
+        let mut m = crate::monitor::build(&spec(config.clone()), &models).unwrap();
         assert!(alarms(m.as_mut(), &signal(400, usize::MAX, 0.0, 4)).is_empty());
-        let mut m = build(&spec(config), &models).unwrap();
+        let mut m = crate::monitor::build(&spec(config), &models).unwrap();
         let a = alarms(m.as_mut(), &signal(400, 300, 1.0, 4));
         assert!(a.first().is_some_and(|&k| (300..303).contains(&k)), "{a:?}");
     }
@@ -795,7 +834,7 @@ mod tests {
     fn vector_channel_predicts_each_component_and_checks_its_length() {
         let config = json!({"channels": [{"name": "v", "dim": 2, "embedding": 3, "predictor":
             {"online": {"window": 30, "gamma": 30.0, "sigma2": 9.0}}}]});
-        let mut m = build(&spec(config), &NoModels).unwrap();
+        let mut m = crate::monitor::build(&spec(config), &NoModels).unwrap();
         assert_eq!(m.tests().slots()[0].dof, 2);
         let a = signal(60, usize::MAX, 0.0, 5);
         let b = signal(60, usize::MAX, 0.0, 6);
@@ -835,7 +874,7 @@ mod tests {
 
     #[test]
     fn reset_restarts_predictor_and_test() {
-        let mut m = build(&spec(online_config()), &NoModels).unwrap();
+        let mut m = crate::monitor::build(&spec(online_config()), &NoModels).unwrap();
         let series = signal(200, 150, 5.0, 7);
         assert!(!alarms(m.as_mut(), &series).is_empty());
         m.reset();

@@ -38,8 +38,7 @@
 //! error estimate (open loop); `hpl` (m); `isolated`: the aids whose test is isolated.
 
 use nalgebra::{Matrix2, Vector3};
-use serde::Serialize;
-use serde_json::{Map, Value};
+use serde::{Deserialize, Serialize};
 
 use super::{
     BuildError, ConfigError, EpochError, Monitor, MonitorKind, MonitorReport, Outputs, StepError,
@@ -95,192 +94,310 @@ pub struct FederatedConfig {
     pub p_md: f64,
 }
 
-/// The keys a section may hold.
-const TOP: &[&str] = &[
-    "aids", "gnss", "dvl", "cns", "imu", "init", "beta", "hal_m", "p_md",
-];
+/// The `gnss` section of a `federated` config; seed 004's values by default.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GnssNoise {
+    /// Position noise (1σ per axis), m.
+    pub pos_sigma_m: f64,
+    /// Velocity noise, m/s.
+    pub vel_sigma_mps: f64,
+}
 
-/// Reads an optional object section, refusing unknown keys (`section.key`).
-fn section<'a>(
-    obj: &'a Map<String, Value>,
-    name: &str,
-    allowed: &[&str],
-) -> Result<Option<&'a Map<String, Value>>, ConfigError> {
-    let Some(v) = obj.get(name) else {
-        return Ok(None);
-    };
-    let map = v
-        .as_object()
-        .ok_or_else(|| ConfigError::new(name, "must be an object"))?;
-    if let Some(k) = map.keys().find(|k| !allowed.contains(&k.as_str())) {
-        return Err(ConfigError::new(
-            format!("{name}.{k}"),
-            format!("unknown field, expected one of {}", allowed.join(", ")),
-        ));
+impl Default for GnssNoise {
+    fn default() -> Self {
+        GnssNoise {
+            pos_sigma_m: 10.0,
+            vel_sigma_mps: 0.1,
+        }
     }
-    Ok(Some(map))
+}
+
+/// The `dvl` section of a `federated` config.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DvlNoise {
+    /// Velocity noise, m/s.
+    pub vel_sigma_mps: f64,
+}
+
+impl Default for DvlNoise {
+    fn default() -> Self {
+        DvlNoise { vel_sigma_mps: 0.1 }
+    }
+}
+
+/// The `cns` section of a `federated` config.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CnsNoise {
+    /// Position noise, m.
+    pub pos_sigma_m: f64,
+}
+
+impl Default for CnsNoise {
+    fn default() -> Self {
+        CnsNoise { pos_sigma_m: 450.0 }
+    }
+}
+
+/// The `imu` section: [`ImuErrors`] with every field optional.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ImuSection {
+    /// Gyro bias, °/h.
+    pub gyro_bias_dph: f64,
+    /// Accelerometer bias, µg.
+    pub accel_bias_ug: f64,
+    /// Angle random walk, °/√h.
+    pub arw_deg_rthr: f64,
+    /// Velocity random walk, m/s/√h.
+    pub vrw_mps_rthr: f64,
+}
+
+impl Default for ImuSection {
+    fn default() -> Self {
+        ImuSection::from(ImuErrors::default())
+    }
+}
+
+impl From<ImuErrors> for ImuSection {
+    fn from(e: ImuErrors) -> Self {
+        ImuSection {
+            gyro_bias_dph: e.gyro_bias_dph,
+            accel_bias_ug: e.accel_bias_ug,
+            arw_deg_rthr: e.arw_deg_rthr,
+            vrw_mps_rthr: e.vrw_mps_rthr,
+        }
+    }
+}
+
+/// The `init` section: the initial error uncertainty; seed 004's values by default.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct InitSigma {
+    /// Attitude [roll, pitch, yaw], arcsec.
+    pub att_sigma_arcsec: [f64; 3],
+    /// Position, m.
+    pub pos_sigma_m: f64,
+    /// Velocity, m/s.
+    pub vel_sigma_mps: f64,
+}
+
+impl Default for InitSigma {
+    fn default() -> Self {
+        InitSigma {
+            att_sigma_arcsec: [5.0, 5.0, 30.0],
+            pos_sigma_m: 10.0,
+            vel_sigma_mps: 0.1,
+        }
+    }
+}
+
+/// The `beta` section: one information-sharing factor per configured aid.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BetaSection {
+    /// GNSS's factor.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gnss: Option<f64>,
+    /// DVL's factor.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dvl: Option<f64>,
+    /// CNS's factor.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cns: Option<f64>,
+}
+
+impl BetaSection {
+    fn get(&self, aid: Aid) -> Option<f64> {
+        match aid {
+            Aid::Gnss => self.gnss,
+            Aid::Dvl => self.dvl,
+            Aid::Cns => self.cns,
+        }
+    }
+}
+
+/// The `config` of a `federated` monitor as the user writes it; sections left out take
+/// their `Default`, and an aid's section may only be given for an aid in `aids`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FederatedConfigWire {
+    /// The aids, in order (each at most once; 1 to [`MAX_AIDS`]).
+    #[serde(default)]
+    pub aids: Vec<Aid>,
+    /// GNSS noise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gnss: Option<GnssNoise>,
+    /// DVL noise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dvl: Option<DvlNoise>,
+    /// CNS noise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cns: Option<CnsNoise>,
+    /// IMU errors.
+    #[serde(default)]
+    pub imu: ImuSection,
+    /// Initial uncertainty.
+    #[serde(default)]
+    pub init: InitSigma,
+    /// Sharing factors (default: equal).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub beta: Option<BetaSection>,
+    /// Horizontal alert limit, m.
+    #[serde(default = "default_hal_m")]
+    pub hal_m: f64,
+    /// Missed-detection probability for the HPL.
+    #[serde(default = "default_p_md")]
+    pub p_md: f64,
+}
+
+fn default_hal_m() -> f64 {
+    DEFAULT_HAL_M
+}
+
+fn default_p_md() -> f64 {
+    hpl::DEFAULT_P_MD
+}
+
+impl FederatedConfigWire {
+    /// A config for `aids` with every other field at its default.
+    pub fn new(aids: Vec<Aid>) -> Self {
+        FederatedConfigWire {
+            aids,
+            gnss: None,
+            dvl: None,
+            cns: None,
+            imu: ImuSection::default(),
+            init: InitSigma::default(),
+            beta: None,
+            hal_m: DEFAULT_HAL_M,
+            p_md: hpl::DEFAULT_P_MD,
+        }
+    }
 }
 
 /// A finite positive number at `field`.
-fn positive(field: &str, v: &Value) -> Result<f64, ConfigError> {
-    match v.as_f64() {
-        Some(x) if x.is_finite() && x > 0.0 => Ok(x),
-        _ => Err(ConfigError::new(field, "must be a finite number > 0")),
+fn positive(field: impl FnOnce() -> String, x: f64) -> Result<f64, ConfigError> {
+    if x.is_finite() && x > 0.0 {
+        Ok(x)
+    } else {
+        Err(ConfigError::new(field(), "must be a finite number > 0"))
     }
 }
 
-/// `section.key` as a positive number, or `default` when absent.
-fn number(
-    map: Option<&Map<String, Value>>,
-    section: &str,
-    key: &str,
-    default: f64,
-) -> Result<f64, ConfigError> {
-    match map.and_then(|m| m.get(key)) {
-        Some(v) => positive(&format!("{section}.{key}"), v),
-        None => Ok(default),
+/// Checks `aids` (1 to [`MAX_AIDS`], no repeats) and that aid sections name listed aids.
+fn check_aids(w: &FederatedConfigWire) -> Result<(), ConfigError> {
+    if w.aids.is_empty() || w.aids.len() > MAX_AIDS {
+        return Err(ConfigError::new(
+            "aids",
+            format!("must name 1 to {MAX_AIDS} aids"),
+        ));
+    }
+    for (i, aid) in w.aids.iter().enumerate() {
+        if w.aids[..i].contains(aid) {
+            return Err(ConfigError::new(format!("aids[{i}]"), "duplicate aid"));
+        }
+    }
+    let sections = [
+        (Aid::Gnss, w.gnss.is_some()),
+        (Aid::Dvl, w.dvl.is_some()),
+        (Aid::Cns, w.cns.is_some()),
+    ];
+    for (aid, given) in sections {
+        if given && !w.aids.contains(&aid) {
+            return Err(ConfigError::new(
+                aid.as_str(),
+                "configured but not listed in aids",
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The sharing factors in `aids` order: each in (0, 1], summing to 1 (renormalised exactly).
+fn check_beta(aids: &[Aid], beta: Option<&BetaSection>) -> Result<Vec<f64>, ConfigError> {
+    let Some(map) = beta else {
+        return Ok(federated::equal_betas(aids.len()));
+    };
+    for aid in [Aid::Gnss, Aid::Dvl, Aid::Cns] {
+        if map.get(aid).is_some() && !aids.contains(&aid) {
+            return Err(ConfigError::new(
+                format!("beta.{}", aid.as_str()),
+                "not one of the configured aids",
+            ));
+        }
+    }
+    let mut out = Vec::with_capacity(aids.len());
+    for aid in aids {
+        let field = || format!("beta.{}", aid.as_str());
+        let b = map
+            .get(*aid)
+            .ok_or_else(|| ConfigError::new("beta", format!("missing {}", aid.as_str())))?;
+        let b = positive(field, b)?;
+        if b > 1.0 {
+            return Err(ConfigError::new(field(), "must be in (0, 1]"));
+        }
+        out.push(b);
+    }
+    let sum: f64 = out.iter().sum();
+    if (sum - 1.0).abs() > 1e-6 {
+        return Err(ConfigError::new(
+            "beta",
+            format!("the sharing factors must sum to 1, got {sum}"),
+        ));
+    }
+    Ok(out.iter().map(|b| b / sum).collect())
+}
+
+impl TryFrom<FederatedConfigWire> for FederatedConfig {
+    type Error = ConfigError;
+
+    /// Validates the config; errors name the field (`aids[1]`, `gnss.pos_sigma_m`, `beta`, …).
+    fn try_from(w: FederatedConfigWire) -> Result<Self, ConfigError> {
+        check_aids(&w)?;
+        let beta = check_beta(&w.aids, w.beta.as_ref())?;
+        let (g, d, c) = (
+            w.gnss.unwrap_or_default(),
+            w.dvl.unwrap_or_default(),
+            w.cns.unwrap_or_default(),
+        );
+        let f = |s: &'static str| move || s.to_owned();
+        let imu = ImuErrors {
+            gyro_bias_dph: positive(f("imu.gyro_bias_dph"), w.imu.gyro_bias_dph)?,
+            accel_bias_ug: positive(f("imu.accel_bias_ug"), w.imu.accel_bias_ug)?,
+            arw_deg_rthr: positive(f("imu.arw_deg_rthr"), w.imu.arw_deg_rthr)?,
+            vrw_mps_rthr: positive(f("imu.vrw_mps_rthr"), w.imu.vrw_mps_rthr)?,
+        };
+        let mut att = [0.0; 3];
+        for (i, a) in w.init.att_sigma_arcsec.iter().enumerate() {
+            att[i] = positive(|| format!("init.att_sigma_arcsec[{i}]"), *a)?;
+        }
+        if !(w.p_md > 0.0 && w.p_md < 1.0) {
+            return Err(ConfigError::new("p_md", "must be in (0, 1)"));
+        }
+        Ok(FederatedConfig {
+            gnss_pos_sigma_m: positive(f("gnss.pos_sigma_m"), g.pos_sigma_m)?,
+            gnss_vel_sigma_mps: positive(f("gnss.vel_sigma_mps"), g.vel_sigma_mps)?,
+            dvl_vel_sigma_mps: positive(f("dvl.vel_sigma_mps"), d.vel_sigma_mps)?,
+            cns_pos_sigma_m: positive(f("cns.pos_sigma_m"), c.pos_sigma_m)?,
+            imu,
+            init_att_sigma_arcsec: att,
+            init_pos_sigma_m: positive(f("init.pos_sigma_m"), w.init.pos_sigma_m)?,
+            init_vel_sigma_mps: positive(f("init.vel_sigma_mps"), w.init.vel_sigma_mps)?,
+            beta,
+            hal_m: positive(f("hal_m"), w.hal_m)?,
+            p_md: w.p_md,
+            aids: w.aids,
+        })
     }
 }
 
 impl FederatedConfig {
-    /// Parses and validates the `config` JSON; errors name the field (`aids[1]`,
-    /// `gnss.pos_sigma_m`, `beta`, …).
-    pub fn from_json(value: &Value) -> Result<Self, ConfigError> {
-        let obj = value
-            .as_object()
-            .ok_or_else(|| ConfigError::new("", "config must be an object"))?;
-        if let Some(k) = obj.keys().find(|k| !TOP.contains(&k.as_str())) {
-            return Err(ConfigError::new(
-                k.as_str(),
-                format!("unknown field, expected one of {}", TOP.join(", ")),
-            ));
-        }
-        let list = obj
-            .get("aids")
-            .ok_or_else(|| ConfigError::new("aids", "required: name the aids, e.g. [\"gnss\"]"))?
-            .as_array()
-            .ok_or_else(|| ConfigError::new("aids", "must be an array of aid names"))?;
-        if list.is_empty() || list.len() > MAX_AIDS {
-            return Err(ConfigError::new(
-                "aids",
-                format!("must name 1 to {MAX_AIDS} aids"),
-            ));
-        }
-        let mut aids = Vec::with_capacity(list.len());
-        for (i, v) in list.iter().enumerate() {
-            let aid = v.as_str().and_then(Aid::parse).ok_or_else(|| {
-                ConfigError::new(format!("aids[{i}]"), "must be one of gnss, dvl, cns")
-            })?;
-            if aids.contains(&aid) {
-                return Err(ConfigError::new(format!("aids[{i}]"), "duplicate aid"));
-            }
-            aids.push(aid);
-        }
-        for aid in [Aid::Gnss, Aid::Dvl, Aid::Cns] {
-            if obj.contains_key(aid.as_str()) && !aids.contains(&aid) {
-                return Err(ConfigError::new(
-                    aid.as_str(),
-                    "configured but not listed in aids",
-                ));
-            }
-        }
-
-        let gnss = section(obj, "gnss", &["pos_sigma_m", "vel_sigma_mps"])?;
-        let dvl = section(obj, "dvl", &["vel_sigma_mps"])?;
-        let cns = section(obj, "cns", &["pos_sigma_m"])?;
-        let imu_map = section(
-            obj,
-            "imu",
-            &[
-                "gyro_bias_dph",
-                "accel_bias_ug",
-                "arw_deg_rthr",
-                "vrw_mps_rthr",
-            ],
-        )?;
-        let init = section(
-            obj,
-            "init",
-            &["att_sigma_arcsec", "pos_sigma_m", "vel_sigma_mps"],
-        )?;
-        let d = ImuErrors::default();
-        let imu = ImuErrors {
-            gyro_bias_dph: number(imu_map, "imu", "gyro_bias_dph", d.gyro_bias_dph)?,
-            accel_bias_ug: number(imu_map, "imu", "accel_bias_ug", d.accel_bias_ug)?,
-            arw_deg_rthr: number(imu_map, "imu", "arw_deg_rthr", d.arw_deg_rthr)?,
-            vrw_mps_rthr: number(imu_map, "imu", "vrw_mps_rthr", d.vrw_mps_rthr)?,
-        };
-        let mut att = [5.0, 5.0, 30.0];
-        if let Some(v) = init.and_then(|m| m.get("att_sigma_arcsec")) {
-            let a = v.as_array().filter(|a| a.len() == 3).ok_or_else(|| {
-                ConfigError::new("init.att_sigma_arcsec", "must be [roll, pitch, yaw]")
-            })?;
-            for (i, x) in a.iter().enumerate() {
-                att[i] = positive(&format!("init.att_sigma_arcsec[{i}]"), x)?;
-            }
-        }
-
-        let beta = match section(obj, "beta", &["gnss", "dvl", "cns"])? {
-            None => federated::equal_betas(aids.len()),
-            Some(map) => {
-                let mut beta = Vec::with_capacity(aids.len());
-                for aid in &aids {
-                    let v = map.get(aid.as_str()).ok_or_else(|| {
-                        ConfigError::new("beta", format!("missing {}", aid.as_str()))
-                    })?;
-                    let b = positive(&format!("beta.{}", aid.as_str()), v)?;
-                    if b > 1.0 {
-                        return Err(ConfigError::new(
-                            format!("beta.{}", aid.as_str()),
-                            "must be in (0, 1]",
-                        ));
-                    }
-                    beta.push(b);
-                }
-                if let Some(k) = map
-                    .keys()
-                    .find(|k| Aid::parse(k).is_none_or(|a| !aids.contains(&a)))
-                {
-                    return Err(ConfigError::new(
-                        format!("beta.{k}"),
-                        "not one of the configured aids",
-                    ));
-                }
-                let sum: f64 = beta.iter().sum();
-                if (sum - 1.0).abs() > 1e-6 {
-                    return Err(ConfigError::new(
-                        "beta",
-                        format!("the sharing factors must sum to 1, got {sum}"),
-                    ));
-                }
-                // Exactly 1 for the filter: spread the rounding over the factors.
-                beta.iter().map(|b| b / sum).collect()
-            }
-        };
-        let p_md = match obj.get("p_md") {
-            Some(v) => match v.as_f64() {
-                Some(p) if p > 0.0 && p < 1.0 => p,
-                _ => return Err(ConfigError::new("p_md", "must be in (0, 1)")),
-            },
-            None => hpl::DEFAULT_P_MD,
-        };
-        Ok(FederatedConfig {
-            aids,
-            gnss_pos_sigma_m: number(gnss, "gnss", "pos_sigma_m", 10.0)?,
-            gnss_vel_sigma_mps: number(gnss, "gnss", "vel_sigma_mps", 0.1)?,
-            dvl_vel_sigma_mps: number(dvl, "dvl", "vel_sigma_mps", 0.1)?,
-            cns_pos_sigma_m: number(cns, "cns", "pos_sigma_m", 450.0)?,
-            imu,
-            init_att_sigma_arcsec: att,
-            init_pos_sigma_m: number(init, "init", "pos_sigma_m", 10.0)?,
-            init_vel_sigma_mps: number(init, "init", "vel_sigma_mps", 0.1)?,
-            beta,
-            hal_m: match obj.get("hal_m") {
-                Some(v) => positive("hal_m", v)?,
-                None => DEFAULT_HAL_M,
-            },
-            p_md,
-        })
+    /// Parses and validates the `config` JSON, naming the field path of any error.
+    pub fn from_json(value: &serde_json::Value) -> Result<Self, ConfigError> {
+        Self::try_from(super::parse_config::<FederatedConfigWire>(value)?)
     }
 
     /// The initial error estimate: zero error, `P₀ = diag(att², vel², pos², ε², ∇²)` with the
@@ -338,7 +455,7 @@ impl FederatedMonitor {
         policy: PolicyConfig,
         spec: ThresholdSpec,
     ) -> Result<Self, BuildError> {
-        let tests: Vec<(&'static str, u32)> = config
+        let tests: Vec<(&str, u32)> = config
             .aids
             .iter()
             .map(|a| {
@@ -603,7 +720,7 @@ mod tests {
     use rand::rngs::StdRng;
     use rand::{Rng, SeedableRng};
     use rand_distr::StandardNormal;
-    use serde_json::json;
+    use serde_json::{Value, json};
 
     fn all_aids() -> Value {
         json!({"aids": ["gnss", "dvl", "cns"]})
@@ -717,7 +834,7 @@ mod tests {
             super::super::build(
                 &super::super::MonitorSpec {
                     kind: MonitorKind::Federated,
-                    config,
+                    config: super::super::MonitorConfig::parse(MonitorKind::Federated, &config)?,
                     policy: PolicyConfig::counters_default(),
                     threshold: ThresholdSpec::Threshold(20.0),
                 },
@@ -734,7 +851,7 @@ mod tests {
             ThresholdSpec::PFa(0.002),
         );
         let slots = m.tests().slots();
-        let names: Vec<_> = slots.iter().map(|s| (s.name, s.dof)).collect();
+        let names: Vec<_> = slots.iter().map(|s| (&*s.name, s.dof)).collect();
         assert_eq!(names, vec![("dvl", 3), ("gnss", 6), ("hpl", 2)]);
         assert!((slots[1].threshold_for(3).unwrap() - 14.7955).abs() < 1e-4);
         assert_eq!(slots[2].threshold, 55.0);
@@ -932,7 +1049,7 @@ mod tests {
                 Vector3::zeros()
             };
             let r = m.step(&ship.next(offset)).unwrap();
-            let gnss = r.tests.iter().find(|o| o.name == "gnss").unwrap();
+            let gnss = r.tests.iter().find(|o| &*o.name == "gnss").unwrap();
             health.push(gnss.decision.health);
             let (_, _, isolated) = outputs(&r);
             assert_eq!(
@@ -970,7 +1087,7 @@ mod tests {
             ThresholdSpec::Threshold(20.0),
         );
         let r = m.step(&ship.next(Vector3::zeros())).unwrap();
-        let hpl = r.tests.iter().find(|o| o.name == "hpl").unwrap();
+        let hpl = r.tests.iter().find(|o| &*o.name == "hpl").unwrap();
         let (_, value, _) = outputs(&r);
         assert_eq!(hpl.statistic.value, value);
         assert_eq!((hpl.statistic.threshold, hpl.statistic.dof), (5.0, 2));
@@ -1008,7 +1125,11 @@ mod tests {
         }
         e.dvl_vel_b = None;
         let r = m.step(&e).unwrap();
-        let names: Vec<_> = r.tests.iter().map(|o| (o.name, o.statistic.dof)).collect();
+        let names: Vec<_> = r
+            .tests
+            .iter()
+            .map(|o| (&*o.name, o.statistic.dof))
+            .collect();
         assert_eq!(names, vec![("gnss", 3), ("cns", 2), ("hpl", 2)]);
         assert!((r.tests[0].statistic.threshold - 14.7955).abs() < 1e-4);
         let state = m.filter().state().clone();

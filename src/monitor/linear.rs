@@ -4,7 +4,7 @@
 //! against other Kalman filter libraries.
 
 use nalgebra::{DMatrix, DVector};
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 use super::{
     ConfigError, EpochError, Monitor, MonitorKind, MonitorReport, Outputs, StepError, TestBank,
@@ -13,18 +13,25 @@ use crate::detect::{PolicyConfig, ThresholdError, ThresholdSpec};
 use crate::epoch::Epoch;
 use crate::filter::kalman::{self, LinearObservation, LinearTransition, StateEstimate};
 
-/// The wire form of the model: row-major nested arrays.
-#[derive(Debug, Deserialize)]
+/// The `config` of a `linear` monitor as the user writes it: row-major nested arrays.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct LinearConfigWire {
-    f: Vec<Vec<f64>>,
-    h: Vec<Vec<f64>>,
-    q: Vec<Vec<f64>>,
-    r: Vec<Vec<f64>>,
-    x0: Vec<f64>,
-    p0: Vec<Vec<f64>>,
-    #[serde(default)]
-    b: Option<Vec<Vec<f64>>>,
+pub struct LinearConfigWire {
+    /// State transition F (n × n).
+    pub f: Vec<Vec<f64>>,
+    /// Observation matrix H (m × n).
+    pub h: Vec<Vec<f64>>,
+    /// Process noise Q (n × n).
+    pub q: Vec<Vec<f64>>,
+    /// Measurement noise R (m × m).
+    pub r: Vec<Vec<f64>>,
+    /// Initial state (n).
+    pub x0: Vec<f64>,
+    /// Initial covariance (n × n).
+    pub p0: Vec<Vec<f64>>,
+    /// Control matrix B (n × k), optional.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub b: Option<Vec<Vec<f64>>>,
 }
 
 /// A validated linear model: `x = F x (+ B u) + w`, `z = H x + v`,
@@ -131,10 +138,28 @@ fn check_covariance(field: &str, m: &DMatrix<f64>, strict: bool) -> Result<(), C
 }
 
 impl LinearConfig {
-    /// Parses and validates the `config` JSON of a `linear` monitor.
+    /// Parses and validates the `config` JSON of a `linear` monitor, naming the field path
+    /// of any error.
     pub fn from_json(value: &serde_json::Value) -> Result<Self, ConfigError> {
-        let wire = LinearConfigWire::deserialize(value)
-            .map_err(|e| ConfigError::new("", e.to_string()))?;
+        Self::try_from(super::parse_config::<LinearConfigWire>(value)?)
+    }
+
+    /// State dimension n.
+    pub fn states(&self) -> usize {
+        self.f.nrows()
+    }
+
+    /// Measurement dimension m.
+    pub fn measurements(&self) -> usize {
+        self.h.nrows()
+    }
+}
+
+impl TryFrom<LinearConfigWire> for LinearConfig {
+    type Error = ConfigError;
+
+    /// Checks shapes, finiteness, symmetry and definiteness.
+    fn try_from(wire: LinearConfigWire) -> Result<Self, ConfigError> {
         let f = matrix("f", &wire.f, (None, None))?;
         let n = f.nrows();
         if f.ncols() != n {
@@ -174,16 +199,6 @@ impl LinearConfig {
             p0,
             b,
         })
-    }
-
-    /// State dimension n.
-    pub fn states(&self) -> usize {
-        self.f.nrows()
-    }
-
-    /// Measurement dimension m.
-    pub fn measurements(&self) -> usize {
-        self.h.nrows()
     }
 }
 
@@ -254,7 +269,7 @@ impl Monitor for LinearMonitor {
             if z.len() != want {
                 return Err(EpochError::WrongLength {
                     monitor: name.to_owned(),
-                    field: "z",
+                    field: "z".into(),
                     got: z.len(),
                     want,
                 });
@@ -265,7 +280,7 @@ impl Monitor for LinearMonitor {
                 Some(b) if u.len() != b.ncols() => {
                     return Err(EpochError::WrongLength {
                         monitor: name.to_owned(),
-                        field: "u",
+                        field: "u".into(),
                         got: u.len(),
                         want: b.ncols(),
                     });

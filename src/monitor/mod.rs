@@ -9,12 +9,13 @@ pub mod rimu;
 pub mod tacan;
 pub mod tests_bank;
 
-use std::collections::{BTreeMap, HashMap, HashSet};
-use std::sync::{Arc, Mutex, OnceLock};
+use std::borrow::Cow;
+use std::collections::{BTreeMap, HashMap};
+use std::sync::Arc;
 
 use serde::Serialize;
 
-pub use tests_bank::{TestBank, TestOutcome};
+pub use tests_bank::{TestBank, TestName, TestOutcome};
 
 use crate::detect::{PolicyConfig, PolicyError, ThresholdError, ThresholdSpec};
 use crate::epoch::Epoch;
@@ -78,8 +79,8 @@ pub enum EpochError {
     WrongLength {
         /// The monitor's name.
         monitor: String,
-        /// The epoch field.
-        field: &'static str,
+        /// The epoch field (`z`, `u`, `channels.<name>`, …).
+        field: Cow<'static, str>,
         /// Elements received.
         got: usize,
         /// Elements expected.
@@ -126,9 +127,9 @@ pub enum Outputs {
     /// (a channel appears once its predictor has enough history).
     Channel {
         /// ŷ_k per channel name (scalar channels give one element).
-        prediction: BTreeMap<String, Vec<f64>>,
+        prediction: BTreeMap<TestName, Vec<f64>>,
         /// r_k per channel name.
-        residual: BTreeMap<String, Vec<f64>>,
+        residual: BTreeMap<TestName, Vec<f64>>,
     },
     /// `rimu`: the parity vector, the gyros the classifier flagged at the last
     /// detection, the gyros isolated, and ω from the healthy gyros (rad/s, body).
@@ -184,13 +185,92 @@ pub trait Monitor: Send {
     fn reset(&mut self);
 }
 
+/// Deserialises a monitor's `config` into its typed form, keeping the path of the field
+/// at fault (`q[1][0]`, `gnss.pos_sigma_m`, `channels[0].predictor`; empty for the
+/// config itself, e.g. a missing required field).
+pub fn parse_config<T: serde::de::DeserializeOwned>(
+    value: &serde_json::Value,
+) -> Result<T, ConfigError> {
+    serde_path_to_error::deserialize(value).map_err(|e| {
+        let field = config_path(e.path());
+        ConfigError::new(field, e.into_inner().to_string())
+    })
+}
+
+/// A serde path as a config field: `a.b[1]`, or empty at the root.
+fn config_path(path: &serde_path_to_error::Path) -> String {
+    let mut out = String::new();
+    for segment in path.iter() {
+        match segment {
+            serde_path_to_error::Segment::Seq { index } => {
+                out.push_str(&format!("[{index}]"));
+            }
+            serde_path_to_error::Segment::Map { key } => {
+                if !out.is_empty() {
+                    out.push('.');
+                }
+                out.push_str(key);
+            }
+            serde_path_to_error::Segment::Enum { variant } => {
+                if !out.is_empty() {
+                    out.push('.');
+                }
+                out.push_str(variant);
+            }
+            serde_path_to_error::Segment::Unknown => {}
+        }
+    }
+    out
+}
+
+/// A monitor's configuration, typed by kind (each variant is the kind's user-facing
+/// config; the monitor validates it with `TryFrom` when it is built).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum MonitorConfig {
+    /// `linear`.
+    Linear(linear::LinearConfigWire),
+    /// `federated`.
+    Federated(federated::FederatedConfigWire),
+    /// `channel`.
+    Channel(channel::ChannelConfigWire),
+    /// `rimu`.
+    Rimu(rimu::RimuConfigWire),
+    /// `tacan`.
+    Tacan(tacan::TacanConfigWire),
+}
+
+impl MonitorConfig {
+    /// Parses the `config` JSON of a monitor of `kind`; errors name the field path.
+    pub fn parse(kind: MonitorKind, value: &serde_json::Value) -> Result<Self, ConfigError> {
+        Ok(match kind {
+            MonitorKind::Linear => MonitorConfig::Linear(parse_config(value)?),
+            MonitorKind::Federated => MonitorConfig::Federated(parse_config(value)?),
+            MonitorKind::Channel => MonitorConfig::Channel(parse_config(value)?),
+            MonitorKind::Rimu => MonitorConfig::Rimu(parse_config(value)?),
+            MonitorKind::Tacan => MonitorConfig::Tacan(parse_config(value)?),
+        })
+    }
+
+    /// The kind this config is for.
+    pub fn kind(&self) -> MonitorKind {
+        match self {
+            MonitorConfig::Linear(_) => MonitorKind::Linear,
+            MonitorConfig::Federated(_) => MonitorKind::Federated,
+            MonitorConfig::Channel(_) => MonitorKind::Channel,
+            MonitorConfig::Rimu(_) => MonitorKind::Rimu,
+            MonitorConfig::Tacan(_) => MonitorKind::Tacan,
+        }
+    }
+}
+
 /// Everything needed to build a monitor.
 #[derive(Debug, Clone)]
 pub struct MonitorSpec {
     /// Monitor kind.
     pub kind: MonitorKind,
-    /// The kind's configuration, as given by the user.
-    pub config: serde_json::Value,
+    /// The kind's configuration.
+    pub config: MonitorConfig,
     /// Decision policy for every test of the monitor.
     pub policy: PolicyConfig,
     /// Threshold for every test of the monitor.
@@ -209,6 +289,15 @@ pub enum BuildError {
     /// The threshold is invalid.
     #[error("threshold: {0}")]
     Threshold(#[from] ThresholdError),
+    /// `config.<field>` names a model the [`ModelSource`] does not hold (never stored,
+    /// or deleted since).
+    #[error("config.{field}: no stored model '{id}'")]
+    ModelNotFound {
+        /// Path of the field inside `config`, e.g. `model` or `channels[0].predictor.model`.
+        field: String,
+        /// The id asked for.
+        id: String,
+    },
     /// The kind exists in the design but is not available in this build.
     #[error("monitor type '{0}' is not implemented yet")]
     Unsupported(&'static str),
@@ -237,47 +326,37 @@ impl ModelSource for HashMap<String, Arc<AnyModel>> {
     }
 }
 
-/// Interns a test name chosen by the user (a channel name) so it can live in a
-/// [`TestSlot`](tests_bank::TestSlot) as `&'static str`. Each distinct name is leaked
-/// once; the set is bounded by the names users give their channels.
-pub fn intern(name: &str) -> &'static str {
-    static NAMES: OnceLock<Mutex<HashSet<&'static str>>> = OnceLock::new();
-    let mut names = NAMES
-        .get_or_init(Default::default)
-        .lock()
-        .unwrap_or_else(|p| p.into_inner());
-    if let Some(&known) = names.get(name) {
-        return known;
-    }
-    let leaked: &'static str = Box::leak(name.to_owned().into_boxed_str());
-    names.insert(leaked);
-    leaked
-}
-
 /// Builds a monitor from its spec, validating everything first. Monitors that use a
 /// trained model (`channel`, `rimu`, `tacan`) look it up in `models`.
 pub fn build(spec: &MonitorSpec, models: &dyn ModelSource) -> Result<Box<dyn Monitor>, BuildError> {
     spec.policy.check()?;
     spec.threshold.check()?;
-    match spec.kind {
-        MonitorKind::Linear => {
-            let config = linear::LinearConfig::from_json(&spec.config)?;
+    let (policy, threshold) = (spec.policy, spec.threshold);
+    if spec.config.kind() != spec.kind {
+        return Err(BuildError::Config(ConfigError::new(
+            "",
+            format!(
+                "is a {} config, the monitor is {}",
+                spec.config.kind().as_str(),
+                spec.kind.as_str()
+            ),
+        )));
+    }
+    match &spec.config {
+        MonitorConfig::Linear(c) => {
+            let config = linear::LinearConfig::try_from(c.clone())?;
             Ok(Box::new(linear::LinearMonitor::new(
-                config,
-                spec.policy,
-                spec.threshold,
+                config, policy, threshold,
             )?))
         }
-        MonitorKind::Federated => {
-            let config = federated::FederatedConfig::from_json(&spec.config)?;
+        MonitorConfig::Federated(c) => {
+            let config = federated::FederatedConfig::try_from(c.clone())?;
             Ok(Box::new(federated::FederatedMonitor::new(
-                config,
-                spec.policy,
-                spec.threshold,
+                config, policy, threshold,
             )?))
         }
-        MonitorKind::Channel => channel::build(spec, models),
-        MonitorKind::Rimu => rimu::build(spec, models),
-        MonitorKind::Tacan => tacan::build(spec, models),
+        MonitorConfig::Channel(c) => channel::build(c, policy, threshold, models),
+        MonitorConfig::Rimu(c) => rimu::build(c, policy, threshold, models),
+        MonitorConfig::Tacan(c) => tacan::build(c, policy, threshold, models),
     }
 }

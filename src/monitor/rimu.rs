@@ -16,11 +16,11 @@ use std::collections::VecDeque;
 use std::sync::Arc;
 
 use nalgebra::DMatrix;
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 use super::{
-    BuildError, ConfigError, EpochError, ModelSource, Monitor, MonitorKind, MonitorReport,
-    MonitorSpec, Outputs, StepError, TestBank,
+    BuildError, ConfigError, EpochError, ModelSource, Monitor, MonitorKind, MonitorReport, Outputs,
+    StepError, TestBank,
 };
 use crate::detect::parity::{self, FssWindow, ParitySpace};
 use crate::detect::{Health, PolicyConfig, ThresholdError, ThresholdSpec};
@@ -50,46 +50,51 @@ pub fn default_sigma() -> f64 {
 pub type GyroClassifier = Arc<dyn Fn(&[f64]) -> f64 + Send + Sync>;
 
 /// `sigma`: one value for every gyro or one per gyro.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(untagged)]
-enum SigmaWire {
+pub enum SigmaWire {
+    /// One σ for every gyro, rad/s per sample.
     Scalar(f64),
+    /// One σ per gyro.
     PerGyro(Vec<f64>),
 }
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RimuConfigWire {
-    #[serde(default)]
-    h: Option<Vec<Vec<f64>>>,
-    #[serde(default)]
-    sigma: Option<SigmaWire>,
-    #[serde(default = "default_fss_window")]
-    fss_window: usize,
-    #[serde(default = "default_feature_window")]
-    feature_window: usize,
-    #[serde(default)]
-    wavelet: WaveletPacketParams,
-    #[serde(default)]
-    model: Option<String>,
-    #[serde(default = "default_t_i")]
-    t_i: f64,
+/// The `config` of a `rimu` monitor as the user writes it; every field has a default.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RimuConfigWire {
+    /// Mounting matrix rows (gyro axes in the body frame); default: x, y, z and the skew axis.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub h: Option<Vec<Vec<f64>>>,
+    /// Gyro noise σ (default [`default_sigma`] for each gyro).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sigma: Option<SigmaWire>,
+    /// FSS window l' (seed 002: 6).
+    pub fss_window: usize,
+    /// Feature window l: seed 002 uses 100; periodization needs a multiple of 2^level
+    /// (8 at level 3), so the default is the nearest below, 96.
+    pub feature_window: usize,
+    /// Wavelet-packet feature parameters.
+    pub wavelet: WaveletPacketParams,
+    /// Stored `svm` classifier id, if any.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub model: Option<String>,
+    /// Decision threshold T_I (seed 002: 0.1).
+    pub t_i: f64,
 }
 
-/// Seed 002's FSS window l' = 6.
-fn default_fss_window() -> usize {
-    6
-}
-
-/// Seed 002 uses l = 100; periodization needs a multiple of 2^level (8 at level 3),
-/// so the default is the nearest below, 96.
-fn default_feature_window() -> usize {
-    96
-}
-
-/// Seed 002's T_I = 0.1.
-fn default_t_i() -> f64 {
-    0.1
+impl Default for RimuConfigWire {
+    fn default() -> Self {
+        RimuConfigWire {
+            h: None,
+            sigma: None,
+            fss_window: 6,
+            feature_window: 96,
+            wavelet: WaveletPacketParams::default(),
+            model: None,
+            t_i: 0.1,
+        }
+    }
 }
 
 /// Longest windows accepted (a minute of 100 Hz samples; bounds memory per session).
@@ -115,18 +120,18 @@ pub struct RimuConfig {
 }
 
 impl RimuConfig {
-    /// Parses and validates a `rimu` config (without looking the model up).
+    /// Parses and validates a `rimu` config (without looking the model up), naming the
+    /// field path of any error.
     pub fn from_json(value: &serde_json::Value) -> Result<Self, ConfigError> {
-        let wire = RimuConfigWire::deserialize(value).map_err(|e| {
-            let msg = e.to_string();
-            let field = msg
-                .split('`')
-                .nth(1)
-                .filter(|_| msg.starts_with("unknown field"))
-                .unwrap_or("")
-                .to_owned();
-            ConfigError::new(field, msg)
-        })?;
+        Self::try_from(super::parse_config::<RimuConfigWire>(value)?)
+    }
+}
+
+impl TryFrom<RimuConfigWire> for RimuConfig {
+    type Error = ConfigError;
+
+    /// Validates the mounting matrix, noise, windows and wavelet parameters.
+    fn try_from(wire: RimuConfigWire) -> Result<Self, ConfigError> {
         let h = match &wire.h {
             None => parity::default_h(),
             Some(rows) => {
@@ -206,14 +211,20 @@ impl RimuConfig {
 
 /// Builds a `rimu` monitor from its spec; `config.model` must name an `svm` model whose
 /// input dimension is `2^level`.
-pub fn build(spec: &MonitorSpec, models: &dyn ModelSource) -> Result<Box<dyn Monitor>, BuildError> {
-    let config = RimuConfig::from_json(&spec.config)?;
+pub fn build(
+    wire: &RimuConfigWire,
+    policy: PolicyConfig,
+    threshold: ThresholdSpec,
+    models: &dyn ModelSource,
+) -> Result<Box<dyn Monitor>, BuildError> {
+    let config = RimuConfig::try_from(wire.clone())?;
     let classifier = match &config.model {
         None => None,
         Some(id) => {
-            let model = models
-                .model(id)
-                .ok_or_else(|| ConfigError::new("model", format!("no stored model '{id}'")))?;
+            let model = models.model(id).ok_or_else(|| BuildError::ModelNotFound {
+                field: "model".into(),
+                id: id.clone(),
+            })?;
             if model.kind() != ModelKind::Svm {
                 return Err(ConfigError::new(
                     "model",
@@ -240,10 +251,7 @@ pub fn build(spec: &MonitorSpec, models: &dyn ModelSource) -> Result<Box<dyn Mon
         }
     };
     Ok(Box::new(RimuMonitor::new(
-        config,
-        classifier,
-        spec.policy,
-        spec.threshold,
+        config, classifier, policy, threshold,
     )?))
 }
 
@@ -339,7 +347,7 @@ impl Monitor for RimuMonitor {
             if g.len() != want {
                 return Err(EpochError::WrongLength {
                     monitor: name.to_owned(),
-                    field: "gyros",
+                    field: "gyros".into(),
                     got: g.len(),
                     want,
                 });
@@ -411,14 +419,14 @@ impl Monitor for RimuMonitor {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::monitor::NoModels;
+    use crate::monitor::{MonitorSpec, NoModels};
     use crate::sim::rimu::{GyroFaultKind, RimuSimParams, simulate};
     use serde_json::json;
 
     fn spec(config: serde_json::Value) -> MonitorSpec {
         MonitorSpec {
             kind: MonitorKind::Rimu,
-            config,
+            config: crate::monitor::MonitorConfig::parse(MonitorKind::Rimu, &config).unwrap(),
             policy: PolicyConfig::Classic,
             threshold: ThresholdSpec::Threshold(39.81),
         }
@@ -450,8 +458,11 @@ mod tests {
 
     fn monitor(config: serde_json::Value, classifier: Option<GyroClassifier>) -> RimuMonitor {
         let s = spec(config);
+        let crate::monitor::MonitorConfig::Rimu(wire) = s.config else {
+            unreachable!("a rimu spec")
+        };
         RimuMonitor::new(
-            RimuConfig::from_json(&s.config).unwrap(),
+            RimuConfig::try_from(wire).unwrap(),
             classifier,
             s.policy,
             s.threshold,
@@ -465,7 +476,7 @@ mod tests {
         assert_eq!(c.parity.gyros(), 4);
         assert_eq!((c.fss_window, c.feature_window, c.t_i), (6, 96, 0.1));
         let m = monitor(json!({}), None);
-        assert_eq!(m.tests().slots()[0].name, "parity");
+        assert_eq!(&*m.tests().slots()[0].name, "parity");
         assert_eq!(m.tests().slots()[0].dof, 6);
     }
 
@@ -480,11 +491,11 @@ mod tests {
         assert_eq!(field(json!({"feature_window": 100})), "feature_window");
         assert_eq!(field(json!({"wavelet": {"level": 0}})), "wavelet.level");
         assert_eq!(field(json!({"windw": 3})), "windw");
-        let e = build(&spec(json!({"model": "m-0"})), &NoModels)
+        let e = crate::monitor::build(&spec(json!({"model": "m-0"})), &NoModels)
             .err()
             .unwrap();
         assert!(
-            matches!(&e, BuildError::Config(c) if c.field == "model"),
+            matches!(&e, BuildError::ModelNotFound { field, id } if field == "model" && id == "m-0"),
             "{e}"
         );
     }

@@ -54,11 +54,11 @@ use std::collections::VecDeque;
 use std::sync::Arc;
 
 use nalgebra::Vector3;
-use serde_json::{Map, Value};
+use serde::{Deserialize, Serialize};
 
 use super::{
-    BuildError, ConfigError, EpochError, ModelSource, Monitor, MonitorKind, MonitorReport,
-    MonitorSpec, Outputs, StepError, TestBank,
+    BuildError, ConfigError, EpochError, ModelSource, Monitor, MonitorKind, MonitorReport, Outputs,
+    StepError, TestBank,
 };
 use crate::detect::{PolicyConfig, ThresholdSpec};
 use crate::epoch::Epoch;
@@ -95,113 +95,130 @@ pub struct TacanConfig {
     pub max_gap_s: f64,
 }
 
-const TOP: &[&str] = &["station", "window", "crest", "model", "max_gap_s"];
+/// The station's position as the user writes it: degrees and metres.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StationWire {
+    /// Latitude, degrees.
+    pub lat: f64,
+    /// Longitude, degrees.
+    pub lon: f64,
+    /// Ellipsoidal height, m.
+    pub h: f64,
+}
 
-fn number(obj: &Map<String, Value>, key: &str, field: &str) -> Result<f64, ConfigError> {
-    obj.get(key)
-        .ok_or_else(|| ConfigError::new(field, "required"))?
-        .as_f64()
-        .filter(|v| v.is_finite())
-        .ok_or_else(|| ConfigError::new(field, "must be a finite number"))
+/// The `config` of a `tacan` monitor as the user writes it. `station` and `model` are
+/// required (checked by `TryFrom`, so their absence names the field).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TacanConfigWire {
+    /// The station.
+    pub station: Option<StationWire>,
+    /// Window length K (default 10, seed 003).
+    pub window: usize,
+    /// Add the crest factor to the features (default false).
+    pub crest: bool,
+    /// Id of the stored `ocsvm` model.
+    pub model: Option<String>,
+    /// Largest gap between used epochs that keeps the window, s.
+    pub max_gap_s: f64,
+}
+
+impl Default for TacanConfigWire {
+    fn default() -> Self {
+        let features = TacanFeatureParams::default();
+        TacanConfigWire {
+            station: None,
+            window: features.window,
+            crest: features.crest,
+            model: None,
+            max_gap_s: DEFAULT_MAX_GAP_S,
+        }
+    }
 }
 
 impl TacanConfig {
-    /// Parses and validates the `config` JSON; errors name the field (`station.lat`,
+    /// Parses and validates the `config` JSON; errors name the field path (`station.lat`,
     /// `window`, `model`, …). The model itself is checked by [`build`].
-    pub fn from_json(value: &Value) -> Result<Self, ConfigError> {
-        let obj = value
-            .as_object()
-            .ok_or_else(|| ConfigError::new("", "config must be an object"))?;
-        if let Some(k) = obj.keys().find(|k| !TOP.contains(&k.as_str())) {
-            return Err(ConfigError::new(
-                k.as_str(),
-                format!("unknown field, expected one of {}", TOP.join(", ")),
-            ));
-        }
-        let st = obj
-            .get("station")
-            .ok_or_else(|| ConfigError::new("station", "required: {lat, lon, h}"))?
-            .as_object()
-            .ok_or_else(|| ConfigError::new("station", "must be an object {lat, lon, h}"))?;
-        if let Some(k) = st
-            .keys()
-            .find(|k| !["lat", "lon", "h"].contains(&k.as_str()))
-        {
-            return Err(ConfigError::new(
-                format!("station.{k}"),
-                "unknown field, expected lat, lon, h",
-            ));
-        }
-        let lat = number(st, "lat", "station.lat")?;
+    pub fn from_json(value: &serde_json::Value) -> Result<Self, ConfigError> {
+        Self::try_from(super::parse_config::<TacanConfigWire>(value)?)
+    }
+}
+
+impl TryFrom<TacanConfigWire> for TacanConfig {
+    type Error = ConfigError;
+
+    /// Checks ranges and the required fields.
+    fn try_from(w: TacanConfigWire) -> Result<Self, ConfigError> {
+        let st = w
+            .station
+            .ok_or_else(|| ConfigError::new("station", "required: {lat, lon, h}"))?;
+        let finite = |field: &str, v: f64| {
+            if v.is_finite() {
+                Ok(v)
+            } else {
+                Err(ConfigError::new(field, "must be a finite number"))
+            }
+        };
+        let lat = finite("station.lat", st.lat)?;
         if !(-90.0..=90.0).contains(&lat) {
             return Err(ConfigError::new(
                 "station.lat",
                 "must be in [−90, 90] degrees",
             ));
         }
-        let lon = number(st, "lon", "station.lon")?;
+        let lon = finite("station.lon", st.lon)?;
         if !(-180.0..=180.0).contains(&lon) {
             return Err(ConfigError::new(
                 "station.lon",
                 "must be in [−180, 180] degrees",
             ));
         }
-        let h = number(st, "h", "station.h")?;
-        let window = match obj.get("window") {
-            None => 10,
-            Some(v) => match v.as_u64() {
-                Some(w) if (2..=MAX_WINDOW as u64).contains(&w) => w as usize,
-                _ => {
-                    return Err(ConfigError::new(
-                        "window",
-                        format!("must be an integer from 2 to {MAX_WINDOW}"),
-                    ));
-                }
-            },
-        };
-        let crest = match obj.get("crest") {
-            None => false,
-            Some(v) => v
-                .as_bool()
-                .ok_or_else(|| ConfigError::new("crest", "must be true or false"))?,
-        };
-        let model = obj
-            .get("model")
-            .ok_or_else(|| ConfigError::new("model", "required: the id of an ocsvm model"))?
-            .as_str()
-            .ok_or_else(|| ConfigError::new("model", "must be a model id string"))?
-            .to_owned();
-        let max_gap_s = match obj.get("max_gap_s") {
-            None => DEFAULT_MAX_GAP_S,
-            Some(v) => v
-                .as_f64()
-                .filter(|g| g.is_finite() && *g > 0.0)
-                .ok_or_else(|| ConfigError::new("max_gap_s", "must be a finite number > 0"))?,
-        };
+        let h = finite("station.h", st.h)?;
+        if !(2..=MAX_WINDOW).contains(&w.window) {
+            return Err(ConfigError::new(
+                "window",
+                format!("must be an integer from 2 to {MAX_WINDOW}"),
+            ));
+        }
+        let model = w
+            .model
+            .ok_or_else(|| ConfigError::new("model", "required: the id of an ocsvm model"))?;
+        if !(w.max_gap_s.is_finite() && w.max_gap_s > 0.0) {
+            return Err(ConfigError::new("max_gap_s", "must be a finite number > 0"));
+        }
         Ok(TacanConfig {
             station: Lla {
                 lat: lat.to_radians(),
                 lon: lon.to_radians(),
                 h,
             },
-            features: TacanFeatureParams { window, crest },
+            features: TacanFeatureParams {
+                window: w.window,
+                crest: w.crest,
+            },
             model,
-            max_gap_s,
+            max_gap_s: w.max_gap_s,
         })
     }
 }
 
-/// Builds a `tacan` monitor from its spec, looking its model up in `models`.
-pub fn build(spec: &MonitorSpec, models: &dyn ModelSource) -> Result<Box<dyn Monitor>, BuildError> {
-    let config = TacanConfig::from_json(&spec.config)?;
+/// Builds a `tacan` monitor from its config, looking its model up in `models`.
+pub fn build(
+    wire: &TacanConfigWire,
+    policy: PolicyConfig,
+    threshold: ThresholdSpec,
+    models: &dyn ModelSource,
+) -> Result<Box<dyn Monitor>, BuildError> {
+    let config = TacanConfig::try_from(wire.clone())?;
     let model = models
         .model(&config.model)
-        .ok_or_else(|| ConfigError::new("model", format!("no stored model '{}'", config.model)))?;
+        .ok_or_else(|| BuildError::ModelNotFound {
+            field: "model".into(),
+            id: config.model.clone(),
+        })?;
     Ok(Box::new(TacanMonitor::new(
-        config,
-        model,
-        spec.policy,
-        spec.threshold,
+        config, model, policy, threshold,
     )?))
 }
 
@@ -414,11 +431,11 @@ impl Monitor for TacanMonitor {
 mod tests {
     use std::collections::HashMap;
 
-    use serde_json::json;
+    use serde_json::{Value, json};
 
     use super::*;
     use crate::detect::Health;
-    use crate::monitor::NoModels;
+    use crate::monitor::{MonitorConfig, MonitorSpec, NoModels};
     use crate::sim::experiment::seed003::{Seed003Params, train_model};
     use crate::sim::tacan::{TacanFlightParams, default_station, simulate_flight};
 
@@ -433,7 +450,7 @@ mod tests {
     fn spec(config: Value, policy: PolicyConfig) -> MonitorSpec {
         MonitorSpec {
             kind: MonitorKind::Tacan,
-            config,
+            config: MonitorConfig::parse(MonitorKind::Tacan, &config).unwrap(),
             policy,
             threshold: ThresholdSpec::default(),
         }
@@ -442,6 +459,7 @@ mod tests {
     fn field(e: BuildError) -> String {
         match e {
             BuildError::Config(c) => c.field,
+            BuildError::ModelNotFound { field, .. } => field,
             other => panic!("{other:?}"),
         }
     }
@@ -497,7 +515,7 @@ mod tests {
             ),
             (
                 json!({"station": {"lat": 0.0, "lon": 0.0}, "model": "m"}),
-                "station.h",
+                "station",
             ),
             (
                 json!({"station": {"lat": 0.0, "lon": 0.0, "h": 0.0, "x": 1}, "model": "m"}),
@@ -530,7 +548,7 @@ mod tests {
             let e = TacanConfig::from_json(&c).unwrap_err();
             assert_eq!(e.field, want, "{c}");
         }
-        let e = build(&spec(config("m-404"), PolicyConfig::Classic), &NoModels)
+        let e = crate::monitor::build(&spec(config("m-404"), PolicyConfig::Classic), &NoModels)
             .map(|_| ())
             .unwrap_err();
         assert_eq!(field(e), "model");
@@ -551,7 +569,7 @@ mod tests {
         assert_eq!(m.standardizer.as_ref().map(Standardizer::dim), Some(3));
         let mut c = config("m");
         c["crest"] = json!(true);
-        let e = build(&spec(c, PolicyConfig::Classic), &models)
+        let e = crate::monitor::build(&spec(c, PolicyConfig::Classic), &models)
             .map(|_| ())
             .unwrap_err();
         assert_eq!(field(e), "model");
@@ -560,7 +578,8 @@ mod tests {
     #[test]
     fn a_clean_stream_stays_healthy_and_a_200_m_jump_is_flagged() {
         let models = HashMap::from([("m".to_owned(), small_model(false))]);
-        let mut monitor = build(&spec(config("m"), PolicyConfig::Classic), &models).unwrap();
+        let mut monitor =
+            crate::monitor::build(&spec(config("m"), PolicyConfig::Classic), &models).unwrap();
         let mut f = flight();
         // A 200 m jump on 3 samples from sample 400.
         for k in 400..403 {
@@ -576,8 +595,8 @@ mod tests {
                 assert_eq!(report.outputs, empty());
                 continue;
             }
-            let o = report.tests[0];
-            assert_eq!((o.name, o.statistic.dof), ("range", 3));
+            let o = &report.tests[0];
+            assert_eq!((&*o.name, o.statistic.dof), ("range", 3));
             let Outputs::Tacan {
                 features: Some(x),
                 decision: Some(g),
@@ -611,7 +630,8 @@ mod tests {
     #[test]
     fn a_gap_restarts_the_window_and_epochs_without_both_blocks_are_ignored() {
         let models = HashMap::from([("m".to_owned(), small_model(false))]);
-        let mut monitor = build(&spec(config("m"), PolicyConfig::Classic), &models).unwrap();
+        let mut monitor =
+            crate::monitor::build(&spec(config("m"), PolicyConfig::Classic), &models).unwrap();
         let f = simulate_flight(&TacanFlightParams {
             seed: 13,
             duration_s: 2.0,

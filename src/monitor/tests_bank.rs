@@ -9,15 +9,21 @@
 //! [`TestBank::add_fixed`]). [`TestBank::preview`] and [`TestBank::commit`] split an
 //! evaluation so a monitor can decide, finish its numerical step, and only then commit.
 
+use std::sync::Arc;
+
 use crate::detect::{
     Decision, Health, PolicyConfig, PolicyState, Statistic, ThresholdError, ThresholdSpec,
 };
+
+/// A test's name, shared between its slot and every outcome it yields: cloning it per
+/// epoch bumps a count and allocates nothing; it is freed with the last monitor using it.
+pub type TestName = Arc<str>;
 
 /// One test's running state.
 #[derive(Debug, Clone)]
 pub struct TestSlot {
     /// Test name as on the wire (`residual`, `gnss`, `parity`, …).
-    pub name: &'static str,
+    pub name: TestName,
     /// Degrees of freedom of its statistic.
     pub dof: u32,
     /// Effective threshold, resolved from the monitor's spec.
@@ -45,12 +51,12 @@ impl TestSlot {
 }
 
 /// The outcome of one test for one epoch.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct TestOutcome {
     /// Which test (index into the monitor's bank).
     pub index: usize,
     /// Test name.
-    pub name: &'static str,
+    pub name: TestName,
     /// Statistic, threshold, dof.
     pub statistic: Statistic,
     /// The policy's decision.
@@ -71,7 +77,7 @@ impl TestBank {
     /// Creates a bank with the given `(name, dof)` tests, all under one
     /// threshold spec and policy.
     pub fn new(
-        tests: &[(&'static str, u32)],
+        tests: &[(&str, u32)],
         spec: ThresholdSpec,
         policy: PolicyConfig,
     ) -> Result<Self, ThresholdError> {
@@ -79,7 +85,7 @@ impl TestBank {
             .iter()
             .map(|&(name, dof)| {
                 Ok(TestSlot {
-                    name,
+                    name: TestName::from(name),
                     dof,
                     threshold: spec.resolve(dof)?,
                     policy: PolicyState::new(policy),
@@ -112,13 +118,13 @@ impl TestBank {
     /// policy changes of the monitor do not touch. Returns its index.
     pub fn add_fixed(
         &mut self,
-        name: &'static str,
+        name: &str,
         dof: u32,
         threshold: f64,
         policy: PolicyConfig,
     ) -> usize {
         self.slots.push(TestSlot {
-            name,
+            name: TestName::from(name),
             dof,
             threshold,
             policy: PolicyState::new(policy),
@@ -197,7 +203,7 @@ impl TestBank {
         let decision = slot.policy.step(statistic.exceeds());
         TestOutcome {
             index,
-            name: slot.name,
+            name: slot.name.clone(),
             statistic,
             decision,
             previous,
@@ -229,7 +235,7 @@ impl TestBank {
         Ok((
             TestOutcome {
                 index,
-                name: slot.name,
+                name: slot.name.clone(),
                 statistic,
                 decision,
                 previous: slot.policy.health(),

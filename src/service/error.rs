@@ -7,6 +7,8 @@ use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use serde_json::json;
 
+use crate::monitor::BuildError;
+use crate::service::session::SessionError;
 use crate::service::store::StoreError;
 
 /// An error a handler returns.
@@ -83,6 +85,47 @@ impl ApiError {
 impl From<StoreError> for ApiError {
     fn from(e: StoreError) -> Self {
         ApiError::Internal(e.to_string())
+    }
+}
+
+impl From<SessionError> for ApiError {
+    fn from(e: SessionError) -> Self {
+        match e {
+            SessionError::Build { index, source } => build_error(index, source),
+            SessionError::Invalid { field, reason } => ApiError::Invalid {
+                field,
+                message: reason,
+            },
+            SessionError::TooLarge(m) => ApiError::TooLarge(m),
+            e @ SessionError::AlreadyAttached(_) => ApiError::Conflict(e.to_string()),
+            e @ (SessionError::NoMonitor { .. } | SessionError::Stopped(_)) => {
+                ApiError::NotFound(e.to_string())
+            }
+            e @ SessionError::Busy(_) => ApiError::Unavailable(e.to_string()),
+        }
+    }
+}
+
+/// The 422 of monitor `index`'s build error, naming the field from the request body's root.
+fn build_error(index: usize, e: BuildError) -> ApiError {
+    let prefix = format!("monitors[{index}]");
+    match e {
+        BuildError::Config(c) if c.field.is_empty() => {
+            ApiError::invalid(format!("{prefix}.config"), c.reason)
+        }
+        BuildError::Config(c) => {
+            ApiError::invalid(format!("{prefix}.config.{}", c.field), c.reason)
+        }
+        BuildError::ModelNotFound { field, id } => ApiError::invalid(
+            format!("{prefix}.config.{field}"),
+            format!("no stored model '{id}'"),
+        ),
+        BuildError::Policy(p) => ApiError::invalid(format!("{prefix}.policy"), p.to_string()),
+        BuildError::Threshold(t) => ApiError::invalid(prefix, t.to_string()),
+        BuildError::Unsupported(kind) => ApiError::invalid(
+            format!("{prefix}.type"),
+            format!("monitor type '{kind}' is not implemented yet"),
+        ),
     }
 }
 

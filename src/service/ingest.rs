@@ -16,7 +16,7 @@ use super::app::AppState;
 use super::error::ApiError;
 use super::session::handle::IngestLink;
 use super::session::{FrameCommand, SessionHandle};
-use super::wire::{self, ErrorEvent, FrameError};
+use super::wire::{self, ErrorEvent, FrameError, FrameErrorCode};
 
 /// The subprotocol the server selects when a client offers it (browsers
 /// offering a `bearer.TOKEN` protocol must also offer this one).
@@ -88,7 +88,7 @@ fn on_text(text: &str, stream: u64, state: &AppState) -> Next {
     let limits = &state.config.limits;
     if text.len() > limits.max_frame_bytes {
         return Next::Refuse(FrameError::new(
-            "frame_too_large",
+            FrameErrorCode::FrameTooLarge,
             format!(
                 "frame is {} bytes, the limit is {}",
                 text.len(),
@@ -151,7 +151,7 @@ async fn run(mut socket: WebSocket, state: AppState, handle: SessionHandle, link
                     Some(Ok(Message::Binary(bytes))) => match std::str::from_utf8(&bytes) {
                         Ok(s) => Utf8Bytes::from(s),
                         Err(_) => {
-                            let e = FrameError::new("malformed_json", "binary frame is not UTF-8 JSON");
+                            let e = FrameError::new(FrameErrorCode::MalformedJson, "binary frame is not UTF-8 JSON");
                             if send_error(&mut socket, &state, &e).await.is_err() { break; }
                             continue;
                         }

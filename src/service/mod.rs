@@ -92,11 +92,8 @@ pub async fn start(config: ServiceConfig) -> Result<Server, StartError> {
             // A model deleted while a live session used it: that session kept its
             // copy until now, but cannot be rebuilt. Skip it (its row stays) rather
             // than refuse to start.
-            Err(ApiError::Invalid {
-                field: Some(field),
-                message,
-            }) if field.contains(".config.") && field.ends_with("model") => {
-                tracing::warn!(session = %id, %field, %message, "stored session names a deleted model; not restarted");
+            Err(e) if e.is_missing_model() => {
+                tracing::warn!(session = %id, error = %e, "stored session names a deleted model; not restarted");
                 continue;
             }
             Err(e) => return Err(StartError::StoredSession(id, e.to_string())),

@@ -178,14 +178,56 @@ struct WireEpoch {
     u: Option<Vec<f64>>,
 }
 
+/// The stable machine-readable code of a refused frame, as sent in `error` events.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FrameErrorCode {
+    /// The text is not JSON, or not a frame.
+    MalformedJson,
+    /// A number is NaN, infinite or out of range.
+    NonFinite,
+    /// A field no monitor of the session (or no epoch) has.
+    UnknownInput,
+    /// A vector has the wrong number of elements.
+    WrongLength,
+    /// The epoch is well-formed JSON but invalid (range, type).
+    InvalidEpoch,
+    /// `t` is earlier than the previous epoch's.
+    TimeBackwards,
+    /// The frame is over the size limit.
+    FrameTooLarge,
+    /// The batch holds more epochs than allowed.
+    BatchTooLarge,
+    /// The batch holds no epoch.
+    EmptyBatch,
+    /// A monitor failed numerically on the epoch.
+    Numerical,
+}
+
+impl FrameErrorCode {
+    /// The wire string.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            FrameErrorCode::MalformedJson => "malformed_json",
+            FrameErrorCode::NonFinite => "non_finite",
+            FrameErrorCode::UnknownInput => "unknown_input",
+            FrameErrorCode::WrongLength => "wrong_length",
+            FrameErrorCode::InvalidEpoch => "invalid_epoch",
+            FrameErrorCode::TimeBackwards => "time_backwards",
+            FrameErrorCode::FrameTooLarge => "frame_too_large",
+            FrameErrorCode::BatchTooLarge => "batch_too_large",
+            FrameErrorCode::EmptyBatch => "empty_batch",
+            FrameErrorCode::Numerical => "numerical",
+        }
+    }
+}
+
 /// Why an ingest frame was refused. The `code` is stable for clients.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{message}")]
 pub struct FrameError {
-    /// Machine-readable code (`malformed_json`, `non_finite`, `unknown_input`,
-    /// `wrong_length`, `invalid_epoch`, `time_backwards`, `frame_too_large`,
-    /// `batch_too_large`, `empty_batch`, `numerical`).
-    pub code: &'static str,
+    /// Machine-readable code.
+    pub code: FrameErrorCode,
     /// Human-readable reason.
     pub message: String,
     /// Index of the offending epoch within a batch, when known.
@@ -194,7 +236,7 @@ pub struct FrameError {
 
 impl FrameError {
     /// Builds an error without an epoch index.
-    pub fn new(code: &'static str, message: impl Into<String>) -> Self {
+    pub fn new(code: FrameErrorCode, message: impl Into<String>) -> Self {
         FrameError {
             code,
             message: message.into(),
@@ -236,20 +278,20 @@ fn classify(err: serde_json::Error, text: &str) -> FrameError {
     let message = err.to_string();
     if message.contains("number out of range") || (err.is_syntax() && has_non_finite_token(text)) {
         return FrameError::new(
-            "non_finite",
+            FrameErrorCode::NonFinite,
             format!("non-finite number in frame: {message}"),
         );
     }
     if message.contains("unknown field") {
-        return FrameError::new("unknown_input", message);
+        return FrameError::new(FrameErrorCode::UnknownInput, message);
     }
     if message.contains("invalid length") {
-        return FrameError::new("wrong_length", message);
+        return FrameError::new(FrameErrorCode::WrongLength, message);
     }
     if err.is_data() {
-        return FrameError::new("invalid_epoch", message);
+        return FrameError::new(FrameErrorCode::InvalidEpoch, message);
     }
-    FrameError::new("malformed_json", message)
+    FrameError::new(FrameErrorCode::MalformedJson, message)
 }
 
 fn finite(what: &str, values: &[f64]) -> Result<(), FrameError> {
@@ -257,7 +299,7 @@ fn finite(what: &str, values: &[f64]) -> Result<(), FrameError> {
         Ok(())
     } else {
         Err(FrameError::new(
-            "non_finite",
+            FrameErrorCode::NonFinite,
             format!("{what} holds a non-finite number"),
         ))
     }
@@ -268,7 +310,7 @@ fn latitude(what: &str, lat_deg: f64) -> Result<f64, FrameError> {
         Ok(lat_deg.to_radians())
     } else {
         Err(FrameError::new(
-            "invalid_epoch",
+            FrameErrorCode::InvalidEpoch,
             format!("{what} = {lat_deg}° is outside [-90, 90]"),
         ))
     }
@@ -279,7 +321,7 @@ fn longitude(what: &str, lon_deg: f64) -> Result<f64, FrameError> {
         Ok(lon_deg.to_radians())
     } else {
         Err(FrameError::new(
-            "invalid_epoch",
+            FrameErrorCode::InvalidEpoch,
             format!("{what} = {lon_deg}° is outside [-360, 360]"),
         ))
     }
@@ -412,13 +454,13 @@ pub fn parse_frame(text: &str, max_batch: usize) -> Result<Vec<Epoch>, FrameErro
     };
     if wire.is_empty() {
         return Err(FrameError::new(
-            "empty_batch",
+            FrameErrorCode::EmptyBatch,
             "a batch must hold at least one epoch",
         ));
     }
     if wire.len() > max_batch {
         return Err(FrameError::new(
-            "batch_too_large",
+            FrameErrorCode::BatchTooLarge,
             format!(
                 "batch holds {} epochs, the limit is {max_batch}",
                 wire.len()
@@ -432,7 +474,7 @@ pub fn parse_frame(text: &str, max_batch: usize) -> Result<Vec<Epoch>, FrameErro
             && epoch.t < prev
         {
             return Err(FrameError::new(
-                "time_backwards",
+                FrameErrorCode::TimeBackwards,
                 format!("t = {} goes back from {} within the batch", epoch.t, prev),
             )
             .at(i));
@@ -476,7 +518,7 @@ impl TestResultWire {
 #[derive(Debug, Clone, Serialize)]
 pub struct MonitorResultWire<'a> {
     /// Tests that ran this epoch.
-    pub tests: BTreeMap<&'static str, TestResultWire>,
+    pub tests: BTreeMap<crate::monitor::TestName, TestResultWire>,
     /// Monitor outputs, flattened beside `tests`.
     #[serde(flatten)]
     pub outputs: &'a crate::monitor::Outputs,
@@ -488,7 +530,12 @@ pub fn monitor_result(report: &MonitorReport) -> MonitorResultWire<'_> {
         tests: report
             .tests
             .iter()
-            .map(|o| (o.name, TestResultWire::new(&o.statistic, o.decision.health)))
+            .map(|o| {
+                (
+                    o.name.clone(),
+                    TestResultWire::new(&o.statistic, o.decision.health),
+                )
+            })
             .collect(),
         outputs: &report.outputs,
     }
@@ -549,7 +596,7 @@ pub struct ErrorEvent<'a> {
     #[serde(rename = "type")]
     pub kind: &'static str,
     /// Stable code.
-    pub code: &'a str,
+    pub code: FrameErrorCode,
     /// Reason.
     pub message: &'a str,
     /// Offending epoch within a batch, when known.
@@ -738,7 +785,8 @@ pub fn epoch_to_wire(epoch: &Epoch) -> Result<String, FrameError> {
         z: epoch.z.as_deref(),
         u: epoch.u.as_deref(),
     };
-    serde_json::to_string(&out).map_err(|e| FrameError::new("invalid_epoch", e.to_string()))
+    serde_json::to_string(&out)
+        .map_err(|e| FrameError::new(FrameErrorCode::InvalidEpoch, e.to_string()))
 }
 
 #[cfg(test)]
@@ -841,7 +889,10 @@ mod epoch_to_wire_tests {
             z: Some(vec![f64::NAN]),
             ..Epoch::default()
         };
-        assert_eq!(epoch_to_wire(&epoch).unwrap_err().code, "non_finite");
+        assert_eq!(
+            epoch_to_wire(&epoch).unwrap_err().code.as_str(),
+            "non_finite"
+        );
     }
 }
 
@@ -873,7 +924,7 @@ mod tests {
 
     #[test]
     fn bad_frames_get_their_codes() {
-        let code = |s: &str| parse_frame(s, 3).unwrap_err().code;
+        let code = |s: &str| parse_frame(s, 3).unwrap_err().code.as_str();
         assert_eq!(code(r#"{"t": 1, "z": [1,"#), "malformed_json");
         assert_eq!(code(r#"{"t": NaN}"#), "non_finite");
         assert_eq!(code(r#"{"t": 1, "z": [Infinity]}"#), "non_finite");

@@ -28,7 +28,7 @@ pub struct TestView {
 pub struct MonitorView {
     #[serde(flatten)]
     spec: MonitorSpecWire,
-    tests: std::collections::BTreeMap<&'static str, TestView>,
+    tests: std::collections::BTreeMap<crate::monitor::TestName, TestView>,
 }
 
 /// A session as the API shows it.
@@ -56,7 +56,7 @@ fn view(handle: &SessionHandle) -> SessionView {
                         .iter()
                         .map(|(name, t)| {
                             (
-                                *name,
+                                name.clone(),
                                 TestView {
                                     dof: t.dof,
                                     threshold: t.threshold,

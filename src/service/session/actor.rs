@@ -11,20 +11,20 @@ use std::time::{Duration, Instant};
 use serde::Serialize;
 use tokio::sync::{mpsc, watch};
 
+use super::SessionError;
 use super::handle::{ControlCommand, FrameCommand, IngestLink, SessionHandle, SessionShared};
 use super::spec::{NamedMonitors, build_monitors};
 use super::stats::{MonitorStats, Position, SessionStats, TestStats, Track};
 use crate::detect::{Health, ThresholdSpec};
 use crate::epoch::Epoch;
 use crate::monitor::{Monitor, MonitorReport, Outputs, TestOutcome};
-use crate::service::error::ApiError;
 use crate::service::metrics::Metrics;
 use crate::service::now_ms;
 use crate::service::store::{Store, StoredSession};
 use crate::service::train::Models;
 use crate::service::wire::{
-    self, AlarmRecord, ErrorEvent, FrameError, MonitorResultWire, StateChange, TestThreshold,
-    ThresholdUpdate, ThresholdView,
+    self, AlarmRecord, ErrorEvent, FrameError, FrameErrorCode, MonitorResultWire, StateChange,
+    TestThreshold, ThresholdUpdate, ThresholdView,
 };
 
 /// Frames queued per session before the ingest socket stops reading.
@@ -71,7 +71,7 @@ struct Actor {
 }
 
 /// Builds the monitors of `stored` and starts its actor.
-pub fn spawn(stored: StoredSession, deps: ActorDeps) -> Result<SessionHandle, ApiError> {
+pub fn spawn(stored: StoredSession, deps: ActorDeps) -> Result<SessionHandle, SessionError> {
     let monitors = build_monitors(&stored, &*deps.models)?;
     let id: Arc<str> = Arc::from(stored.id.as_str());
     let stats = initial_stats(&id, &monitors);
@@ -124,7 +124,7 @@ fn initial_stats(id: &str, monitors: &NamedMonitors) -> SessionStats {
                     .tests()
                     .slots()
                     .iter()
-                    .map(|s| (s.name, TestStats::new(s.dof, s.threshold)))
+                    .map(|s| (s.name.clone(), TestStats::new(s.dof, s.threshold)))
                     .collect();
                 (
                     name.clone(),
@@ -211,12 +211,9 @@ impl Actor {
         }
     }
 
-    async fn attach(&mut self) -> Result<IngestLink, ApiError> {
+    async fn attach(&mut self) -> Result<IngestLink, SessionError> {
         if self.ingest.as_ref().is_some_and(|tx| !tx.is_closed()) {
-            return Err(ApiError::Conflict(format!(
-                "session '{}' already has an ingest stream attached",
-                self.id
-            )));
+            return Err(SessionError::AlreadyAttached(self.id.to_string()));
         }
         // DESIGN §4.1: filter state starts afresh when a session's stream
         // reconnects. Tests left suspect or isolated by the previous stream
@@ -225,7 +222,7 @@ impl Actor {
         for m in &mut self.monitors {
             for slot in m.monitor.tests().slots() {
                 if slot.policy.health() != Health::Healthy {
-                    returned.push((m.name.clone(), slot.name, slot.policy.health()));
+                    returned.push((m.name.clone(), slot.name.clone(), slot.policy.health()));
                 }
             }
             m.monitor.reset();
@@ -235,7 +232,7 @@ impl Actor {
             if let Err(e) = self
                 .deps
                 .store
-                .clear_alarms(&self.id, &monitor, test, t)
+                .clear_alarms(&self.id, &monitor, &test, t)
                 .await
             {
                 tracing::error!(session = %self.id, error = %e, "could not mark alarms cleared");
@@ -243,7 +240,7 @@ impl Actor {
             let change = StateChange {
                 session: self.id.to_string(),
                 monitor,
-                test: test.to_owned(),
+                test: test.to_string(),
                 t: t.unwrap_or(0.0),
                 from,
                 to: Health::Healthy,
@@ -266,7 +263,7 @@ impl Actor {
                 continue;
             };
             for slot in m.monitor.tests().slots() {
-                if let Some(test) = monitor_stats.tests.get_mut(slot.name) {
+                if let Some(test) = monitor_stats.tests.get_mut(&slot.name) {
                     test.state = slot.policy.health();
                 }
             }
@@ -278,12 +275,13 @@ impl Actor {
         })
     }
 
-    fn find(&self, name: &str) -> Result<usize, ApiError> {
+    fn find(&self, name: &str) -> Result<usize, SessionError> {
         self.monitors
             .iter()
             .position(|m| m.name == name)
-            .ok_or_else(|| {
-                ApiError::NotFound(format!("session '{}' has no monitor '{name}'", self.id))
+            .ok_or_else(|| SessionError::NoMonitor {
+                session: self.id.to_string(),
+                monitor: name.to_owned(),
             })
     }
 
@@ -302,7 +300,7 @@ impl Actor {
                 .map(|s| {
                     let p_fa = spec.p_fa(s.dof).unwrap_or(f64::NAN);
                     (
-                        s.name.to_owned(),
+                        s.name.to_string(),
                         TestThreshold {
                             dof: s.dof,
                             threshold: s.threshold,
@@ -318,40 +316,43 @@ impl Actor {
         &mut self,
         name: &str,
         update: ThresholdUpdate,
-    ) -> Result<(ThresholdView, StoredSession), ApiError> {
+    ) -> Result<(ThresholdView, StoredSession), SessionError> {
         let index = self.find(name)?;
         if update.p_fa.is_none() && update.threshold.is_none() && update.policy.is_none() {
-            return Err(ApiError::Invalid {
+            return Err(SessionError::Invalid {
                 field: None,
-                message: "give `p_fa` or `threshold`, and/or `policy`".into(),
+                reason: "give `p_fa` or `threshold`, and/or `policy`".into(),
             });
         }
         let spec = match (update.p_fa, update.threshold) {
             (None, None) => None,
             (p, t) => Some(
                 ThresholdSpec::from_parts(p, t)
-                    .map_err(|e| ApiError::invalid("p_fa", e.to_string()))?,
+                    .map_err(|e| SessionError::invalid("p_fa", e.to_string()))?,
             ),
         };
         if let Some(policy) = update.policy {
             policy
                 .check()
-                .map_err(|e| ApiError::invalid("policy", e.to_string()))?;
+                .map_err(|e| SessionError::invalid("policy", e.to_string()))?;
         }
         let bank = self.monitors[index].monitor.tests_mut();
         if let Some(spec) = spec {
             bank.set_spec(spec)
-                .map_err(|e| ApiError::invalid("p_fa", e.to_string()))?;
+                .map_err(|e| SessionError::invalid("p_fa", e.to_string()))?;
         }
         if let Some(policy) = update.policy {
             bank.set_policy(policy);
         }
         let (spec, policy) = (bank.spec(), bank.policy());
-        let thresholds: Vec<(&'static str, f64)> =
-            bank.slots().iter().map(|s| (s.name, s.threshold)).collect();
+        let thresholds: Vec<(crate::monitor::TestName, f64)> = bank
+            .slots()
+            .iter()
+            .map(|s| (s.name.clone(), s.threshold))
+            .collect();
         if let Some(stats) = self.stats.monitors.get_mut(name) {
             for (test, threshold) in thresholds {
-                if let Some(t) = stats.tests.get_mut(test) {
+                if let Some(t) = stats.tests.get_mut(&test) {
                     t.threshold = threshold;
                 }
             }
@@ -374,7 +375,7 @@ impl Actor {
             && first.t < last
         {
             return Err(FrameError::new(
-                "time_backwards",
+                FrameErrorCode::TimeBackwards,
                 format!("t = {} goes back from {last}", first.t),
             )
             .at(0));
@@ -383,8 +384,10 @@ impl Actor {
             for m in &self.monitors {
                 m.monitor.check_epoch(&m.name, epoch).map_err(|e| {
                     let code = match e {
-                        crate::monitor::EpochError::WrongLength { .. } => "wrong_length",
-                        crate::monitor::EpochError::UnknownInput(_) => "unknown_input",
+                        crate::monitor::EpochError::WrongLength { .. } => {
+                            FrameErrorCode::WrongLength
+                        }
+                        crate::monitor::EpochError::UnknownInput(_) => FrameErrorCode::UnknownInput,
                     };
                     FrameError::new(code, e.to_string()).at(i)
                 })?;
@@ -443,7 +446,7 @@ impl Actor {
                     Ok(report) => reports.push(report),
                     Err(e) => {
                         failure = Some(FrameError::new(
-                            "numerical",
+                            FrameErrorCode::Numerical,
                             format!(
                                 "monitor '{}' could not process t = {}: {e}; this and later epochs of the frame were not used",
                                 m.name, epoch.t
@@ -510,14 +513,14 @@ impl Actor {
             monitor_stats.epochs += 1;
             let mut worst: Option<f64> = None;
             for outcome in &report.tests {
-                let Some(test) = monitor_stats.tests.get_mut(outcome.name) else {
+                let Some(test) = monitor_stats.tests.get_mut(&outcome.name) else {
                     continue;
                 };
                 let delay_s = test.record(t, outcome);
                 let ratio = outcome.statistic.test_ratio();
                 worst = Some(worst.map_or(ratio, |w| w.max(ratio)));
                 if outcome.previous != outcome.decision.health {
-                    transitions.push((index, *outcome, delay_s));
+                    transitions.push((index, outcome.clone(), delay_s));
                 }
             }
             if worst.is_some() {
@@ -562,7 +565,7 @@ impl Actor {
         let change = StateChange {
             session: self.id.to_string(),
             monitor: monitor.clone(),
-            test: outcome.name.to_owned(),
+            test: outcome.name.to_string(),
             t,
             from,
             to,
@@ -572,7 +575,7 @@ impl Actor {
             if let Err(e) = self
                 .deps
                 .store
-                .clear_alarms(&self.id, &monitor, outcome.name, Some(t))
+                .clear_alarms(&self.id, &monitor, &outcome.name, Some(t))
                 .await
             {
                 tracing::error!(session = %self.id, error = %e, "could not mark alarms cleared");
@@ -583,7 +586,7 @@ impl Actor {
                 id: 0,
                 session: self.id.to_string(),
                 monitor,
-                test: outcome.name.to_owned(),
+                test: outcome.name.to_string(),
                 state: to,
                 t,
                 statistic: outcome.statistic.value,

@@ -6,9 +6,9 @@ use std::time::{Duration, Instant};
 
 use tokio::sync::{mpsc, oneshot, watch};
 
+use super::SessionError;
 use super::stats::SessionStats;
 use crate::epoch::Epoch;
-use crate::service::error::ApiError;
 use crate::service::store::StoredSession;
 use crate::service::wire::{ThresholdUpdate, ThresholdView};
 
@@ -44,16 +44,16 @@ pub struct IngestLink {
 #[derive(Debug)]
 pub enum ControlCommand {
     /// Attach a new ingest stream: filter state starts afresh.
-    Attach(oneshot::Sender<Result<IngestLink, ApiError>>),
+    Attach(oneshot::Sender<Result<IngestLink, SessionError>>),
     /// The ingest socket of `stream` closed.
     Detach(u64),
     /// Read a monitor's thresholds.
-    GetThreshold(String, oneshot::Sender<Result<ThresholdView, ApiError>>),
+    GetThreshold(String, oneshot::Sender<Result<ThresholdView, SessionError>>),
     /// Change a monitor's threshold and/or policy.
     SetThreshold(
         String,
         ThresholdUpdate,
-        oneshot::Sender<Result<(ThresholdView, StoredSession), ApiError>>,
+        oneshot::Sender<Result<(ThresholdView, StoredSession), SessionError>>,
     ),
     /// Current statistics.
     Stats(oneshot::Sender<SessionStats>),
@@ -136,21 +136,21 @@ impl SessionHandle {
     async fn ask<T>(
         &self,
         make: impl FnOnce(oneshot::Sender<T>) -> ControlCommand,
-    ) -> Result<T, ApiError> {
+    ) -> Result<T, SessionError> {
         let (tx, rx) = oneshot::channel();
-        let gone = || ApiError::NotFound(format!("session '{}' has stopped", self.id));
+        let gone = || SessionError::Stopped(self.id.to_string());
         tokio::time::timeout(CONTROL_TIMEOUT, self.control.send(make(tx)))
             .await
-            .map_err(|_| ApiError::Unavailable(format!("session '{}' is busy", self.id)))?
+            .map_err(|_| SessionError::Busy(self.id.to_string()))?
             .map_err(|_| gone())?;
         tokio::time::timeout(CONTROL_TIMEOUT, rx)
             .await
-            .map_err(|_| ApiError::Unavailable(format!("session '{}' is busy", self.id)))?
+            .map_err(|_| SessionError::Busy(self.id.to_string()))?
             .map_err(|_| gone())
     }
 
     /// Attaches an ingest stream (409 if one is already attached).
-    pub async fn attach(&self) -> Result<IngestLink, ApiError> {
+    pub async fn attach(&self) -> Result<IngestLink, SessionError> {
         self.ask(ControlCommand::Attach).await?
     }
 
@@ -160,7 +160,7 @@ impl SessionHandle {
     }
 
     /// A monitor's thresholds and policy.
-    pub async fn threshold(&self, monitor: &str) -> Result<ThresholdView, ApiError> {
+    pub async fn threshold(&self, monitor: &str) -> Result<ThresholdView, SessionError> {
         self.ask(|tx| ControlCommand::GetThreshold(monitor.to_owned(), tx))
             .await?
     }
@@ -170,13 +170,13 @@ impl SessionHandle {
         &self,
         monitor: &str,
         update: ThresholdUpdate,
-    ) -> Result<(ThresholdView, StoredSession), ApiError> {
+    ) -> Result<(ThresholdView, StoredSession), SessionError> {
         self.ask(|tx| ControlCommand::SetThreshold(monitor.to_owned(), update, tx))
             .await?
     }
 
     /// Exact current statistics.
-    pub async fn stats(&self) -> Result<SessionStats, ApiError> {
+    pub async fn stats(&self) -> Result<SessionStats, SessionError> {
         self.ask(ControlCommand::Stats).await
     }
 

@@ -3,11 +3,13 @@
 //! `registry` maps ids to handles; `spec` validates what a user asks for.
 
 pub mod actor;
+pub mod error;
 pub mod handle;
 pub mod registry;
 pub mod spec;
 pub mod stats;
 
+pub use error::SessionError;
 pub use handle::{ControlCommand, FrameCommand, SessionHandle};
 pub use registry::Registry;
 pub use spec::{build_monitors, validate_session};

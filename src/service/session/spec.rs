@@ -1,10 +1,10 @@
 //! Validation of a session spec: ids, monitor names, limits, and each monitor's
 //! configuration (built once here so a bad model is a 422 naming its field).
 
+use super::SessionError;
 use crate::detect::ThresholdSpec;
-use crate::monitor::{self, BuildError, ModelSource, Monitor, MonitorSpec};
+use crate::monitor::{self, BuildError, ModelSource, Monitor, MonitorConfig, MonitorSpec};
 use crate::service::config::Limits;
-use crate::service::error::ApiError;
 use crate::service::store::StoredSession;
 use crate::service::wire::{CreateSession, MonitorSpecWire};
 
@@ -20,7 +20,7 @@ pub fn valid_name(s: &str) -> bool {
 pub fn monitor_spec(wire: &MonitorSpecWire) -> Result<MonitorSpec, BuildError> {
     Ok(MonitorSpec {
         kind: wire.kind,
-        config: wire.config.clone(),
+        config: MonitorConfig::parse(wire.kind, &wire.config)?,
         policy: wire.policy,
         threshold: ThresholdSpec::from_parts(wire.p_fa, wire.threshold)?,
     })
@@ -36,7 +36,7 @@ pub type NamedMonitors = Vec<(String, Box<dyn Monitor>)>;
 pub fn build_monitors(
     session: &StoredSession,
     models: &dyn ModelSource,
-) -> Result<NamedMonitors, ApiError> {
+) -> Result<NamedMonitors, SessionError> {
     session
         .monitors
         .iter()
@@ -45,48 +45,30 @@ pub fn build_monitors(
             let built = monitor_spec(wire).and_then(|spec| monitor::build(&spec, models));
             match built {
                 Ok(m) => Ok((wire.name.clone(), m)),
-                Err(e) => Err(build_error(i, e)),
+                Err(source) => Err(SessionError::Build { index: i, source }),
             }
         })
         .collect()
 }
 
-fn build_error(index: usize, e: BuildError) -> ApiError {
-    let prefix = format!("monitors[{index}]");
-    match e {
-        BuildError::Config(c) if c.field.is_empty() => {
-            ApiError::invalid(format!("{prefix}.config"), c.reason)
-        }
-        BuildError::Config(c) => {
-            ApiError::invalid(format!("{prefix}.config.{}", c.field), c.reason)
-        }
-        BuildError::Policy(p) => ApiError::invalid(format!("{prefix}.policy"), p.to_string()),
-        BuildError::Threshold(t) => ApiError::invalid(prefix, t.to_string()),
-        BuildError::Unsupported(kind) => ApiError::invalid(
-            format!("{prefix}.type"),
-            format!("monitor type '{kind}' is not implemented yet"),
-        ),
-    }
-}
-
 /// Checks a create request against the naming rules and limits.
-pub fn validate_session(req: &CreateSession, limits: &Limits) -> Result<(), ApiError> {
+pub fn validate_session(req: &CreateSession, limits: &Limits) -> Result<(), SessionError> {
     if let Some(id) = &req.id
         && !valid_name(id)
     {
-        return Err(ApiError::invalid(
+        return Err(SessionError::invalid(
             "id",
             "must be 1-64 characters of A-Z a-z 0-9 _ - .",
         ));
     }
     if req.monitors.is_empty() {
-        return Err(ApiError::invalid(
+        return Err(SessionError::invalid(
             "monitors",
             "a session needs at least one monitor",
         ));
     }
     if req.monitors.len() > limits.max_monitors_per_session {
-        return Err(ApiError::TooLarge(format!(
+        return Err(SessionError::TooLarge(format!(
             "{} monitors, the limit per session is {}",
             req.monitors.len(),
             limits.max_monitors_per_session
@@ -94,13 +76,13 @@ pub fn validate_session(req: &CreateSession, limits: &Limits) -> Result<(), ApiE
     }
     for (i, m) in req.monitors.iter().enumerate() {
         if !valid_name(&m.name) {
-            return Err(ApiError::invalid(
+            return Err(SessionError::invalid(
                 format!("monitors[{i}].name"),
                 "must be 1-64 characters of A-Z a-z 0-9 _ - .",
             ));
         }
         if req.monitors[..i].iter().any(|other| other.name == m.name) {
-            return Err(ApiError::invalid(
+            return Err(SessionError::invalid(
                 format!("monitors[{i}].name"),
                 format!("duplicate monitor name '{}'", m.name),
             ));

@@ -162,7 +162,7 @@ pub struct MonitorStats {
     /// Worst (largest) last test ratio over its tests.
     pub worst_test_ratio: Option<f64>,
     /// Per test.
-    pub tests: BTreeMap<&'static str, TestStats>,
+    pub tests: BTreeMap<crate::monitor::TestName, TestStats>,
     /// `federated` only: the latest corrected and raw INS positions; absent
     /// before the first INS epoch and for other kinds.
     #[serde(skip_serializing_if = "Option::is_none")]

@@ -177,7 +177,7 @@ pub fn run_monitor(scenario: &Scenario, spec: &MonitorSpec) -> Result<MonitorRun
         busy += started.elapsed();
         for o in &report.tests {
             run.tests
-                .entry(o.name.to_owned())
+                .entry(o.name.to_string())
                 .or_default()
                 .push(TestSample {
                     t,

@@ -150,7 +150,8 @@ pub fn run_with(
         )?;
         for &threshold in &params.thresholds {
             for policy in policies {
-                let spec = super::seed004::spec(&scenario, policy, threshold);
+                let spec = super::seed004::spec(&scenario, policy, threshold)
+                    .map_err(crate::monitor::BuildError::from)?;
                 let run = run_monitor(&scenario, &spec)?;
                 let gnss = run.tests.get("gnss").map(Vec::as_slice).unwrap_or(&[]);
                 let alarm = run.first_alarm("gnss", params.onset_s);

@@ -198,7 +198,8 @@ pub fn run_channel(
 ) -> Result<ChannelTrace, ExperimentError> {
     let spec = MonitorSpec {
         kind: MonitorKind::Channel,
-        config,
+        config: monitor::MonitorConfig::parse(MonitorKind::Channel, &config)
+            .map_err(monitor::BuildError::from)?,
         policy: PolicyConfig::Classic,
         threshold: ThresholdSpec::PFa(p_fa),
     };

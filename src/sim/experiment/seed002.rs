@@ -199,17 +199,16 @@ pub struct Seed002Result {
 }
 
 fn spec(p: &Seed002Params, with_model: bool) -> MonitorSpec {
-    let mut config = json!({
-        "feature_window": p.feature_window,
-        "wavelet": serde_json::to_value(&p.wavelet).unwrap_or(Value::Null),
-        "t_i": p.t_i,
-    });
-    if with_model {
-        config["model"] = json!(MODEL_ID);
-    }
+    let config = crate::monitor::rimu::RimuConfigWire {
+        feature_window: p.feature_window,
+        wavelet: p.wavelet.clone(),
+        t_i: p.t_i,
+        model: with_model.then(|| MODEL_ID.to_owned()),
+        ..Default::default()
+    };
     MonitorSpec {
         kind: MonitorKind::Rimu,
-        config,
+        config: crate::monitor::MonitorConfig::Rimu(config),
         policy: PolicyConfig::Classic,
         threshold: ThresholdSpec::Threshold(T_D),
     }

@@ -329,15 +329,16 @@ fn run_flight(
 fn spec(p: &Seed003Params, policy: PolicyConfig) -> MonitorSpec {
     MonitorSpec {
         kind: MonitorKind::Tacan,
-        config: json!({
-            "station": {
-                "lat": p.station.lat.to_degrees(),
-                "lon": p.station.lon.to_degrees(),
-                "h": p.station.h
-            },
-            "window": p.features.window,
-            "crest": p.features.crest,
-            "model": "seed003"
+        config: crate::monitor::MonitorConfig::Tacan(crate::monitor::tacan::TacanConfigWire {
+            station: Some(crate::monitor::tacan::StationWire {
+                lat: p.station.lat.to_degrees(),
+                lon: p.station.lon.to_degrees(),
+                h: p.station.h,
+            }),
+            window: p.features.window,
+            crest: p.features.crest,
+            model: Some("seed003".to_owned()),
+            ..Default::default()
         }),
         policy,
         threshold: ThresholdSpec::default(),

@@ -168,13 +168,20 @@ impl Seed004Result {
 
 /// The monitor spec of one case: the scenario's federated config (its sensor
 /// noise and IMU), the policy, a raw threshold.
-pub fn spec(scenario: &Scenario, policy: PolicyConfig, threshold: f64) -> MonitorSpec {
-    MonitorSpec {
+pub fn spec(
+    scenario: &Scenario,
+    policy: PolicyConfig,
+    threshold: f64,
+) -> Result<MonitorSpec, crate::monitor::ConfigError> {
+    Ok(MonitorSpec {
         kind: MonitorKind::Federated,
-        config: scenario.default_monitor_config(),
+        config: crate::monitor::MonitorConfig::parse(
+            MonitorKind::Federated,
+            &scenario.default_monitor_config(),
+        )?,
         policy,
         threshold: ThresholdSpec::Threshold(threshold),
-    }
+    })
 }
 
 /// Runs the four cases on the `ship` scenario.
@@ -199,7 +206,9 @@ pub fn run_on(
     let mut cases = Vec::new();
     for &threshold in &params.thresholds {
         for policy in policies {
-            let run = run_monitor(scenario, &spec(scenario, policy, threshold))?;
+            let spec =
+                spec(scenario, policy, threshold).map_err(crate::monitor::BuildError::from)?;
+            let run = run_monitor(scenario, &spec)?;
             let settled = || run.errors.iter().filter(|e| e.t >= params.settle_s);
             let mut case = CaseResult {
                 policy,
