@@ -760,13 +760,19 @@ pub fn render(s: &ReplaySummary) -> String {
             );
         }
     }
+    render_stats(&mut out, &s.view);
+    out
+}
+
+/// The stats part of the summary: session counts, then one row per test.
+fn render_stats(out: &mut String, view: &StatsView) {
     let _ = writeln!(
         out,
         "stats: {} epochs processed, {} frames, {} refused, last t {}",
-        thousands(s.view.epochs),
-        thousands(s.view.frames),
-        s.view.frame_errors,
-        num(s.view.last_t, 2)
+        thousands(view.epochs),
+        thousands(view.frames),
+        view.frame_errors,
+        num(view.last_t, 2)
     );
     let _ = writeln!(
         out,
@@ -783,7 +789,7 @@ pub fn render(s: &ReplaySummary) -> String {
         "healthy/suspect/isolated s",
         "delay"
     );
-    for (name, m) in &s.view.monitors {
+    for (name, m) in &view.monitors {
         for (test, t) in &m.tests {
             let time = &t.time_in_state_s;
             let _ = writeln!(
@@ -808,7 +814,6 @@ pub fn render(s: &ReplaySummary) -> String {
             );
         }
     }
-    out
 }
 
 #[cfg(test)]
