@@ -14,6 +14,9 @@
 use std::time::Duration;
 
 use futures_util::{SinkExt, StreamExt};
+use navguard::detect::PolicyConfig;
+use navguard::monitor::MonitorKind;
+use navguard::service::wire::{CreateSession, MonitorSpecWire};
 use navguard::service::{self, ServiceConfig};
 use serde_json::{Value, json};
 use tokio::net::{TcpSocket, TcpStream};
@@ -31,17 +34,34 @@ const STEADY_FRAMES: usize = 40;
 /// Longest wait for anything: a deadlock fails the test instead of hanging it.
 const PATIENCE: Duration = Duration::from_secs(60);
 
-fn linear_session(id: &str) -> Value {
+/// The session body, built through the service's own wire type.
+fn linear_session(id: &str) -> CreateSession {
+    CreateSession {
+        id: Some(id.to_owned()),
+        monitors: vec![MonitorSpecWire {
+            name: "track".into(),
+            kind: MonitorKind::Linear,
+            config: linear_config(),
+            policy: PolicyConfig::Classic,
+            p_fa: None,
+            threshold: None,
+        }],
+        echo: true,
+    }
+}
+
+/// A 2-D constant-velocity model at 10 Hz seeing x and y.
+fn linear_config() -> Value {
     let q = 0.005;
     let (a, b) = (q * 0.01 / 3.0, q * 0.1 / 2.0);
-    json!({"id": id, "echo": true, "monitors": [{"name": "track", "type": "linear", "config": {
+    json!({
         "f": [[1, 0.1, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0.1], [0, 0, 0, 1]],
         "h": [[1, 0, 0, 0], [0, 0, 1, 0]],
         "q": [[a, b, 0, 0], [b, q, 0, 0], [0, 0, a, b], [0, 0, b, q]],
         "r": [[1.0, 0.0], [0.0, 1.0]],
         "x0": [0, 1, 0, -1],
         "p0": [[5, 0, 0, 0], [0, 5, 0, 0], [0, 0, 5, 0], [0, 0, 0, 5]]
-    }}]})
+    })
 }
 
 /// Epoch `k` of a target moving at (1, −1) m/s, seen without noise at 10 Hz.

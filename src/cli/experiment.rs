@@ -5,6 +5,8 @@
 
 use std::path::{Path, PathBuf};
 
+use super::spinner;
+
 use anyhow::{Context, bail};
 use navguard::sim::experiment::{ramp, seed000, seed001, seed002, seed003, seed004};
 
@@ -157,6 +159,225 @@ pub struct RampArgs {
     pub window: f64,
 }
 
+/// What every experiment command does, so [`run`] drives them all alike:
+/// build the library parameters from the flags, run in-process, print the
+/// table, write the figures, then apply the command's `--check`, if any.
+trait Experiment {
+    /// The library's result.
+    type Output;
+    /// Name for errors and the progress spinner (`seed 004`).
+    const TITLE: &'static str;
+    /// Runs the library experiment with the flags' parameters.
+    fn run(&self) -> anyhow::Result<Self::Output>;
+    /// The table.
+    fn render(output: &Self::Output) -> String;
+    /// The figures, as (file name, SVG text).
+    fn plots(_output: &Self::Output) -> Vec<(String, String)> {
+        Vec::new()
+    }
+    /// Where the figures go (`None`: the experiment draws none).
+    fn out_dir(&self) -> Option<&Path> {
+        None
+    }
+    /// `--check`: an error when the result misses the paper's claim.
+    fn check(&self, _output: &Self::Output) -> anyhow::Result<()> {
+        Ok(())
+    }
+}
+
+impl Experiment for Seed004Args {
+    type Output = seed004::Seed004Result;
+    const TITLE: &'static str = "seed 004";
+
+    fn run(&self) -> anyhow::Result<Self::Output> {
+        let params = seed004::Seed004Params {
+            seed: self.seed,
+            duration_s: self.duration,
+            settle_s: self.settle,
+            ..seed004::Seed004Params::default()
+        };
+        Ok(seed004::run(params)?)
+    }
+
+    fn render(output: &Self::Output) -> String {
+        seed004::render(output)
+    }
+
+    fn plots(output: &Self::Output) -> Vec<(String, String)> {
+        seed004::plots(output)
+    }
+
+    fn out_dir(&self) -> Option<&Path> {
+        Some(&self.out_dir)
+    }
+
+    fn check(&self, output: &Self::Output) -> anyhow::Result<()> {
+        if self.check && !output.counters_beat_classic(20.0) {
+            bail!("the counter policy does not beat the classic one at threshold 20");
+        }
+        Ok(())
+    }
+}
+
+impl Experiment for Seed002Args {
+    type Output = seed002::Seed002Result;
+    const TITLE: &'static str = "seed 002";
+
+    fn run(&self) -> anyhow::Result<Self::Output> {
+        let params = seed002::Seed002Params {
+            seed: self.seed,
+            runs: self.runs,
+            climb_deg: self.climb_deg,
+            ..seed002::Seed002Params::default()
+        };
+        Ok(seed002::run(params)?)
+    }
+
+    fn render(output: &Self::Output) -> String {
+        seed002::render(output)
+    }
+
+    fn plots(output: &Self::Output) -> Vec<(String, String)> {
+        seed002::plots(output)
+    }
+
+    fn out_dir(&self) -> Option<&Path> {
+        Some(&self.out_dir)
+    }
+
+    fn check(&self, output: &Self::Output) -> anyhow::Result<()> {
+        let steady_bias = output.rows.iter().filter(|r| {
+            r.scenario == "steady" && matches!(r.fault, navguard::sim::rimu::GyroFaultKind::Bias(_))
+        });
+        let (_, isolated, _, runs) = seed002::totals(steady_bias);
+        if self.check && isolated < runs {
+            bail!("steady bias faults isolated correctly in {isolated}/{runs} runs");
+        }
+        Ok(())
+    }
+}
+
+impl Experiment for Seed003Args {
+    type Output = seed003::Seed003Result;
+    const TITLE: &'static str = "seed 003";
+
+    fn run(&self) -> anyhow::Result<Self::Output> {
+        let model_params = match &self.model_params {
+            Some(text) => serde_json::from_str(text).context("--model-params")?,
+            None => seed003::default_model_params(),
+        };
+        let params = seed003::Seed003Params {
+            seed: self.seed,
+            noise_vars_m2: self.noise.clone(),
+            train_flights: self.train_flights,
+            train_duration_s: self.train_duration,
+            test_flights: self.test_flights,
+            test_duration_s: self.test_duration,
+            jumps: self.jumps,
+            train_samples: self.train_samples,
+            features: navguard::features::tacan::TacanFeatureParams {
+                window: self.window,
+                crest: self.crest,
+            },
+            model_params,
+            ..seed003::Seed003Params::default()
+        };
+        Ok(seed003::run(params)?)
+    }
+
+    fn render(output: &Self::Output) -> String {
+        seed003::render(output)
+    }
+
+    fn plots(output: &Self::Output) -> Vec<(String, String)> {
+        seed003::plots(output)
+    }
+
+    fn out_dir(&self) -> Option<&Path> {
+        Some(&self.out_dir)
+    }
+
+    fn check(&self, output: &Self::Output) -> anyhow::Result<()> {
+        if self.check && output.levels.iter().any(|l| l.mean_detection() < 0.99) {
+            bail!("a noise level's mean detection probability is below 99 %");
+        }
+        Ok(())
+    }
+}
+
+impl Experiment for RampArgs {
+    type Output = ramp::RampResult;
+    const TITLE: &'static str = "ramp";
+
+    fn run(&self) -> anyhow::Result<Self::Output> {
+        let params = ramp::RampParams {
+            seed: self.seed,
+            onset_s: self.onset,
+            window_s: self.window,
+            ..ramp::RampParams::default()
+        };
+        Ok(ramp::run(params)?)
+    }
+
+    fn render(output: &Self::Output) -> String {
+        ramp::render(output)
+    }
+}
+
+impl Experiment for Seed000Args {
+    type Output = seed000::Seed000Result;
+    const TITLE: &'static str = "seed 000";
+
+    fn run(&self) -> anyhow::Result<Self::Output> {
+        let params = seed000::Seed000Params {
+            seed: self.seed,
+            runs: self.runs,
+            threads: self.threads,
+            ..seed000::Seed000Params::default()
+        };
+        Ok(seed000::run(params)?)
+    }
+
+    fn render(output: &Self::Output) -> String {
+        seed000::render(output)
+    }
+
+    fn plots(output: &Self::Output) -> Vec<(String, String)> {
+        seed000::plots(output)
+    }
+
+    fn out_dir(&self) -> Option<&Path> {
+        Some(&self.out_dir)
+    }
+}
+
+impl Experiment for Seed001Args {
+    type Output = seed001::Seed001Result;
+    const TITLE: &'static str = "seed 001";
+
+    fn run(&self) -> anyhow::Result<Self::Output> {
+        let params = seed001::Seed001Params {
+            seed: self.seed,
+            window: self.window,
+            reps: self.reps,
+            ..seed001::Seed001Params::default()
+        };
+        Ok(seed001::run(params)?)
+    }
+
+    fn render(output: &Self::Output) -> String {
+        seed001::render(output)
+    }
+
+    fn plots(output: &Self::Output) -> Vec<(String, String)> {
+        seed001::plots(output)
+    }
+
+    fn out_dir(&self) -> Option<&Path> {
+        Some(&self.out_dir)
+    }
+}
+
 fn write_all(dir: &Path, files: &[(String, String)]) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     for (name, text) in files {
@@ -166,137 +387,35 @@ fn write_all(dir: &Path, files: &[(String, String)]) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Runs one experiment (a spinner on stderr while it works), prints its
+/// table, writes its figures and applies its check.
+fn execute<E: Experiment>(experiment: &E) -> anyhow::Result<()> {
+    let spinner = spinner(&format!("running the {} experiment", E::TITLE), true);
+    let output = experiment.run();
+    spinner.finish_and_clear();
+    let output = output.with_context(|| format!("{} experiment", E::TITLE))?;
+    print!("{}", E::render(&output));
+    if let Some(dir) = experiment.out_dir() {
+        let plots = E::plots(&output);
+        write_all(dir, &plots)?;
+        let noun = if plots.len() == 1 {
+            "figure"
+        } else {
+            "figures"
+        };
+        println!("\nwrote {} {noun} to {}", plots.len(), dir.display());
+    }
+    experiment.check(&output)
+}
+
 /// Runs the command.
 pub fn run(command: ExperimentCommand) -> anyhow::Result<()> {
     match command {
-        ExperimentCommand::Seed004(args) => {
-            let params = seed004::Seed004Params {
-                seed: args.seed,
-                duration_s: args.duration,
-                settle_s: args.settle,
-                ..seed004::Seed004Params::default()
-            };
-            let result = seed004::run(params).context("seed 004 experiment")?;
-            print!("{}", seed004::render(&result));
-            let plots = seed004::plots(&result);
-            write_all(&args.out_dir, &plots)?;
-            println!(
-                "\nwrote {} figures to {}",
-                plots.len(),
-                args.out_dir.display()
-            );
-            if args.check && !result.counters_beat_classic(20.0) {
-                bail!("the counter policy does not beat the classic one at threshold 20");
-            }
-            Ok(())
-        }
-        ExperimentCommand::Seed002(args) => {
-            let params = seed002::Seed002Params {
-                seed: args.seed,
-                runs: args.runs,
-                climb_deg: args.climb_deg,
-                ..seed002::Seed002Params::default()
-            };
-            let result = seed002::run(params).context("seed 002 experiment")?;
-            print!("{}", seed002::render(&result));
-            let plots = seed002::plots(&result);
-            write_all(&args.out_dir, &plots)?;
-            println!(
-                "\nwrote {} figure(s) to {}",
-                plots.len(),
-                args.out_dir.display()
-            );
-            let steady_bias = result.rows.iter().filter(|r| {
-                r.scenario == "steady"
-                    && matches!(r.fault, navguard::sim::rimu::GyroFaultKind::Bias(_))
-            });
-            let (_, isolated, _, runs) = seed002::totals(steady_bias);
-            if args.check && isolated < runs {
-                bail!("steady bias faults isolated correctly in {isolated}/{runs} runs");
-            }
-            Ok(())
-        }
-        ExperimentCommand::Seed003(args) => {
-            let model_params = match &args.model_params {
-                Some(text) => serde_json::from_str(text).context("--model-params")?,
-                None => seed003::default_model_params(),
-            };
-            let params = seed003::Seed003Params {
-                seed: args.seed,
-                noise_vars_m2: args.noise,
-                train_flights: args.train_flights,
-                train_duration_s: args.train_duration,
-                test_flights: args.test_flights,
-                test_duration_s: args.test_duration,
-                jumps: args.jumps,
-                train_samples: args.train_samples,
-                features: navguard::features::tacan::TacanFeatureParams {
-                    window: args.window,
-                    crest: args.crest,
-                },
-                model_params,
-                ..seed003::Seed003Params::default()
-            };
-            let result = seed003::run(params).context("seed 003 experiment")?;
-            print!("{}", seed003::render(&result));
-            let plots = seed003::plots(&result);
-            write_all(&args.out_dir, &plots)?;
-            println!(
-                "\nwrote {} figures to {}",
-                plots.len(),
-                args.out_dir.display()
-            );
-            if args.check && result.levels.iter().any(|l| l.mean_detection() < 0.99) {
-                bail!("a noise level's mean detection probability is below 99 %");
-            }
-            Ok(())
-        }
-        ExperimentCommand::Ramp(args) => {
-            let params = ramp::RampParams {
-                seed: args.seed,
-                onset_s: args.onset,
-                window_s: args.window,
-                ..ramp::RampParams::default()
-            };
-            let result = ramp::run(params).context("ramp experiment")?;
-            print!("{}", ramp::render(&result));
-            Ok(())
-        }
-        ExperimentCommand::Seed000(args) => {
-            let params = seed000::Seed000Params {
-                seed: args.seed,
-                runs: args.runs,
-                threads: args.threads,
-                ..seed000::Seed000Params::default()
-            };
-            let result = seed000::run(params).context("seed 000 experiment")?;
-            print!("{}", seed000::render(&result));
-            let plots = seed000::plots(&result);
-            write_all(&args.out_dir, &plots)?;
-            println!(
-                "\nwrote {} figures to {}",
-                plots.len(),
-                args.out_dir.display()
-            );
-            Ok(())
-        }
-        ExperimentCommand::Seed001(args) => {
-            let params = seed001::Seed001Params {
-                seed: args.seed,
-                window: args.window,
-                reps: args.reps,
-                ..seed001::Seed001Params::default()
-            };
-            let result = seed001::run(params).context("seed 001 experiment")?;
-            print!("{}", seed001::render(&result));
-            let plots = seed001::plots(&result);
-            write_all(&args.out_dir, &plots)?;
-            println!(
-                "\nwrote {} figures to {}",
-                plots.len(),
-                args.out_dir.display()
-            );
-            Ok(())
-        }
+        ExperimentCommand::Seed004(args) => execute(&args),
+        ExperimentCommand::Seed002(args) => execute(&args),
+        ExperimentCommand::Seed003(args) => execute(&args),
+        ExperimentCommand::Ramp(args) => execute(&args),
+        ExperimentCommand::Seed000(args) => execute(&args),
+        ExperimentCommand::Seed001(args) => execute(&args),
     }
 }

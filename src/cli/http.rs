@@ -93,13 +93,19 @@ impl Endpoint {
         format!("ws://{}{}{path}", self.authority(), self.prefix)
     }
 
-    /// Sends one request and returns the status and body. Connection
-    /// failures and timeouts are errors that name the server.
-    pub async fn request(
+    /// Sends a bodiless request (`GET`, `DELETE`) and returns the status and body.
+    pub async fn call(&self, method: &str, path: &str) -> anyhow::Result<(u16, String)> {
+        self.request::<()>(method, path, None).await
+    }
+
+    /// Sends one request with an optional JSON body (one of the service's own
+    /// wire types) and returns the status and body. Connection failures and
+    /// timeouts are errors that name the server.
+    pub async fn request<B: serde::Serialize + ?Sized>(
         &self,
         method: &str,
         path: &str,
-        body: Option<&serde_json::Value>,
+        body: Option<&B>,
     ) -> anyhow::Result<(u16, String)> {
         let url = format!("{}{path}", self.http_base());
         let method = reqwest::Method::from_bytes(method.as_bytes())
@@ -207,5 +213,70 @@ mod tests {
         assert_eq!(e.http_base(), "http://[::1]:9/nav");
         assert!(Endpoint::parse("wss://x:1", None).is_err());
         assert!(Endpoint::parse("127.0.0.1:8080", None).is_err());
+    }
+}
+
+/// A message the server sends on an ingest socket, read through the service's
+/// own wire types (so a change to them breaks this at compile time).
+#[derive(Debug, Clone, serde::Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum ServerEvent {
+    /// A test moved into suspect or isolated.
+    Alarm(navguard::service::wire::AlarmRecord),
+    /// A test changed health (the tools only count these; the body is parsed
+    /// so that a change to the service's type is caught here).
+    #[allow(dead_code)]
+    State(navguard::service::wire::StateChange),
+    /// A frame was refused.
+    Error(RefusedFrame),
+    /// One epoch's result (`echo` sessions).
+    Result,
+    /// Anything else (`ready`, `stats`, …).
+    #[serde(other)]
+    Other,
+}
+
+/// The `error` event's fields, owned (the service's `ErrorEvent` borrows).
+#[derive(Debug, Clone, serde::Deserialize)]
+pub struct RefusedFrame {
+    /// Stable code (`time_backwards`, `numerical`, …).
+    pub code: String,
+    /// Reason.
+    pub message: String,
+}
+
+/// The session's `/stats`, read through the service's own per-test type.
+/// `MonitorStats` keys its tests by `&'static str`, which cannot be read back
+/// from an owned body, so the session and monitor levels are spelt here with
+/// the fields the tools use.
+#[derive(Debug, Clone, Default, serde::Deserialize)]
+pub struct StatsView {
+    /// Frames accepted since the session started.
+    pub frames: u64,
+    /// Epochs processed.
+    pub epochs: u64,
+    /// Frames refused.
+    pub frame_errors: u64,
+    /// Time of the last epoch.
+    pub last_t: Option<f64>,
+    /// Per monitor.
+    pub monitors: std::collections::BTreeMap<String, MonitorStatsView>,
+}
+
+/// One monitor of a [`StatsView`].
+#[derive(Debug, Clone, Default, serde::Deserialize)]
+pub struct MonitorStatsView {
+    /// Per test, as the service's `TestStats`.
+    pub tests: std::collections::BTreeMap<String, navguard::service::session::stats::TestStats>,
+}
+
+impl StatsView {
+    /// Alarms counted, summed over every monitor and test.
+    pub fn alarms(&self) -> u64 {
+        self.monitors
+            .values()
+            .flat_map(|m| m.tests.values())
+            .map(|t| t.alarms)
+            .sum()
     }
 }

@@ -20,8 +20,10 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use futures_util::StreamExt;
+use navguard::detect::PolicyConfig;
 use navguard::epoch::Aid;
-use navguard::service::wire::epoch_to_wire;
+use navguard::monitor::MonitorKind;
+use navguard::service::wire::{CreateSession, MonitorSpecWire, epoch_to_wire};
 use navguard::sim::{self, Channel, Fault, FaultKind};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
@@ -31,7 +33,7 @@ use tokio::time::Instant;
 use tokio_tungstenite::tungstenite::Utf8Bytes;
 
 use super::http::Endpoint;
-use super::progress::thousands;
+use super::{progress_bar, thousands};
 
 mod report;
 mod stream;
@@ -143,7 +145,7 @@ struct Workload {
     /// `t` of every epoch of the pass.
     times: Vec<f64>,
     /// `POST /api/v1/sessions` body without its `id`.
-    spec: Value,
+    spec: CreateSession,
 }
 
 impl Workload {
@@ -197,7 +199,7 @@ fn federated_lines(
     epochs: usize,
     seed: u64,
     fault_at: Option<f64>,
-) -> anyhow::Result<(Vec<(f64, String)>, Value)> {
+) -> anyhow::Result<(Vec<(f64, String)>, CreateSession)> {
     let faults = fault_at
         .map(|start_s| {
             vec![Fault {
@@ -221,17 +223,38 @@ fn federated_lines(
                 .map_err(|e| anyhow::anyhow!("serialising a simulated epoch: {}", e.message))
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
-    let monitor = json!({
-        "name": "federated",
-        "type": "federated",
-        "config": scenario.default_monitor_config(),
-        "policy": {"kind": "counters", "n1": 10, "n2": 5},
-    });
-    Ok((lines, json!({"echo": true, "monitors": [monitor]})))
+    let config = federated_config(&scenario);
+    Ok((lines, echo_session(MonitorKind::Federated, config)))
+}
+
+/// The `federated` config for the simulated ship: its aids, IMU and initial errors.
+fn federated_config(scenario: &sim::Scenario) -> Value {
+    scenario.default_monitor_config()
+}
+
+/// A session body (no id) with one monitor of `kind`, named after it, under
+/// the counters policy (N1 10, N2 5), echoing every result.
+fn echo_session(kind: MonitorKind, config: Value) -> CreateSession {
+    CreateSession {
+        id: None,
+        monitors: vec![MonitorSpecWire {
+            name: kind.as_str().to_owned(),
+            kind,
+            config,
+            policy: PolicyConfig::Counters { n1: 10, n2: 5 },
+            p_fa: None,
+            threshold: None,
+        }],
+        echo: true,
+    }
 }
 
 /// A constant-velocity target seen in x and y with correlated noise, 10 Hz.
-fn linear_lines(epochs: usize, seed: u64, fault_at: Option<f64>) -> (Vec<(f64, String)>, Value) {
+fn linear_lines(
+    epochs: usize,
+    seed: u64,
+    fault_at: Option<f64>,
+) -> (Vec<(f64, String)>, CreateSession) {
     let mut rng = StdRng::seed_from_u64(seed);
     let noise = Normal::new(0.0, 1.0).expect("unit normal");
     let dt = 0.1;
@@ -248,24 +271,27 @@ fn linear_lines(epochs: usize, seed: u64, fault_at: Option<f64>) -> (Vec<(f64, S
             (t, format!(r#"{{"t":{t},"z":[{x},{y}]}}"#))
         })
         .collect();
+    (lines, echo_session(MonitorKind::Linear, linear_config(dt)))
+}
+
+/// The `linear` config: a 2-D constant-velocity model sampled every `dt` s,
+/// seeing x and y with variances 1 and 1.96.
+fn linear_config(dt: f64) -> Value {
     let q = 0.05 * dt;
     let (a, b) = (q * dt * dt / 3.0, q * dt / 2.0);
-    let config = json!({
+    json!({
         "f": [[1, dt, 0, 0], [0, 1, 0, 0], [0, 0, 1, dt], [0, 0, 0, 1]],
         "h": [[1, 0, 0, 0], [0, 0, 1, 0]],
         "q": [[a, b, 0, 0], [b, q, 0, 0], [0, 0, a, b], [0, 0, b, q]],
         "r": [[1.0, 0.0], [0.0, 1.96]],
         "x0": [0, 1, 0, -1],
         "p0": [[5, 0, 0, 0], [0, 5, 0, 0], [0, 0, 5, 0], [0, 0, 0, 5]],
-    });
-    let monitor = json!({"name": "linear", "type": "linear", "config": config,
-        "policy": {"kind": "counters", "n1": 10, "n2": 5}});
-    (lines, json!({"echo": true, "monitors": [monitor]}))
+    })
 }
 
 /// Reads `process_resident_memory_bytes` from the server's `/metrics`.
 async fn server_rss(endpoint: &Endpoint) -> anyhow::Result<Option<u64>> {
-    let (status, body) = endpoint.request("GET", "/metrics", None).await?;
+    let (status, body) = endpoint.call("GET", "/metrics").await?;
     if status != 200 {
         bail!("GET /metrics: HTTP {status}");
     }
@@ -287,9 +313,11 @@ where
         .await
 }
 
-async fn create_session(endpoint: &Endpoint, spec: &Value, id: &str) -> anyhow::Result<()> {
-    let mut body = spec.clone();
-    body["id"] = json!(id);
+async fn create_session(endpoint: &Endpoint, spec: &CreateSession, id: &str) -> anyhow::Result<()> {
+    let body = CreateSession {
+        id: Some(id.to_owned()),
+        ..spec.clone()
+    };
     let (status, text) = endpoint
         .request("POST", "/api/v1/sessions", Some(&body))
         .await?;
@@ -303,7 +331,7 @@ async fn create_session(endpoint: &Endpoint, spec: &Value, id: &str) -> anyhow::
 async fn delete_sessions(endpoint: &Endpoint, ids: Vec<String>) -> usize {
     let results = each_concurrently(ids, |id| async move {
         let (status, text) = endpoint
-            .request("DELETE", &format!("/api/v1/sessions/{id}"), None)
+            .call("DELETE", &format!("/api/v1/sessions/{id}"))
             .await?;
         match status {
             204 | 404 => Ok(()),
@@ -349,7 +377,25 @@ pub async fn run(args: LoadgenArgs) -> anyhow::Result<()> {
     }
     tokio::time::sleep(Duration::from_secs_f64(args.settle.max(0.0))).await;
     let rss_idle = server_rss(&endpoint).await?;
+    let progress = progress_bar(
+        (args.duration * 10.0).ceil() as u64,
+        "[{bar:24}] {percent:>3}% {elapsed} of the run  {msg}",
+        !args.json,
+    );
+    progress.set_message(format!("{} session(s)", args.sessions));
+    let ticker = {
+        let progress = progress.clone();
+        tokio::spawn(async move {
+            let start = Instant::now();
+            loop {
+                progress.set_position((start.elapsed().as_secs_f64() * 10.0) as u64);
+                tokio::time::sleep(Duration::from_millis(100)).await;
+            }
+        })
+    };
     let outcome = stream(&args, &endpoint, &work, &ids).await;
+    ticker.abort();
+    progress.finish_and_clear();
     let rss_loaded = server_rss(&endpoint).await.ok().flatten();
     let undeleted = delete_sessions(&endpoint, ids).await;
     if undeleted > 0 {
@@ -509,7 +555,11 @@ mod tests {
         assert_eq!(first.as_array().map(Vec::len), Some(3));
         assert_eq!(first[1]["t"], json!(0.1));
         assert_eq!(w.ranges[20], 60..63);
-        assert_eq!(w.spec["monitors"][0]["type"], "linear");
+        assert_eq!(w.spec.monitors[0].kind, MonitorKind::Linear);
+        assert_eq!(
+            w.spec.monitors[0].config["r"],
+            json!([[1.0, 0.0], [0.0, 1.96]])
+        );
     }
 
     #[test]
@@ -519,7 +569,11 @@ mod tests {
         assert_eq!(w.epochs(), 3);
         let first: Value = serde_json::from_str(w.frames[0].as_str()).unwrap();
         assert!(first["ins"].is_object() && first["gnss"].is_object());
-        assert_eq!(w.spec["echo"], json!(true));
-        assert_eq!(w.spec["monitors"][0]["type"], "federated");
+        assert!(w.spec.echo);
+        assert_eq!(w.spec.monitors[0].kind, MonitorKind::Federated);
+        assert_eq!(
+            w.spec.monitors[0].policy,
+            PolicyConfig::Counters { n1: 10, n2: 5 }
+        );
     }
 }

@@ -19,16 +19,21 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use futures_util::stream::{SplitSink, SplitStream};
 use futures_util::{SinkExt, StreamExt};
+use indicatif::ProgressBar;
+use navguard::detect::PolicyConfig;
+use navguard::monitor::MonitorKind;
+use navguard::service::session::spec::valid_name;
+use navguard::service::wire::{CreateSession, MonitorSpecWire};
 use serde::de::IgnoredAny;
 use serde::{Deserialize, Serialize};
-use serde_json::{Value, json};
+use serde_json::Value;
 use tokio::io::AsyncBufReadExt;
 use tokio::time::Instant;
 use tokio_tungstenite::tungstenite::protocol::CloseFrame;
 use tokio_tungstenite::tungstenite::{self, Message};
 
-use super::http::{Endpoint, Socket};
-use super::progress::{Progress, thousands};
+use super::http::{Endpoint, ServerEvent, Socket, StatsView};
+use super::{progress_bar, thousands};
 
 /// Longest the server may go without processing a frame while we wait for
 /// the last ones.
@@ -212,12 +217,6 @@ pub fn scan(path: &Path) -> anyhow::Result<FileScan> {
     Ok(out)
 }
 
-fn valid_name(s: &str) -> bool {
-    (1..=64).contains(&s.len())
-        && s.bytes()
-            .all(|b| b.is_ascii_alphanumeric() || matches!(b, b'_' | b'-' | b'.'))
-}
-
 /// Reads inline JSON or `@file`.
 fn json_arg(text: &str, what: &str) -> anyhow::Result<Value> {
     let (source, body) = match text.strip_prefix('@') {
@@ -231,23 +230,22 @@ fn json_arg(text: &str, what: &str) -> anyhow::Result<Value> {
 }
 
 /// The `POST /api/v1/sessions` body for a new session (see `SPEC_HELP`).
-pub fn session_body(args: &ReplayArgs, scan: &FileScan) -> anyhow::Result<Value> {
+pub fn session_body(args: &ReplayArgs, scan: &FileScan) -> anyhow::Result<CreateSession> {
     if let Some(path) = &args.session_spec {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("reading --session-spec {}", path.display()))?;
-        let mut body: Value = serde_json::from_str(&text)
-            .with_context(|| format!("--session-spec {} is not JSON", path.display()))?;
-        let object = body
-            .as_object_mut()
-            .context("--session-spec must hold a JSON object")?;
-        match object.get("id").and_then(Value::as_str) {
-            Some(id) if id != args.session => bail!(
+        let mut body: CreateSession = serde_json::from_str(&text).with_context(|| {
+            format!(
+                "--session-spec {} is not a POST /api/v1/sessions body",
+                path.display()
+            )
+        })?;
+        match &body.id {
+            Some(id) if *id != args.session => bail!(
                 "--session-spec names session '{id}' but --session is '{}'",
                 args.session
             ),
-            _ => {
-                object.insert("id".into(), json!(args.session));
-            }
+            _ => body.id = Some(args.session.clone()),
         }
         return Ok(body);
     }
@@ -264,32 +262,45 @@ pub fn session_body(args: &ReplayArgs, scan: &FileScan) -> anyhow::Result<Value>
                         "the file has `ins` blocks but no gnss, dvl or cns: nothing to aid the INS with"
                     );
                 }
-                json!({ "aids": aids })
+                federated_config(&aids)
             }
         };
-        ("federated", config)
+        (MonitorKind::Federated, config)
     } else if scan.z {
         let text = args.monitor_config.as_deref().context(
             "the file has `z` blocks: a `linear` monitor needs --monitor-config (its f, h, q, r, x0, p0)",
         )?;
-        ("linear", json_arg(text, "--monitor-config")?)
+        (MonitorKind::Linear, json_arg(text, "--monitor-config")?)
     } else {
         bail!(
             "cannot tell which monitor the file needs (no `ins` and no `z` blocks): give --session-spec"
         );
     };
     let policy = match args.policy.unwrap_or(PolicyArg::Counters) {
-        PolicyArg::Classic => json!({"kind": "classic"}),
-        PolicyArg::Counters => json!({"kind": "counters", "n1": args.n1, "n2": args.n2}),
+        PolicyArg::Classic => PolicyConfig::Classic,
+        PolicyArg::Counters => PolicyConfig::Counters {
+            n1: args.n1,
+            n2: args.n2,
+        },
     };
-    let mut monitor = json!({"name": kind, "type": kind, "config": config, "policy": policy});
-    if let Some(t) = args.threshold {
-        monitor["threshold"] = json!(t);
-    }
-    if let Some(p) = args.p_fa {
-        monitor["p_fa"] = json!(p);
-    }
-    Ok(json!({"id": args.session, "monitors": [monitor]}))
+    let monitor = MonitorSpecWire {
+        name: kind.as_str().to_owned(),
+        kind,
+        config,
+        policy,
+        p_fa: args.p_fa,
+        threshold: args.threshold,
+    };
+    Ok(CreateSession {
+        id: Some(args.session.clone()),
+        monitors: vec![monitor],
+        echo: false,
+    })
+}
+
+/// The `federated` config with these aids and every other field at its default.
+fn federated_config(aids: &[&str]) -> Value {
+    serde_json::json!({ "aids": aids })
 }
 
 /// Alarms of one monitor, test and state.
@@ -339,25 +350,24 @@ struct Tally {
 
 impl Tally {
     fn take(&mut self, text: &str) {
-        let Ok(v) = serde_json::from_str::<Value>(text) else {
+        let Ok(event) = serde_json::from_str::<ServerEvent>(text) else {
             return;
         };
-        let s = |k: &str| v[k].as_str().unwrap_or("").to_owned();
-        match v["type"].as_str() {
-            Some("error") => {
-                let code = s("code");
+        match event {
+            ServerEvent::Error(e) => {
                 self.error_total += 1;
-                if code == "numerical" {
+                if e.code == "numerical" {
                     self.numerical += 1;
                 }
                 if self.error_samples.len() < MAX_ERROR_SAMPLES {
-                    self.error_samples.push(format!("{code}: {}", s("message")));
+                    self.error_samples
+                        .push(format!("{}: {}", e.code, e.message));
                 }
-                *self.errors.entry(code).or_default() += 1;
+                *self.errors.entry(e.code).or_default() += 1;
             }
-            Some("alarm") => {
-                let t = v["t"].as_f64().unwrap_or(f64::NAN);
-                let key = (s("monitor"), s("test"), s("state"));
+            ServerEvent::Alarm(alarm) => {
+                let t = alarm.t;
+                let key = (alarm.monitor, alarm.test, alarm.state.as_str().to_owned());
                 self.alarm_total += 1;
                 if self.alarm_events.len() < MAX_ALARM_EVENTS {
                     self.alarm_events.push(AlarmEvent {
@@ -378,9 +388,9 @@ impl Tally {
                 group.count += 1;
                 group.last_t = t;
             }
-            Some("state") => self.states += 1,
-            Some("result") => self.results += 1,
-            _ => {}
+            ServerEvent::State(_) => self.states += 1,
+            ServerEvent::Result => self.results += 1,
+            ServerEvent::Other => {}
         }
     }
 }
@@ -408,8 +418,11 @@ pub struct ReplaySummary {
     pub alarms: Vec<AlarmEvent>,
     /// State-change events received.
     pub state_changes: u64,
-    /// The session's `/stats` at the end.
+    /// The session's `/stats` at the end, as the server wrote it.
     pub stats: Value,
+    /// The same, read through the service's types.
+    #[serde(skip)]
+    pub view: StatsView,
 }
 
 /// Runs the command.
@@ -421,23 +434,26 @@ pub async fn run(args: ReplayArgs) -> anyhow::Result<()> {
     let endpoint = Endpoint::parse(&args.url, args.token.clone())?;
     let path = format!("/api/v1/sessions/{}", args.session);
     let created = ensure_session(&endpoint, &args, &scan, &path).await?;
-    let baseline = stats(&endpoint, &path).await?;
+    let baseline = stats_view(&stats(&endpoint, &path).await?)?;
     let socket = endpoint.connect(&format!("{path}/ingest")).await?;
     let (sink, stream) = socket.split();
     let tally = Arc::new(Mutex::new(Tally::default()));
     let reader = tokio::spawn(read_events(stream, tally.clone()));
-    let mut progress = Progress::new(scan.last_t - scan.first_t, scan.epochs, !args.quiet);
+    let progress = progress_bar(
+        scan.epochs,
+        "[{bar:24}] {percent:>3}% {pos}/{len} epochs  {per_sec}  {msg}",
+        !args.quiet,
+    );
     let started = Instant::now();
-    let outcome = stream_file(&args, &scan, sink, &tally, &mut progress).await;
+    let outcome = stream_file(&args, &scan, sink, &tally, &progress).await;
+    progress.finish_and_clear();
     let (mut sink, sent) = match outcome {
         Ok(done) => done,
         Err(e) => {
-            progress.finish();
             reader.abort();
             return Err(e);
         }
     };
-    progress.finish();
     let drained = drain(&endpoint, &path, &baseline, &sent, &tally).await;
     let wall_s = started.elapsed().as_secs_f64();
     let _ = sink
@@ -464,6 +480,7 @@ pub async fn run(args: ReplayArgs) -> anyhow::Result<()> {
         },
         alarms: tally.alarm_events,
         state_changes: tally.states,
+        view: stats_view(&final_stats)?,
         stats: final_stats,
     };
     print!("{}", render(&summary));
@@ -481,7 +498,7 @@ async fn ensure_session(
     scan: &FileScan,
     path: &str,
 ) -> anyhow::Result<bool> {
-    let (status, body) = endpoint.request("GET", path, None).await?;
+    let (status, body) = endpoint.call("GET", path).await?;
     match status {
         200 => {
             if args.session_spec.is_some() || args.monitor_config.is_some() {
@@ -509,13 +526,15 @@ async fn ensure_session(
 }
 
 async fn stats(endpoint: &Endpoint, path: &str) -> anyhow::Result<Value> {
-    let (status, body) = endpoint
-        .request("GET", &format!("{path}/stats"), None)
-        .await?;
+    let (status, body) = endpoint.call("GET", &format!("{path}/stats")).await?;
     if status != 200 {
         bail!("GET {path}/stats: HTTP {status}: {body}");
     }
     serde_json::from_str(&body).context("the stats are not JSON")
+}
+
+fn stats_view(stats: &Value) -> anyhow::Result<StatsView> {
+    StatsView::deserialize(stats).context("the stats do not have the session stats' shape")
 }
 
 async fn read_events(mut stream: SplitStream<Socket>, tally: Arc<Mutex<Tally>>) {
@@ -550,7 +569,7 @@ async fn stream_file(
     scan: &FileScan,
     mut sink: SplitSink<Socket, Message>,
     tally: &Arc<Mutex<Tally>>,
-    progress: &mut Progress,
+    progress: &ProgressBar,
 ) -> anyhow::Result<(SplitSink<Socket, Message>, Sent)> {
     let file = tokio::fs::File::open(&args.file)
         .await
@@ -606,9 +625,16 @@ async fn stream_file(
         sent.epochs += batch.len() as u64;
         let extra = {
             let tally = tally.lock().unwrap_or_else(|p| p.into_inner());
-            format!("alarms {}  errors {}", tally.alarm_total, tally.error_total)
+            format!(
+                "t {:.0}/{:.0} s  alarms {}  errors {}",
+                last_t - scan.first_t,
+                scan.last_t - scan.first_t,
+                tally.alarm_total,
+                tally.error_total
+            )
         };
-        progress.update(last_t - scan.first_t, sent.epochs, &extra);
+        progress.set_position(sent.epochs);
+        progress.set_message(extra);
     }
     Ok((sink, sent))
 }
@@ -630,45 +656,27 @@ async fn next_epoch(
     }
 }
 
-fn count(v: &Value, key: &str) -> u64 {
-    v[key].as_u64().unwrap_or(0)
-}
-
-/// Alarms the stats have counted, summed over every monitor and test.
-fn stats_alarms(stats: &Value) -> u64 {
-    stats["monitors"]
-        .as_object()
-        .map(|monitors| {
-            monitors
-                .values()
-                .flat_map(|m| m["tests"].as_object().into_iter().flat_map(|t| t.values()))
-                .map(|t| count(t, "alarms"))
-                .sum()
-        })
-        .unwrap_or(0)
-}
-
 /// Waits until the server has dealt with every frame sent (accepted ones
 /// counted in `/stats`, refused ones answered with an `error`) and the socket
 /// has delivered the alarms the stats count. Returns the final stats.
 async fn drain(
     endpoint: &Endpoint,
     path: &str,
-    baseline: &Value,
+    baseline: &StatsView,
     sent: &Sent,
     tally: &Arc<Mutex<Tally>>,
 ) -> anyhow::Result<Value> {
-    let base_frames = count(baseline, "frames");
-    let base_alarms = stats_alarms(baseline);
+    let base_frames = baseline.frames;
+    let base_alarms = baseline.alarms();
     let mut last_progress = (Instant::now(), u64::MAX);
     loop {
-        let current = stats(endpoint, path).await?;
+        let current = stats_view(&stats(endpoint, path).await?)?;
         let (errors, numerical, closed) = {
             let t = tally.lock().unwrap_or_else(|p| p.into_inner());
             (t.error_total, t.numerical, t.closed.clone())
         };
         // A frame refused for a numerical failure was counted as accepted too.
-        let handled = count(&current, "frames").saturating_sub(base_frames) + errors - numerical;
+        let handled = current.frames.saturating_sub(base_frames) + errors - numerical;
         if handled >= sent.frames {
             break;
         }
@@ -692,7 +700,7 @@ async fn drain(
     let deadline = Instant::now() + ALARM_GRACE;
     loop {
         let current = stats(endpoint, path).await?;
-        let want = stats_alarms(&current).saturating_sub(base_alarms);
+        let want = stats_view(&current)?.alarms().saturating_sub(base_alarms);
         let got = tally.lock().unwrap_or_else(|p| p.into_inner()).alarm_total;
         if got >= want {
             return Ok(current);
@@ -705,9 +713,8 @@ async fn drain(
     }
 }
 
-fn num(v: &Value, digits: usize) -> String {
-    v.as_f64()
-        .map_or_else(|| "—".to_owned(), |x| format!("{x:.digits$}"))
+fn num(v: Option<f64>, digits: usize) -> String {
+    v.map_or_else(|| "—".to_owned(), |x| format!("{x:.digits$}"))
 }
 
 /// Renders the summary as text.
@@ -753,13 +760,19 @@ pub fn render(s: &ReplaySummary) -> String {
             );
         }
     }
+    render_stats(&mut out, &s.view);
+    out
+}
+
+/// The stats part of the summary: session counts, then one row per test.
+fn render_stats(out: &mut String, view: &StatsView) {
     let _ = writeln!(
         out,
         "stats: {} epochs processed, {} frames, {} refused, last t {}",
-        thousands(count(&s.stats, "epochs")),
-        thousands(count(&s.stats, "frames")),
-        count(&s.stats, "frame_errors"),
-        num(&s.stats["last_t"], 2)
+        thousands(view.epochs),
+        thousands(view.frames),
+        view.frame_errors,
+        num(view.last_t, 2)
     );
     let _ = writeln!(
         out,
@@ -776,43 +789,40 @@ pub fn render(s: &ReplaySummary) -> String {
         "healthy/suspect/isolated s",
         "delay"
     );
-    if let Some(monitors) = s.stats["monitors"].as_object() {
-        for (name, m) in monitors {
-            let Some(tests) = m["tests"].as_object() else {
-                continue;
-            };
-            for (test, t) in tests {
-                let time = &t["time_in_state_s"];
-                let _ = writeln!(
-                    out,
-                    "  {:<12} {:<8} {:<9} {:>8} {:>7} {:>6} {:>9} {:>10} {:>9} {:>27} {:>7}",
-                    name,
-                    test,
-                    t["state"].as_str().unwrap_or("?"),
-                    count(t, "epochs"),
-                    count(t, "exceedances"),
-                    count(t, "alarms"),
-                    num(&t["threshold"], 2),
-                    num(&t["mean"], 3),
-                    num(&t["max"], 1),
-                    format!(
-                        "{}/{}/{}",
-                        num(&time["healthy"], 0),
-                        num(&time["suspect"], 0),
-                        num(&time["isolated"], 0)
-                    ),
-                    num(&t["last_alarm_delay_s"], 1)
-                );
-            }
+    for (name, m) in &view.monitors {
+        for (test, t) in &m.tests {
+            let time = &t.time_in_state_s;
+            let _ = writeln!(
+                out,
+                "  {:<12} {:<8} {:<9} {:>8} {:>7} {:>6} {:>9} {:>10} {:>9} {:>27} {:>7}",
+                name,
+                test,
+                t.state.as_str(),
+                t.epochs,
+                t.exceedances,
+                t.alarms,
+                num(Some(t.threshold), 2),
+                num(t.mean, 3),
+                num(t.max, 1),
+                format!(
+                    "{}/{}/{}",
+                    num(Some(time.healthy), 0),
+                    num(Some(time.suspect), 0),
+                    num(Some(time.isolated), 0)
+                ),
+                num(t.last_alarm_delay_s, 1)
+            );
         }
     }
-    out
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use clap::Parser;
+    use navguard::detect::Health;
+    use navguard::service::session::stats::TestStats;
+    use navguard::service::wire::{AlarmRecord, StateChange, tagged};
 
     #[derive(Debug, Parser)]
     struct Wrap {
@@ -845,15 +855,18 @@ mod tests {
             ..FileScan::default()
         };
         let body = session_body(&args(&["--threshold", "20"]), &scan).unwrap();
-        assert_eq!(body["id"], "s1");
-        let m = &body["monitors"][0];
-        assert_eq!(m["type"], "federated");
-        assert_eq!(m["config"], json!({"aids": ["gnss", "cns"]}));
-        assert_eq!(m["policy"], json!({"kind": "counters", "n1": 10, "n2": 5}));
-        assert_eq!(m["threshold"], 20.0);
+        assert_eq!(body.id.as_deref(), Some("s1"));
+        let m = &body.monitors[0];
+        assert_eq!(
+            (m.name.as_str(), m.kind),
+            ("federated", MonitorKind::Federated)
+        );
+        assert_eq!(m.config, serde_json::json!({"aids": ["gnss", "cns"]}));
+        assert_eq!(m.policy, PolicyConfig::Counters { n1: 10, n2: 5 });
+        assert_eq!((m.threshold, m.p_fa), (Some(20.0), None));
         let body = session_body(&args(&["--policy", "classic"]), &scan).unwrap();
-        assert_eq!(body["monitors"][0]["policy"], json!({"kind": "classic"}));
-        assert!(body["monitors"][0].get("threshold").is_none());
+        assert_eq!(body.monitors[0].policy, PolicyConfig::Classic);
+        assert_eq!(body.monitors[0].threshold, None);
     }
 
     #[test]
@@ -872,35 +885,85 @@ mod tests {
             &scan,
         )
         .unwrap();
-        assert_eq!(body["monitors"][0]["type"], "linear");
-        assert_eq!(body["monitors"][0]["config"]["f"], json!([[1]]));
+        assert_eq!(body.monitors[0].kind, MonitorKind::Linear);
+        let wire = serde_json::to_value(&body).unwrap();
+        assert_eq!(wire["monitors"][0]["config"]["f"], serde_json::json!([[1]]));
+        assert_eq!(wire["monitors"][0]["type"], "linear");
         assert!(session_body(&args(&[]), &FileScan::default()).is_err());
+    }
+
+    #[test]
+    fn a_bad_session_name_is_refused_before_any_request() {
+        let mut a = args(&[]);
+        a.session = "no spaces".into();
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .build()
+            .unwrap();
+        let err = runtime.block_on(run(a)).unwrap_err().to_string();
+        assert!(err.contains("--session must be"), "{err}");
+    }
+
+    fn alarm(test: &str, t: f64) -> String {
+        let record = AlarmRecord {
+            id: 1,
+            session: "s1".into(),
+            monitor: "nav".into(),
+            test: test.into(),
+            state: Health::Suspect,
+            t,
+            statistic: 30.0,
+            threshold: 20.0,
+            dof: 3,
+            test_ratio: 1.5,
+            delay_s: 0.0,
+            raised_at_ms: 0,
+            cleared_t: None,
+        };
+        tagged("alarm", &record)
     }
 
     #[test]
     fn tally_groups_alarms_and_counts_errors() {
         let mut t = Tally::default();
         for (i, test) in ["gnss", "gnss", "dvl"].iter().enumerate() {
-            t.take(&format!(
-                r#"{{"type":"alarm","monitor":"nav","test":"{test}","state":"suspect","t":{}}}"#,
-                i as f64 + 1.5
-            ));
+            t.take(&alarm(test, i as f64 + 1.5));
         }
         t.take(r#"{"type":"error","code":"time_backwards","message":"m"}"#);
-        t.take(r#"{"type":"error","code":"numerical","message":"n"}"#);
-        t.take(r#"{"type":"state","from":"healthy","to":"suspect"}"#);
+        t.take(r#"{"type":"error","code":"numerical","message":"n \"quoted\""}"#);
+        let change = StateChange {
+            session: "s1".into(),
+            monitor: "nav".into(),
+            test: "gnss".into(),
+            t: 1.5,
+            from: Health::Healthy,
+            to: Health::Suspect,
+        };
+        t.take(&tagged("state", &change));
+        t.take(r#"{"type":"result","t":1.0,"monitors":{}}"#);
+        t.take(r#"{"type":"ready","session":"s1"}"#);
         assert_eq!(t.alarm_total, 3);
         let g = &t.alarms[&("nav".into(), "gnss".into(), "suspect".into())];
         assert_eq!((g.count, g.first_t, g.last_t), (2, 1.5, 2.5));
-        assert_eq!((t.error_total, t.numerical, t.states), (2, 1, 1));
+        assert_eq!(
+            (t.error_total, t.numerical, t.states, t.results),
+            (2, 1, 1, 1)
+        );
         assert_eq!(t.errors["time_backwards"], 1);
+        assert_eq!(t.error_samples[1], r#"numerical: n "quoted""#);
     }
 
     #[test]
     fn stats_alarms_sum_over_monitors_and_tests() {
-        let v = json!({"monitors": {"a": {"tests": {"x": {"alarms": 2}, "y": {"alarms": 1}}},
-                                    "b": {"tests": {"z": {"alarms": 4}}}}});
-        assert_eq!(stats_alarms(&v), 7);
-        assert_eq!(stats_alarms(&json!({})), 0);
+        let test = |alarms: u64| {
+            let mut t = TestStats::new(1, 10.0);
+            t.alarms = alarms;
+            t
+        };
+        let v = serde_json::json!({"frames": 4, "epochs": 8, "frame_errors": 0, "last_t": 0.8,
+            "monitors": {"a": {"type": "linear", "tests": {"x": test(2), "y": test(1)}},
+                         "b": {"type": "linear", "tests": {"z": test(4)}}}});
+        let view = stats_view(&v).unwrap();
+        assert_eq!((view.frames, view.alarms()), (4, 7));
+        assert!(stats_view(&serde_json::json!({})).is_err());
     }
 }

@@ -11,7 +11,7 @@ use navguard::service::wire::epoch_to_wire;
 use navguard::sim::{self, Fault, Scenario, Track};
 use serde_json::json;
 
-use super::progress::thousands;
+use super::thousands;
 
 /// The scenarios `simulate` can write.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]

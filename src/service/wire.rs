@@ -12,7 +12,7 @@ use crate::epoch::{AdsBlock, CnsBlock, GnssBlock, InsBlock};
 use crate::monitor::{MonitorKind, MonitorReport};
 
 /// `POST /api/v1/sessions` body.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CreateSession {
     /// Optional id; generated when absent.

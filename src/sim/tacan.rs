@@ -184,52 +184,113 @@ impl TacanFlightParams {
     }
 }
 
-/// Simulates one flight.
-pub fn simulate_flight(p: &TacanFlightParams) -> Result<TacanFlight, SimError> {
-    p.check()?;
-    let n = p.samples();
-    let dt = 1.0 / p.rate_hz;
-    let mut path_rng = stream(p.seed, 1);
-    let mut ins_rng = stream(p.seed, 2);
-    let mut jump_rng = stream(p.seed, 3);
-    let mut noise_rng = stream(p.seed, 4);
+/// The aircraft's path in the station's ENU plane (module doc, "Flight").
+struct FlightPath {
+    pos: Vector3<f64>,
+    speed: f64,
+    heading: f64,
+    turn: f64,
+    climb: f64,
+    next_change: f64,
+}
 
-    // Initial state in the station's ENU plane.
-    let bearing: f64 = path_rng.random_range(0.0..std::f64::consts::TAU);
-    let dist: f64 = path_rng.random_range(30e3..120e3);
-    let mut pos = Vector3::new(
-        dist * bearing.sin(),
-        dist * bearing.cos(),
-        path_rng.random_range(3e3..8e3),
-    );
-    let speed: f64 = path_rng.random_range(150.0..250.0);
-    let mut heading: f64 = path_rng.random_range(0.0..std::f64::consts::TAU);
-    let (mut turn, mut climb, mut next_change) = (0.0f64, 0.0f64, 0.0f64);
+impl FlightPath {
+    /// A random start 30–120 km from the station.
+    fn start(rng: &mut StdRng) -> Self {
+        let bearing: f64 = rng.random_range(0.0..std::f64::consts::TAU);
+        let dist: f64 = rng.random_range(30e3..120e3);
+        let pos = Vector3::new(
+            dist * bearing.sin(),
+            dist * bearing.cos(),
+            rng.random_range(3e3..8e3),
+        );
+        let speed: f64 = rng.random_range(150.0..250.0);
+        let heading: f64 = rng.random_range(0.0..std::f64::consts::TAU);
+        FlightPath {
+            pos,
+            speed,
+            heading,
+            turn: 0.0,
+            climb: 0.0,
+            next_change: 0.0,
+        }
+    }
 
-    // Gauss–Markov INS error: e_{k+1} = a e_k + σ √(1 − a²) w.
-    let a = (-dt / p.ins_tau_s).exp();
-    let q = p.ins_sigma_m * (1.0 - a * a).sqrt();
-    let mut ins_err =
-        Vector3::from_fn(|_, _| p.ins_sigma_m * ins_rng.sample::<f64, _>(StandardNormal));
+    /// Draws a new turn and climb rate when the current ones have run out.
+    fn manoeuvre(&mut self, t: f64, rng: &mut StdRng) {
+        if t >= self.next_change {
+            self.next_change = t + rng.random_range(30.0..90.0);
+            self.turn = if rng.random_bool(0.4) {
+                0.0
+            } else {
+                rng.random_range(-2.0f64..2.0).to_radians()
+            };
+            self.climb = rng.random_range(-5.0..5.0);
+        }
+    }
 
-    let sigma = p.noise_var_m2.sqrt();
-    let mut flight = TacanFlight {
-        epochs: Vec::with_capacity(n),
-        ins_range_m: Vec::with_capacity(n),
-        tacan_range_m: Vec::with_capacity(n),
-        true_range_m: Vec::with_capacity(n),
-        jumps: Vec::with_capacity(p.jumps),
-        jumped: vec![false; n],
-    };
+    fn velocity(&self) -> Vector3<f64> {
+        Vector3::new(
+            self.speed * self.heading.sin(),
+            self.speed * self.heading.cos(),
+            self.climb,
+        )
+    }
 
-    // Jumps: one per slot, kept a window apart (module doc).
+    /// Moves on by `dt`, turning back towards the station when far out and
+    /// heading away.
+    fn advance(&mut self, vel: &Vector3<f64>, dt: f64) {
+        let horizontal = Vector3::new(self.pos.x, self.pos.y, 0.0);
+        let rate = if horizontal.norm() > 150e3 && horizontal.dot(vel) > 0.0 {
+            2f64.to_radians()
+        } else {
+            self.turn
+        };
+        self.pos += vel * dt;
+        self.pos.z = self.pos.z.clamp(1e3, 10e3);
+        self.heading = (self.heading + rate * dt).rem_euclid(std::f64::consts::TAU);
+    }
+}
+
+/// Gauss–Markov INS error: e_{k+1} = a e_k + σ √(1 − a²) w, per ENU axis.
+struct InsError {
+    err: Vector3<f64>,
+    a: f64,
+    q: f64,
+}
+
+impl InsError {
+    fn start(p: &TacanFlightParams, dt: f64, rng: &mut StdRng) -> Self {
+        let a = (-dt / p.ins_tau_s).exp();
+        InsError {
+            err: Vector3::from_fn(|_, _| p.ins_sigma_m * rng.sample::<f64, _>(StandardNormal)),
+            a,
+            q: p.ins_sigma_m * (1.0 - a * a).sqrt(),
+        }
+    }
+
+    fn step(&mut self, rng: &mut StdRng) {
+        for i in 0..3 {
+            self.err[i] = self.a * self.err[i] + self.q * rng.sample::<f64, _>(StandardNormal);
+        }
+    }
+}
+
+/// Places the jumps, one per slot and a window apart (module doc): records them
+/// in `flight` and returns the range offset of every sample.
+fn place_jumps(
+    p: &TacanFlightParams,
+    n: usize,
+    rng: &mut StdRng,
+    flight: &mut TacanFlight,
+) -> Vec<f64> {
     let mut offset = vec![0.0; n];
     if let Some(slot) = n.checked_div(p.jumps) {
         for j in 0..p.jumps {
-            let len = jump_rng.random_range(1..=p.max_jump_samples);
-            let start = j * slot + jump_rng.random_range(0..=slot - len - p.window);
-            let mag = jump_rng.random_range(p.jump_min_m..=p.jump_max_m);
-            let offset_m = if jump_rng.random_bool(0.5) { mag } else { -mag };
+            let len = rng.random_range(1..=p.max_jump_samples);
+            let start = j * slot + rng.random_range(0..=slot - len - p.window);
+            let mag = rng.random_range(p.jump_min_m..=p.jump_max_m);
+            let offset_m = if rng.random_bool(0.5) { mag } else { -mag };
             offset[start..start + len].fill(offset_m);
             flight.jumped[start..start + len].fill(true);
             flight.jumps.push(Jump {
@@ -239,29 +300,37 @@ pub fn simulate_flight(p: &TacanFlightParams) -> Result<TacanFlight, SimError> {
             });
         }
     }
+    offset
+}
 
+/// Simulates one flight.
+pub fn simulate_flight(p: &TacanFlightParams) -> Result<TacanFlight, SimError> {
+    p.check()?;
+    let n = p.samples();
+    let dt = 1.0 / p.rate_hz;
+    let mut path_rng = stream(p.seed, 1);
+    let mut ins_rng = stream(p.seed, 2);
+    let mut jump_rng = stream(p.seed, 3);
+    let mut noise_rng = stream(p.seed, 4);
+    let mut path = FlightPath::start(&mut path_rng);
+    let mut ins = InsError::start(p, dt, &mut ins_rng);
+    let sigma = p.noise_var_m2.sqrt();
+    let mut flight = TacanFlight {
+        epochs: Vec::with_capacity(n),
+        ins_range_m: Vec::with_capacity(n),
+        tacan_range_m: Vec::with_capacity(n),
+        true_range_m: Vec::with_capacity(n),
+        jumps: Vec::with_capacity(p.jumps),
+        jumped: vec![false; n],
+    };
+    let offset = place_jumps(p, n, &mut jump_rng, &mut flight);
     let station_ecef = geo::lla_to_ecef(&p.station);
     for (k, &jump) in offset.iter().enumerate() {
         let t = k as f64 * dt;
-        if t >= next_change {
-            next_change = t + path_rng.random_range(30.0..90.0);
-            turn = if path_rng.random_bool(0.4) {
-                0.0
-            } else {
-                path_rng.random_range(-2.0f64..2.0).to_radians()
-            };
-            climb = path_rng.random_range(-5.0..5.0);
-        }
-        // Turn back towards the station when far out and heading away.
-        let vel = Vector3::new(speed * heading.sin(), speed * heading.cos(), climb);
-        let horizontal = Vector3::new(pos.x, pos.y, 0.0);
-        let rate = if horizontal.norm() > 150e3 && horizontal.dot(&vel) > 0.0 {
-            2f64.to_radians()
-        } else {
-            turn
-        };
-        let truth = geo::ecef_to_lla(&geo::enu_to_ecef(&pos, &p.station));
-        let ins_pos = geo::ecef_to_lla(&geo::enu_to_ecef(&(pos + ins_err), &p.station));
+        path.manoeuvre(t, &mut path_rng);
+        let vel = path.velocity();
+        let truth = geo::ecef_to_lla(&geo::enu_to_ecef(&path.pos, &p.station));
+        let ins_pos = geo::ecef_to_lla(&geo::enu_to_ecef(&(path.pos + ins.err), &p.station));
         let true_range = (geo::lla_to_ecef(&truth) - station_ecef).norm();
         let ins_range = slant_range_m(&ins_pos, &station_ecef);
         let noise: f64 = noise_rng.sample(StandardNormal);
@@ -276,20 +345,14 @@ pub fn simulate_flight(p: &TacanFlightParams) -> Result<TacanFlight, SimError> {
                 lon: ins_pos.lon,
                 h: ins_pos.h,
                 vel: [vel.x, vel.y, vel.z],
-                att: [0.0, (climb / speed).atan(), heading],
+                att: [0.0, (path.climb / path.speed).atan(), path.heading],
                 f_b: None,
             }),
             tacan_range_m: Some(tacan),
             ..Epoch::default()
         });
-
-        // Advance the path and the INS error.
-        pos += vel * dt;
-        pos.z = pos.z.clamp(1e3, 10e3);
-        heading = (heading + rate * dt).rem_euclid(std::f64::consts::TAU);
-        for i in 0..3 {
-            ins_err[i] = a * ins_err[i] + q * ins_rng.sample::<f64, _>(StandardNormal);
-        }
+        path.advance(&vel, dt);
+        ins.step(&mut ins_rng);
     }
     Ok(flight)
 }

@@ -195,6 +195,46 @@ impl Track {
     /// The truth at `rate_hz` from the first fix to the last (module doc).
     pub fn truth(&self, rate_hz: f64) -> Result<Vec<Truth>, SimError> {
         check_positive("rate_hz", rate_hz)?;
+        let samples = self.interpolate(rate_hz);
+        let atts = attitudes(&samples);
+        let dt = 1.0 / rate_hz;
+        let dcms: Vec<_> = atts
+            .iter()
+            .map(|a| geo::dcm_body_to_nav(a[0], a[1], a[2]))
+            .collect();
+        let out = samples
+            .iter()
+            .enumerate()
+            .map(|(k, (t, lla, vel, vel_dot))| {
+                let c_bn = dcms[k];
+                let omega_nb = match dcms.get(k + 1) {
+                    Some(next) => {
+                        Rotation3::from_matrix_unchecked(c_bn.transpose() * next).scaled_axis() / dt
+                    }
+                    None if k > 0 => {
+                        Rotation3::from_matrix_unchecked(dcms[k - 1].transpose() * c_bn)
+                            .scaled_axis()
+                            / dt
+                    }
+                    None => Vector3::zeros(),
+                };
+                let f_n = specific_force_nav(lla, vel, vel_dot);
+                Truth {
+                    t: *t,
+                    lla: *lla,
+                    vel: *vel,
+                    att: atts[k],
+                    f_b: c_bn.transpose() * f_n,
+                    omega_ib_b: body_rate(lla, vel, &c_bn, &omega_nb),
+                }
+            })
+            .collect();
+        Ok(out)
+    }
+
+    /// Position, NED velocity and its rate at `rate_hz`, from the Hermite
+    /// splines through the fixes (longitude unwrapped across ±π).
+    fn interpolate(&self, rate_hz: f64) -> Vec<Sample> {
         let t0 = self.fixes[0].t;
         let ts: Vec<f64> = self.fixes.iter().map(|f| f.t - t0).collect();
         let lat: Vec<f64> = self.fixes.iter().map(|f| f.lla.lat).collect();
@@ -250,56 +290,32 @@ impl Track {
             );
             samples.push((t, lla, vel, vel_dot));
         }
-        // Yaw from the velocity direction, held while (nearly) stopped.
-        let moving = |v: &Vector3<f64>| v.xy().norm() >= MOVING_SPEED_MPS;
-        let mut yaw = samples
-            .iter()
-            .find(|s| moving(&s.2))
-            .map_or(0.0, |s| wrap_2pi(s.2.x.atan2(s.2.y)));
-        let atts: Vec<[f64; 3]> = samples
-            .iter()
-            .map(|(_, _, v, _)| {
-                if moving(v) {
-                    yaw = wrap_2pi(v.x.atan2(v.y));
-                    [0.0, v.z.atan2(v.xy().norm()), yaw]
-                } else {
-                    [0.0, 0.0, yaw]
-                }
-            })
-            .collect();
-        let dcms: Vec<_> = atts
-            .iter()
-            .map(|a| geo::dcm_body_to_nav(a[0], a[1], a[2]))
-            .collect();
-        let out = samples
-            .iter()
-            .enumerate()
-            .map(|(k, (t, lla, vel, vel_dot))| {
-                let c_bn = dcms[k];
-                let omega_nb = match dcms.get(k + 1) {
-                    Some(next) => {
-                        Rotation3::from_matrix_unchecked(c_bn.transpose() * next).scaled_axis() / dt
-                    }
-                    None if k > 0 => {
-                        Rotation3::from_matrix_unchecked(dcms[k - 1].transpose() * c_bn)
-                            .scaled_axis()
-                            / dt
-                    }
-                    None => Vector3::zeros(),
-                };
-                let f_n = specific_force_nav(lla, vel, vel_dot);
-                Truth {
-                    t: *t,
-                    lla: *lla,
-                    vel: *vel,
-                    att: atts[k],
-                    f_b: c_bn.transpose() * f_n,
-                    omega_ib_b: body_rate(lla, vel, &c_bn, &omega_nb),
-                }
-            })
-            .collect();
-        Ok(out)
+        samples
     }
+}
+
+/// One interpolated instant: time, position, velocity and its rate.
+type Sample = (f64, Lla, Vector3<f64>, Vector3<f64>);
+
+/// Roll 0, pitch from the climb and yaw from the velocity direction, the yaw
+/// held while (nearly) stopped.
+fn attitudes(samples: &[Sample]) -> Vec<[f64; 3]> {
+    let moving = |v: &Vector3<f64>| v.xy().norm() >= MOVING_SPEED_MPS;
+    let mut yaw = samples
+        .iter()
+        .find(|s| moving(&s.2))
+        .map_or(0.0, |s| wrap_2pi(s.2.x.atan2(s.2.y)));
+    samples
+        .iter()
+        .map(|(_, _, v, _)| {
+            if moving(v) {
+                yaw = wrap_2pi(v.x.atan2(v.y));
+                [0.0, v.z.atan2(v.xy().norm()), yaw]
+            } else {
+                [0.0, 0.0, yaw]
+            }
+        })
+        .collect()
 }
 
 /// An angle wrapped to [−π, π).

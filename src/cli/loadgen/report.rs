@@ -6,7 +6,7 @@ use std::fmt::Write as _;
 
 use serde::Serialize;
 
-use crate::cli::progress::thousands;
+use crate::cli::thousands;
 
 /// Latency percentiles, microseconds.
 #[derive(Debug, Clone, Copy, Default, Serialize)]

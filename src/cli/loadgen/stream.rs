@@ -8,13 +8,12 @@ use std::time::Duration;
 
 use anyhow::bail;
 use futures_util::{SinkExt, StreamExt};
-use serde_json::Value;
 use tokio::sync::Notify;
 use tokio::time::{Instant, MissedTickBehavior};
 use tokio_tungstenite::tungstenite::Message;
 
 use super::{DRAIN_TIMEOUT, Rate, Workload};
-use crate::cli::http::Endpoint;
+use crate::cli::http::{Endpoint, ServerEvent};
 
 /// Frames sent and not yet fully answered, oldest first.
 #[derive(Default)]
@@ -127,14 +126,14 @@ impl Reader {
             }
             return;
         }
-        let Ok(v) = serde_json::from_str::<Value>(text) else {
+        let Ok(event) = serde_json::from_str::<ServerEvent>(text) else {
             *self.tally.errors.entry("unparsable".into()).or_default() += 1;
             return;
         };
-        match v["type"].as_str() {
-            Some("alarm") => {
+        match event {
+            ServerEvent::Alarm(alarm) => {
                 self.tally.alarms += 1;
-                let t = v["t"].as_f64().unwrap_or(f64::NAN);
+                let t = alarm.t;
                 let times = &self.work.times;
                 let holds = |&&(frame, _): &&(usize, Instant)| {
                     let r = &self.work.ranges[frame];
@@ -150,15 +149,15 @@ impl Reader {
                     self.tally.alarm_latency_us.push(micros(now - sent));
                 }
             }
-            Some("state") => self.tally.states += 1,
-            Some("error") => {
-                let code = v["code"].as_str().unwrap_or("?").to_owned();
+            ServerEvent::State(_) => self.tally.states += 1,
+            ServerEvent::Error(e) => {
+                let code = e.code;
                 // Frames are handled in order: the error answers the oldest one.
                 // A `numerical` failure part-way leaves earlier results counted.
                 *self.tally.errors.entry(code).or_default() += 1;
                 self.answer_front(&mut flight, now, false);
             }
-            _ => {}
+            ServerEvent::Result | ServerEvent::Other => {}
         }
     }
 }

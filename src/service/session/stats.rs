@@ -4,13 +4,13 @@
 
 use std::collections::BTreeMap;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::detect::Health;
 use crate::monitor::TestOutcome;
 
 /// Seconds spent in each state, by epoch time.
-#[derive(Debug, Clone, Default, Serialize, PartialEq)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
 pub struct TimeInState {
     /// Healthy, s.
     pub healthy: f64,
@@ -21,7 +21,7 @@ pub struct TimeInState {
 }
 
 /// Statistics of one test.
-#[derive(Debug, Clone, Serialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct TestStats {
     /// Current state.
     pub state: Health,

@@ -286,11 +286,137 @@ fn mean(v: &[f64]) -> Option<f64> {
 /// A scenario builder of [`RimuSimParams`]: seed and fault → parameters.
 type MakeScenario = fn(u64, Option<(usize, GyroFaultKind)>) -> RimuSimParams;
 
+/// One scenario's runs with the classifier, laid end to end 100 s apart, for
+/// its scorecards.
+#[derive(Default)]
+struct LaidRuns {
+    parity_trace: Vec<(f64, Health)>,
+    iso_trace: Vec<(f64, Health)>,
+    windows: Vec<FaultWindow>,
+    times: Vec<f64>,
+}
+
+impl LaidRuns {
+    /// Appends one run whose fault on `gyro` starts at `onset` and lasts to `end_s`.
+    fn lay(&mut self, out: &RunOutcome, gyro: usize, onset: f64, end_s: f64) {
+        let offset = 100.0 * self.windows.len() as f64;
+        let correct_at = match &out.isolated {
+            Some((t, g)) if g == &vec![gyro] => *t,
+            _ => f64::INFINITY,
+        };
+        for &(t, h, _) in &out.trace {
+            self.parity_trace.push((t + offset, h));
+            // The isolation "alarm" is the faulty gyro being isolated.
+            let iso_health = if t >= correct_at {
+                Health::Isolated
+            } else {
+                Health::Healthy
+            };
+            self.iso_trace.push((t + offset, iso_health));
+        }
+        self.windows.push(FaultWindow {
+            start: onset + offset,
+            end: end_s + offset,
+        });
+        self.times.push(out.time_per_epoch_s);
+    }
+
+    /// The parity and isolation scorecards of scenario `name`.
+    fn scorecards(&self, name: &str) -> [Scorecard; 2] {
+        let tpe = mean(&self.times);
+        let label = format!("T_D={T_D} {name}");
+        [
+            ("parity", &self.parity_trace),
+            ("isolation", &self.iso_trace),
+        ]
+        .map(|(detector, trace)| {
+            let mut card = scorecard::score(detector, &label, trace, &self.windows, tpe);
+            // Every fault lasts to the end of its run: there is no recovery to time
+            // (the windows' ends only separate runs laid end to end).
+            card.recovery_s.clear();
+            card
+        })
+    }
+}
+
+/// One row of the table: a scenario, gyro and fault kind over every run.
+struct Case<'a> {
+    params: &'a Seed002Params,
+    spec: &'a MonitorSpec,
+    models: &'a HashMap<String, Arc<AnyModel>>,
+    name: &'static str,
+    make: MakeScenario,
+    gyro: usize,
+    /// Index of the fault kind in [`GyroFaultKind::SEED002`].
+    ki: usize,
+    kind: GyroFaultKind,
+}
+
+impl Case<'_> {
+    /// Runs every noise seed; with `laid`, lays each run out for the
+    /// scorecards and keeps the λ trace of steady, gyro 1, bias 5σ, first run.
+    fn run(
+        &self,
+        mut laid: Option<&mut LaidRuns>,
+        lambda_trace: &mut Vec<(f64, f64)>,
+    ) -> Result<CaseRow, ExperimentError> {
+        let (params, gyro, kind) = (self.params, self.gyro, self.kind);
+        let mut row = CaseRow {
+            scenario: self.name,
+            gyro,
+            fault: kind,
+            runs: params.runs,
+            detected: 0,
+            isolated_correctly: 0,
+            isolated_wrong: 0,
+            detection_delay_s: None,
+            isolation_delay_s: None,
+            omega_rms_sigma: 0.0,
+        };
+        let (mut det, mut iso, mut sq) = (Vec::new(), Vec::new(), Vec::new());
+        for r in 0..params.runs {
+            // Fresh noise for every run and case (not the same draws per gyro).
+            let case = (gyro * 4 + self.ki) as u64;
+            let seed = params.seed.wrapping_add(1 + r as u64 + 1000 * case);
+            let mut sim = (self.make)(seed, Some((gyro, kind)));
+            if let rsim::Flight::Climb { climb_deg, .. } = &mut sim.flight {
+                *climb_deg = params.climb_deg;
+            }
+            let onset = sim.fault.map_or(0.0, |f| f.onset_s);
+            let out = run_case(&sim, self.spec, self.models)?;
+            if let Some(t) = out.detected_at {
+                row.detected += 1;
+                det.push(t - onset);
+            }
+            match &out.isolated {
+                Some((t, g)) if g == &vec![gyro] => {
+                    row.isolated_correctly += 1;
+                    iso.push(t - onset);
+                }
+                Some(_) => row.isolated_wrong += 1,
+                None => {}
+            }
+            sq.extend(out.omega_sq.iter().copied());
+            if let Some(laid) = laid.as_deref_mut() {
+                laid.lay(&out, gyro, onset, sim.end_s);
+                if self.name == "steady" && gyro == 0 && kind == GyroFaultKind::Bias(5.0) && r == 0
+                {
+                    *lambda_trace = out.trace.iter().map(|&(t, _, l)| (t, l)).collect();
+                }
+            }
+        }
+        let sigma = crate::monitor::rimu::default_sigma();
+        row.detection_delay_s = mean(&det);
+        row.isolation_delay_s = mean(&iso);
+        row.omega_rms_sigma = mean(&sq).map_or(f64::NAN, |m| m.sqrt() / sigma);
+        Ok(row)
+    }
+}
+
 /// Runs the experiment.
 pub fn run(params: Seed002Params) -> Result<Seed002Result, ExperimentError> {
     let (model, training) = train_classifier(&params)?;
     let models: HashMap<String, Arc<AnyModel>> = [(MODEL_ID.to_owned(), model)].into();
-    let sigma = crate::monitor::rimu::default_sigma();
     let scenarios: [(&'static str, MakeScenario); 2] = [
         ("steady", RimuSimParams::steady),
         ("manoeuvring", RimuSimParams::manoeuvring),
@@ -300,101 +426,30 @@ pub fn run(params: Seed002Params) -> Result<Seed002Result, ExperimentError> {
     let mut scorecards = Vec::new();
     let mut lambda_trace = Vec::new();
     for (name, make) in scenarios {
-        // Every run's trace is laid end to end, 100 s apart, for one scorecard per scenario.
-        let (mut parity_trace, mut iso_trace, mut windows) = (Vec::new(), Vec::new(), Vec::new());
-        let mut times = Vec::new();
-        let mut laid = 0usize;
+        let mut laid = LaidRuns::default();
         for with_model in [true, false] {
             let spec = spec(&params, with_model);
             for gyro in 0..4 {
                 for (ki, kind) in GyroFaultKind::SEED002.into_iter().enumerate() {
-                    let mut row = CaseRow {
-                        scenario: name,
+                    let case = Case {
+                        params: &params,
+                        spec: &spec,
+                        models: &models,
+                        name,
+                        make,
                         gyro,
-                        fault: kind,
-                        runs: params.runs,
-                        detected: 0,
-                        isolated_correctly: 0,
-                        isolated_wrong: 0,
-                        detection_delay_s: None,
-                        isolation_delay_s: None,
-                        omega_rms_sigma: 0.0,
+                        ki,
+                        kind,
                     };
-                    let (mut det, mut iso, mut sq) = (Vec::new(), Vec::new(), Vec::new());
-                    for r in 0..params.runs {
-                        // Fresh noise for every run and case (not the same draws per gyro).
-                        let case = (gyro * 4 + ki) as u64;
-                        let seed = params.seed.wrapping_add(1 + r as u64 + 1000 * case);
-                        let mut sim = make(seed, Some((gyro, kind)));
-                        if let rsim::Flight::Climb { climb_deg, .. } = &mut sim.flight {
-                            *climb_deg = params.climb_deg;
-                        }
-                        let onset = sim.fault.map_or(0.0, |f| f.onset_s);
-                        let out = run_case(&sim, &spec, &models)?;
-                        if let Some(t) = out.detected_at {
-                            row.detected += 1;
-                            det.push(t - onset);
-                        }
-                        match &out.isolated {
-                            Some((t, g)) if g == &vec![gyro] => {
-                                row.isolated_correctly += 1;
-                                iso.push(t - onset);
-                            }
-                            Some(_) => row.isolated_wrong += 1,
-                            None => {}
-                        }
-                        sq.extend(out.omega_sq.iter().copied());
-                        if with_model {
-                            let offset = 100.0 * laid as f64;
-                            laid += 1;
-                            let correct_at = match &out.isolated {
-                                Some((t, g)) if g == &vec![gyro] => *t,
-                                _ => f64::INFINITY,
-                            };
-                            for &(t, h, _) in &out.trace {
-                                parity_trace.push((t + offset, h));
-                                // The isolation "alarm" is the faulty gyro being isolated.
-                                let iso_health = if t >= correct_at {
-                                    Health::Isolated
-                                } else {
-                                    Health::Healthy
-                                };
-                                iso_trace.push((t + offset, iso_health));
-                            }
-                            windows.push(FaultWindow {
-                                start: onset + offset,
-                                end: sim.end_s + offset,
-                            });
-                            times.push(out.time_per_epoch_s);
-                            if name == "steady"
-                                && gyro == 0
-                                && kind == GyroFaultKind::Bias(5.0)
-                                && r == 0
-                            {
-                                lambda_trace = out.trace.iter().map(|&(t, _, l)| (t, l)).collect();
-                            }
-                        }
-                    }
-                    row.detection_delay_s = mean(&det);
-                    row.isolation_delay_s = mean(&iso);
-                    row.omega_rms_sigma = mean(&sq).map_or(f64::NAN, |m| m.sqrt() / sigma);
                     if with_model {
-                        rows.push(row);
+                        rows.push(case.run(Some(&mut laid), &mut lambda_trace)?);
                     } else {
-                        rows_parity_only.push(row);
+                        rows_parity_only.push(case.run(None, &mut lambda_trace)?);
                     }
                 }
             }
         }
-        let tpe = mean(&times);
-        let label = format!("T_D={T_D} {name}");
-        for (detector, trace) in [("parity", &parity_trace), ("isolation", &iso_trace)] {
-            let mut card = scorecard::score(detector, &label, trace, &windows, tpe);
-            // Every fault lasts to the end of its run: there is no recovery to time
-            // (the windows' ends only separate runs laid end to end).
-            card.recovery_s.clear();
-            scorecards.push(card);
-        }
+        scorecards.extend(laid.scorecards(name));
     }
     Ok(Seed002Result {
         params,

@@ -347,121 +347,173 @@ fn spec(p: &Seed003Params, policy: PolicyConfig) -> MonitorSpec {
 
 /// Runs the experiment.
 pub fn run(p: Seed003Params) -> Result<Seed003Result, ExperimentError> {
+    let levels = p
+        .noise_vars_m2
+        .iter()
+        .map(|&var| run_level(&p, var))
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(Seed003Result { params: p, levels })
+}
+
+/// Test flight `i` at noise variance `var`.
+fn test_flight(p: &Seed003Params, var: f64, i: usize) -> Result<TacanFlight, ExperimentError> {
+    Ok(simulate_flight(&TacanFlightParams {
+        seed: p.seed * 1000 + 500 + i as u64,
+        duration_s: p.test_duration_s,
+        noise_var_m2: var,
+        jumps: p.jumps,
+        window: p.features.window,
+        ins_sigma_m: p.ins_sigma_m,
+        ins_tau_s: p.ins_tau_s,
+        station: p.station,
+        ..TacanFlightParams::default()
+    })?)
+}
+
+/// Trains at one noise level and runs every test flight under both policies.
+fn run_level(p: &Seed003Params, var: f64) -> Result<NoiseResult, ExperimentError> {
     let k = p.features.window;
-    let mut levels = Vec::new();
-    for &var in &p.noise_vars_m2 {
-        let trained = train_model(&p, var)?;
-        let models: HashMap<String, Arc<AnyModel>> =
-            HashMap::from([("seed003".to_owned(), Arc::new(trained.model))]);
-        let mut flights = Vec::new();
-        let mut traces: Vec<Vec<(f64, Health)>> = vec![Vec::new(), Vec::new()];
-        let mut faults = Vec::new();
-        let mut trace = Trace::default();
-        let policies = [PolicyConfig::Classic, PolicyConfig::counters_default()];
-        let (mut busy_s, mut epochs) = ([0.0; 2], [0usize; 2]);
-        for i in 0..p.test_flights {
-            let flight = simulate_flight(&TacanFlightParams {
-                seed: p.seed * 1000 + 500 + i as u64,
-                duration_s: p.test_duration_s,
-                noise_var_m2: var,
-                jumps: p.jumps,
-                window: k,
-                ins_sigma_m: p.ins_sigma_m,
-                ins_tau_s: p.ins_tau_s,
-                station: p.station,
-                ..TacanFlightParams::default()
-            })?;
-            let truth = flight.window_truth(k);
-            let dt = 1.0 / TacanFlightParams::default().rate_hz;
-            let offset = i as f64 * (p.test_duration_s + 60.0);
-            for (pi, &policy) in policies.iter().enumerate() {
-                let (flags, decisions, busy) = run_flight(&flight, &spec(&p, policy), &models)?;
-                busy_s[pi] += busy;
-                epochs[pi] += flight.epochs.len();
-                for (w, &f) in flags.iter().enumerate() {
-                    let h = if f { Health::Isolated } else { Health::Healthy };
-                    traces[pi].push((offset + (w + k - 1) as f64 * dt, h));
-                }
-                if pi != 0 {
-                    continue;
-                }
-                let mut r = FlightResult {
-                    anomalous: 0,
-                    detected: 0,
-                    clean: 0,
-                    false_alarms: 0,
-                    jumps: flight.jumps.len(),
-                    jumps_detected: 0,
-                };
-                for (&bad, &flag) in truth.iter().zip(&flags) {
-                    match (bad, flag) {
-                        (true, f) => {
-                            r.anomalous += 1;
-                            r.detected += usize::from(f);
-                        }
-                        (false, f) => {
-                            r.clean += 1;
-                            r.false_alarms += usize::from(f);
-                        }
-                    }
-                }
-                // Windows holding jump j: those ending at samples start ..= start + len + K − 2.
-                for j in &flight.jumps {
-                    let first = j.start.saturating_sub(k - 1);
-                    let last = (j.start + j.len - 1).min(flags.len().saturating_sub(1));
-                    if flags
-                        .get(first..=last)
-                        .is_some_and(|w| w.iter().any(|&f| f))
-                    {
-                        r.jumps_detected += 1;
-                    }
-                    faults.push(FaultWindow {
-                        start: offset + j.start as f64 * dt,
-                        end: offset + (j.start + j.len + k - 1) as f64 * dt,
-                    });
-                }
-                flights.push(r);
-                if i == 0 {
-                    let n = flight.epochs.len().min((30.0 / dt) as usize);
-                    trace.range_diff = (0..n)
-                        .map(|s| {
-                            (
-                                s as f64 * dt,
-                                flight.tacan_range_m[s] - flight.ins_range_m[s],
-                            )
-                        })
-                        .collect();
-                    trace.decision = decisions.into_iter().filter(|(t, _)| *t < 30.0).collect();
-                }
+    let trained = train_model(p, var)?;
+    let models: HashMap<String, Arc<AnyModel>> =
+        HashMap::from([("seed003".to_owned(), Arc::new(trained.model))]);
+    let mut flights = Vec::new();
+    let mut traces: Vec<Vec<(f64, Health)>> = vec![Vec::new(), Vec::new()];
+    let mut faults = Vec::new();
+    let mut trace = Trace::default();
+    let policies = [PolicyConfig::Classic, PolicyConfig::counters_default()];
+    let (mut busy_s, mut epochs) = ([0.0; 2], [0usize; 2]);
+    let dt = 1.0 / TacanFlightParams::default().rate_hz;
+    for i in 0..p.test_flights {
+        let flight = test_flight(p, var, i)?;
+        let truth = flight.window_truth(k);
+        let offset = i as f64 * (p.test_duration_s + 60.0);
+        for (pi, &policy) in policies.iter().enumerate() {
+            let (flags, decisions, busy) = run_flight(&flight, &spec(p, policy), &models)?;
+            busy_s[pi] += busy;
+            epochs[pi] += flight.epochs.len();
+            for (w, &f) in flags.iter().enumerate() {
+                let h = if f { Health::Isolated } else { Health::Healthy };
+                traces[pi].push((offset + (w + k - 1) as f64 * dt, h));
+            }
+            if pi != 0 {
+                continue;
+            }
+            let at = FlightOffset { k, offset, dt };
+            flights.push(score_flight(&flight, &truth, &flags, at, &mut faults));
+            if i == 0 {
+                trace = first_seconds(&flight, decisions, dt);
             }
         }
-        // Fault windows are pushed once per flight (classic pass); dedupe is not needed.
-        let labels = ["classic", "counters N1=10 N2=5"];
-        let scorecards = traces
-            .iter()
-            .zip(labels)
-            .enumerate()
-            .map(|(pi, (t, label))| {
-                let per_epoch = busy_s[pi] / epochs[pi].max(1) as f64;
-                let mut card = scorecard::score("range", label, t, &faults, Some(per_epoch));
-                // One figure instead of 2,000: the longest recovery (`None` if one never
-                // recovered before the next jump).
-                card.recovery_s = vec![card.max_recovery_s()];
-                card
-            })
-            .collect();
-        levels.push(NoiseResult {
-            noise_var_m2: var,
-            train_n: trained.train_n,
-            train_total: trained.train_total,
-            train_seconds: trained.seconds,
-            support_vectors: trained.support_vectors,
-            flights,
-            scorecards,
-            trace,
+    }
+    Ok(NoiseResult {
+        noise_var_m2: var,
+        train_n: trained.train_n,
+        train_total: trained.train_total,
+        train_seconds: trained.seconds,
+        support_vectors: trained.support_vectors,
+        flights,
+        scorecards: level_scorecards(&traces, &faults, busy_s, epochs),
+        trace,
+    })
+}
+
+/// Where a test flight's windows sit on the laid-out time axis.
+#[derive(Clone, Copy)]
+struct FlightOffset {
+    /// Window length, samples.
+    k: usize,
+    /// Start of this flight on the axis, s.
+    offset: f64,
+    /// Sample period, s.
+    dt: f64,
+}
+
+/// Counts one flight's detections and false alarms (classic policy) and pushes
+/// its jumps' fault windows.
+fn score_flight(
+    flight: &TacanFlight,
+    truth: &[bool],
+    flags: &[bool],
+    at: FlightOffset,
+    faults: &mut Vec<FaultWindow>,
+) -> FlightResult {
+    let FlightOffset { k, offset, dt } = at;
+    let mut r = FlightResult {
+        anomalous: 0,
+        detected: 0,
+        clean: 0,
+        false_alarms: 0,
+        jumps: flight.jumps.len(),
+        jumps_detected: 0,
+    };
+    for (&bad, &flag) in truth.iter().zip(flags) {
+        match (bad, flag) {
+            (true, f) => {
+                r.anomalous += 1;
+                r.detected += usize::from(f);
+            }
+            (false, f) => {
+                r.clean += 1;
+                r.false_alarms += usize::from(f);
+            }
+        }
+    }
+    // Windows holding jump j: those ending at samples start ..= start + len + K − 2.
+    for j in &flight.jumps {
+        let first = j.start.saturating_sub(k - 1);
+        let last = (j.start + j.len - 1).min(flags.len().saturating_sub(1));
+        if flags
+            .get(first..=last)
+            .is_some_and(|w| w.iter().any(|&f| f))
+        {
+            r.jumps_detected += 1;
+        }
+        faults.push(FaultWindow {
+            start: offset + j.start as f64 * dt,
+            end: offset + (j.start + j.len + k - 1) as f64 * dt,
         });
     }
-    Ok(Seed003Result { params: p, levels })
+    r
+}
+
+/// The first 30 s of a flight for the figure: range difference and decisions.
+fn first_seconds(flight: &TacanFlight, decisions: Vec<(f64, f64)>, dt: f64) -> Trace {
+    let mut trace = Trace::default();
+    let n = flight.epochs.len().min((30.0 / dt) as usize);
+    trace.range_diff = (0..n)
+        .map(|s| {
+            (
+                s as f64 * dt,
+                flight.tacan_range_m[s] - flight.ins_range_m[s],
+            )
+        })
+        .collect();
+    trace.decision = decisions.into_iter().filter(|(t, _)| *t < 30.0).collect();
+    trace
+}
+
+/// One scorecard per policy over every test flight of a level. Fault windows
+/// are pushed once per flight (classic pass); dedupe is not needed.
+fn level_scorecards(
+    traces: &[Vec<(f64, Health)>],
+    faults: &[FaultWindow],
+    busy_s: [f64; 2],
+    epochs: [usize; 2],
+) -> Vec<Scorecard> {
+    let labels = ["classic", "counters N1=10 N2=5"];
+    traces
+        .iter()
+        .zip(labels)
+        .enumerate()
+        .map(|(pi, (t, label))| {
+            let per_epoch = busy_s[pi] / epochs[pi].max(1) as f64;
+            let mut card = scorecard::score("range", label, t, faults, Some(per_epoch));
+            // One figure instead of 2,000: the longest recovery (`None` if one never
+            // recovered before the next jump).
+            card.recovery_s = vec![card.max_recovery_s()];
+            card
+        })
+        .collect()
 }
 
 fn pct(v: f64) -> String {
