@@ -283,13 +283,6 @@ async fn every_kind_trains_over_rest_and_predicts_like_the_same_model_in_process
     assert_eq!(status, 200, "{got}");
     let model = in_process(ModelKind::LwLsSvm, &lw_params, &x, Some(&y));
     assert_close(&got, &in_process_prediction(&model, &queries));
-    for (q, v) in queries.iter().zip(got["y"].as_array().unwrap()) {
-        assert!(
-            (v.as_f64().unwrap() - q[0].sin()).abs() < 0.05,
-            "sin({}) ≈ {v}",
-            q[0]
-        );
-    }
     let old_spelling = json!({"gamma": 50.0, "sigma2": 0.5, "k": 12});
     let same = in_process(ModelKind::LwLsSvm, &old_spelling, &x, Some(&y));
     assert_eq!(same, model);

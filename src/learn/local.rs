@@ -459,7 +459,8 @@ mod tests {
         };
         assert_eq!(field(serde_json::json!({"k": 1})), "k");
         assert_eq!(field(serde_json::json!({"d_floor": -1.0})), "d_floor");
-        assert_eq!(field(serde_json::json!({"gamma": 0})), "reg");
+        assert_eq!(field(serde_json::json!({"gamma": 0})), "gamma");
+        assert_eq!(field(serde_json::json!({"reg": 0})), "reg");
         assert_eq!(field(serde_json::json!({"sigma2": "wide"})), "sigma2");
         let xs: Vec<Vec<f64>> = (0..30).map(|i| vec![i as f64, (i as f64).sqrt()]).collect();
         let ys: Vec<f64> = xs.iter().map(|r| r[1].sin()).collect();

@@ -107,7 +107,15 @@ impl ModelParams {
             ModelKind::Svm => ModelParams::Svm(parse(params)?),
             ModelKind::OcSvm => ModelParams::OcSvm(parse(params)?),
         };
-        parsed.check()?;
+        // A range error names the spelling the body used.
+        parsed.check().map_err(|e| match e {
+            LearnError::InvalidParams { field, reason }
+                if field == name && params.get(name).is_none() && params.get("gamma").is_some() =>
+            {
+                LearnError::params("gamma", reason)
+            }
+            other => other,
+        })?;
         Ok(parsed)
     }
 

@@ -160,7 +160,7 @@ mod tests {
     #[test]
     fn rest_params_are_checked_and_errors_name_the_field() {
         let e = ModelParams::from_json(ModelKind::Svm, &json!({"sigma2": 1, "gamma": 1}));
-        assert_eq!(field_of(e.unwrap_err()), "kernel_gamma");
+        assert_eq!(field_of(e.unwrap_err()), "gamma");
         let e = ModelParams::from_json(ModelKind::Svm, &json!({"sigma2": 1, "kernel_gamma": 1}));
         assert_eq!(field_of(e.unwrap_err()), "kernel_gamma");
         // `kernel_gamma` is the wire name, `gamma` its alias: same params either way.

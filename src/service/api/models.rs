@@ -439,7 +439,11 @@ mod tests {
             ),
             (with("/params/sigma2", json!("wide")), "params.sigma2"),
             (with("/params/sigma2", json!(-1.0)), "params.sigma2"),
-            (with("/params/gamma", json!(0)), "params.reg"),
+            (with("/params/gamma", json!(0)), "params.gamma"),
+            (
+                with("/params", json!({"reg": 0, "sigma2": 1})),
+                "params.reg",
+            ),
             (
                 with("/params", json!({"reg": 1, "gamma": 1})),
                 "params.gamma",
