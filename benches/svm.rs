@@ -126,9 +126,12 @@ fn agreement(file: &str, ours: &[f64]) {
 fn bench(c: &mut Criterion) {
     let oc_data = ocsvm_data();
     let started = Instant::now();
-    let (model, _, metrics) = ocsvm_params()
+    let fitted = ocsvm_params()
+        .check()
+        .expect("valid params")
         .fit_with(&oc_data, &navguard::learn::NoProgress)
         .expect("ocsvm trains");
+    let (model, metrics) = (fitted.model, fitted.metrics);
     println!(
         "navguard ocsvm 30000x3: {:.3} s, {} SVs, rho {:.6}, {} iterations, outliers {:.4}",
         started.elapsed().as_secs_f64(),

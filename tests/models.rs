@@ -267,6 +267,26 @@ async fn every_kind_trains_over_rest_and_predicts_like_the_same_model_in_process
     let model = in_process(ModelKind::OcSvm, &oc_params, &xo, None);
     assert_close(&got, &in_process_prediction(&model, &q));
 
+    // lw-lssvm: a local fit per query, as in-process; the record echoes `reg`
+    // (the regularisation's wire name) for the old spelling `gamma` too.
+    let lw_params = json!({"reg": 50.0, "sigma2": 0.5, "k": 12});
+    let id = train(
+        &server,
+        &json!({"kind": "lw-lssvm", "params": lw_params, "data": {"x": x, "y": y}}),
+    )
+    .await;
+    let (record, _) = wait(&server, &id).await;
+    assert_eq!(record["status"], "ready", "{record}");
+    assert_eq!(record["params"]["reg"], 50.0, "{record}");
+    assert_eq!(record["params"]["k"], 12, "{record}");
+    let (status, got) = predict(&server, &id, &queries).await;
+    assert_eq!(status, 200, "{got}");
+    let model = in_process(ModelKind::LwLsSvm, &lw_params, &x, Some(&y));
+    assert_close(&got, &in_process_prediction(&model, &queries));
+    let old_spelling = json!({"gamma": 50.0, "sigma2": 0.5, "k": 12});
+    let same = in_process(ModelKind::LwLsSvm, &old_spelling, &x, Some(&y));
+    assert_eq!(same, model);
+
     // Newest first.
     let (_, list) = get(&server, "/api/v1/models").await;
     let kinds: Vec<&str> = list["models"]
@@ -275,7 +295,7 @@ async fn every_kind_trains_over_rest_and_predicts_like_the_same_model_in_process
         .iter()
         .map(|m| m["kind"].as_str().unwrap())
         .collect();
-    assert_eq!(kinds, ["ocsvm", "svm", "lssvm", "lssvm"]);
+    assert_eq!(kinds, ["lw-lssvm", "ocsvm", "svm", "lssvm", "lssvm"]);
     server.shutdown().await;
 }
 
@@ -318,7 +338,7 @@ async fn a_cross_validation_job_shows_its_progress_then_its_choice() {
     assert_eq!(cv["folds"], 3, "{record}");
     assert!(cv["error"].as_f64().unwrap() < 0.01, "{record}");
     // The record shows the values CV chose, not "auto".
-    assert_eq!(record["params"]["gamma"], cv["gamma"]);
+    assert_eq!(record["params"]["reg"], cv["reg"]);
     assert_eq!(record["params"]["sigma2"], cv["sigma2"]);
     server.shutdown().await;
 }

@@ -70,17 +70,6 @@ impl<'de> Deserialize<'de> for Hyper {
     }
 }
 
-/// Deserialises `gamma` as a [`Hyper`], naming the field in the error so the service's
-/// 422 says `params.gamma`.
-pub fn de_gamma<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Hyper, D::Error> {
-    Hyper::deserialize(d).map_err(|e| serde::de::Error::custom(format!("`gamma`: {e}")))
-}
-
-/// Deserialises `sigma2` as a [`Hyper`], naming the field in the error.
-pub fn de_sigma2<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Hyper, D::Error> {
-    Hyper::deserialize(d).map_err(|e| serde::de::Error::custom(format!("`sigma2`: {e}")))
-}
-
 /// The `cv` block of `POST /api/v1/models`. Ranges are in the units the model trains
 /// in: standardised units by default (`"standardize": true`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -165,7 +154,9 @@ impl CvParams {
 pub struct CvReport {
     /// Folds used.
     pub folds: usize,
-    /// Chosen `gamma`.
+    /// Chosen regularisation γ: wire name `reg`, as in the params (`gamma` is read
+    /// from metrics stored before the rename).
+    #[serde(rename = "reg", alias = "gamma")]
     pub gamma: f64,
     /// Chosen `sigma2` (absent for the linear kernel).
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -19,6 +19,28 @@ pub enum Kernel {
     Linear,
 }
 
+/// The kernel family a `params` body names (`"kernel"`), shared by `lssvm` and `svm`
+/// (`lw-lssvm` and `ocsvm` are RBF only). Its width comes from the params' `sigma2`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum KernelKind {
+    /// `exp(−‖x − y‖² / sigma2)` (the default).
+    #[default]
+    Rbf,
+    /// `xᵀy` (no width).
+    Linear,
+}
+
+impl KernelKind {
+    /// The kernel of this family with RBF width `sigma2` (ignored by the linear kernel).
+    pub fn with_width(self, sigma2: f64) -> Kernel {
+        match self {
+            KernelKind::Rbf => Kernel::Rbf { sigma2 },
+            KernelKind::Linear => Kernel::Linear,
+        }
+    }
+}
+
 impl Kernel {
     /// Checks the parameters; `field` prefixes the error path (e.g. `sigma2`).
     pub fn check(&self) -> Result<(), LearnError> {

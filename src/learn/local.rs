@@ -18,18 +18,18 @@ use super::cv::{self, CvParams, CvReport, Hyper, Search};
 use super::lssvm::{Prepared, train_rmse};
 use super::lssvm_exact::{self as exact, ExactScale};
 use super::lssvm_solve as solve;
-use super::model::{AnyModel, ModelParams, Trained, TrainingMetrics};
-use super::{Dataset, Kernel, LearnError, NoProgress, Progress};
+use super::{Dataset, Fitted, Kernel, LearnError, NoProgress, Progress, TrainingMetrics};
 
 /// `params` of an `lw-lssvm` model (RBF kernel only: the width is what is localised).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LwLsSvmParams {
-    /// Regularisation γ (> 0) or `"auto"` (the default: chosen by CV).
-    #[serde(default, deserialize_with = "cv::de_gamma")]
+    /// Regularisation γ (> 0) or `"auto"` (the default: chosen by CV). Wire name
+    /// `reg`; `gamma` is accepted as an alias (never both).
+    #[serde(rename = "reg", alias = "gamma", default)]
     pub gamma: Hyper,
     /// Base RBF width σ² (> 0, multiplied by each query's `d`) or `"auto"` (default).
-    #[serde(default, deserialize_with = "cv::de_sigma2")]
+    #[serde(default)]
     pub sigma2: Hyper,
     /// Neighbours per query (≥ 2, default 30; capped at the training set size).
     #[serde(default = "default_k")]
@@ -75,8 +75,8 @@ impl LwLsSvmParams {
     }
 
     /// Validates the parameters; the error names the field.
-    pub fn check(&self) -> Result<(), LearnError> {
-        self.gamma.check("gamma")?;
+    pub fn check(&self) -> Result<ValidLwLsSvmParams, LearnError> {
+        self.gamma.check("reg")?;
         self.sigma2.check("sigma2")?;
         if self.k < 2 {
             return Err(LearnError::params("k", "must be at least 2"));
@@ -84,15 +84,45 @@ impl LwLsSvmParams {
         if !(self.d_floor.is_finite() && self.d_floor >= 0.0) {
             return Err(LearnError::params("d_floor", "must be a finite number ≥ 0"));
         }
-        Ok(())
+        Ok(ValidLwLsSvmParams(self.clone()))
+    }
+
+    /// `self.check()?.fit(data)`.
+    pub fn fit(&self, data: &Dataset) -> Result<LwLsSvmModel, LearnError> {
+        self.check()?.fit(data)
+    }
+}
+
+/// [`LwLsSvmParams`] that passed [`LwLsSvmParams::check`]: the only way to fit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ValidLwLsSvmParams(LwLsSvmParams);
+
+impl ValidLwLsSvmParams {
+    /// The checked parameters.
+    pub fn params(&self) -> &LwLsSvmParams {
+        &self.0
+    }
+
+    /// True when fitting runs cross-validation first: a hyper-parameter is `"auto"`
+    /// or a `cv` block is given.
+    pub fn tunes(&self, cv_given: bool) -> bool {
+        Search::plan(self.0.gamma, self.0.sigma2, true, cv_given).is_some()
     }
 
     /// Fits on `data` (targets required), tuning `"auto"` hyper-parameters by CV first.
     pub fn fit(&self, data: &Dataset) -> Result<LwLsSvmModel, LearnError> {
-        match train(self, None, data, &NoProgress)?.model {
-            AnyModel::LwLsSvm(m) => Ok(m),
-            _ => unreachable!("local::train returns an lw-lssvm model"),
-        }
+        Ok(self.fit_with(None, data, &NoProgress)?.model)
+    }
+
+    /// The training job: CV when asked (see [`super::cv`]), then the model (which
+    /// stores the training set; the local fits happen at prediction).
+    pub fn fit_with(
+        &self,
+        cv: Option<&CvParams>,
+        data: &Dataset,
+        progress: &dyn Progress,
+    ) -> Result<Fitted<LwLsSvmModel, LwLsSvmParams>, LearnError> {
+        train(&self.0, cv, data, progress)
     }
 }
 
@@ -276,16 +306,14 @@ fn tune(
     )
 }
 
-/// Training job entry point for `lw-lssvm`: CV when asked (see [`cv`]), then the model
-/// (which stores the training set; the local fits happen at prediction).
-pub fn train(
+/// [`ValidLwLsSvmParams::fit_with`] on checked `params`.
+fn train(
     params: &LwLsSvmParams,
     cv: Option<&CvParams>,
     data: &Dataset,
     progress: &dyn Progress,
-) -> Result<Trained, LearnError> {
+) -> Result<Fitted<LwLsSvmModel, LwLsSvmParams>, LearnError> {
     let started = Instant::now();
-    params.check()?;
     let p = Prepared::new(data, params.standardize)?;
     let mut report: Option<CvReport> = None;
     let (gamma, sigma2) = match Search::plan(params.gamma, params.sigma2, true, cv.is_some()) {
@@ -333,9 +361,9 @@ pub fn train(
         sigma2: Hyper::Value(sigma2),
         ..params.clone()
     };
-    Ok(Trained {
-        model: AnyModel::LwLsSvm(model),
-        params: ModelParams::LwLsSvm(effective),
+    Ok(Fitted {
+        model,
+        params: effective,
         metrics,
     })
 }
@@ -344,6 +372,7 @@ pub fn train(
 mod tests {
     use super::*;
     use crate::learn::lssvm::LsSvmParams;
+    use crate::learn::{AnyModel, ModelParams};
 
     /// `|x|`-like kink at 0.3 on a smooth background, sampled on a grid.
     fn kinked(x: f64) -> f64 {
@@ -364,29 +393,17 @@ mod tests {
             refine: false,
             ..CvParams::default()
         };
-        let global = match crate::learn::lssvm::train(
-            &LsSvmParams::default(),
-            Some(&cv),
-            &data,
-            &NoProgress,
-        ) {
-            Ok(Trained {
-                model: AnyModel::LsSvm(m),
-                ..
-            }) => m,
-            other => panic!("{other:?}"),
-        };
+        let global = LsSvmParams::default()
+            .check()
+            .unwrap()
+            .fit_with(Some(&cv), &data, &NoProgress)
+            .unwrap()
+            .model;
         let lw = LwLsSvmParams {
             k: 20,
             ..LwLsSvmParams::default()
         };
-        let local = match train(&lw, Some(&cv), &data, &NoProgress) {
-            Ok(Trained {
-                model: AnyModel::LwLsSvm(m),
-                ..
-            }) => m,
-            other => panic!("{other:?}"),
-        };
+        let local = train(&lw, Some(&cv), &data, &NoProgress).unwrap().model;
         let near: Vec<f64> = (0..40)
             .map(|i| 0.2 + 0.2 * (i as f64 + 0.5) / 40.0)
             .collect();
@@ -443,6 +460,7 @@ mod tests {
         assert_eq!(field(serde_json::json!({"k": 1})), "k");
         assert_eq!(field(serde_json::json!({"d_floor": -1.0})), "d_floor");
         assert_eq!(field(serde_json::json!({"gamma": 0})), "gamma");
+        assert_eq!(field(serde_json::json!({"reg": 0})), "reg");
         assert_eq!(field(serde_json::json!({"sigma2": "wide"})), "sigma2");
         let xs: Vec<Vec<f64>> = (0..30).map(|i| vec![i as f64, (i as f64).sqrt()]).collect();
         let ys: Vec<f64> = xs.iter().map(|r| r[1].sin()).collect();
@@ -457,8 +475,9 @@ mod tests {
         )
         .unwrap();
         assert!(t.metrics.cv.is_some() && t.metrics.train_rmse.is_some());
-        let back = AnyModel::from_stored_json(&t.model.to_stored_json()).unwrap();
-        assert_eq!(back, t.model);
+        let any = AnyModel::LwLsSvm(t.model.clone());
+        let back = AnyModel::from_stored_json(&any.to_stored_json()).unwrap();
+        assert_eq!(back, any);
         assert_eq!(
             back.predict_one(&[3.5, 1.9]).to_bits(),
             t.model.predict_one(&[3.5, 1.9]).to_bits()

@@ -2,7 +2,10 @@
 //! the two-solve trick. The channel monitor predicts with [`LsSvmModel`]; the service
 //! trains it through [`train`] (cross-validation first when asked).
 //!
-//! Defaults: `gamma` and `sigma2` are `"auto"` (tuned by k-fold CV with the default
+//! Names: `reg` is the regularisation γ (`gamma` is accepted as its old spelling,
+//! and is what LS-SVMlab calls it); `sigma2` is the RBF width.
+//!
+//! Defaults: `reg` and `sigma2` are `"auto"` (tuned by k-fold CV with the default
 //! [`CvParams`], as LS-SVMlab's `tunelssvm`), `kernel` is `"rbf"`, `standardize` is
 //! true, so `sigma2` is in standardised squared units.
 
@@ -11,40 +14,27 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use super::cv::{self, CvParams, CvReport, Hyper, Search};
+pub use super::kernel::KernelKind;
 use super::lssvm_exact::{self as exact, ExactScale};
 use super::lssvm_solve as solve;
-use super::model::{AnyModel, ModelParams, Trained, TrainingMetrics};
-use super::{Dataset, Kernel, LearnError, NoProgress, Progress, Standardizer};
-
-/// The kernel family of a regression model.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum KernelKind {
-    /// `exp(−‖x − y‖² / sigma2)` (the default).
-    #[default]
-    Rbf,
-    /// `xᵀy` (`sigma2` unused).
-    Linear,
-}
-
-/// Deserialises `kernel`, naming the field in the error.
-pub(crate) fn de_kernel<'de, D: serde::Deserializer<'de>>(d: D) -> Result<KernelKind, D::Error> {
-    KernelKind::deserialize(d).map_err(|e| serde::de::Error::custom(format!("`kernel`: {e}")))
-}
+use super::{
+    Dataset, Fitted, Kernel, LearnError, NoProgress, Progress, Standardizer, TrainingMetrics,
+};
 
 /// `params` of an `lssvm` model.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LsSvmParams {
-    /// Regularisation γ (> 0) or `"auto"` (the default: chosen by CV).
-    #[serde(default, deserialize_with = "cv::de_gamma")]
+    /// Regularisation γ (> 0) or `"auto"` (the default: chosen by CV). Wire name
+    /// `reg`; `gamma` is accepted as an alias (never both).
+    #[serde(rename = "reg", alias = "gamma", default)]
     pub gamma: Hyper,
     /// RBF width σ² (> 0) or `"auto"` (the default: chosen by CV). Unused by the
     /// linear kernel.
-    #[serde(default, deserialize_with = "cv::de_sigma2")]
+    #[serde(default)]
     pub sigma2: Hyper,
     /// `"rbf"` (default) or `"linear"`.
-    #[serde(default, deserialize_with = "de_kernel")]
+    #[serde(default)]
     pub kernel: KernelKind,
     /// Standardise inputs and targets with the training mean and std (default true).
     #[serde(default = "yes")]
@@ -76,22 +66,53 @@ impl LsSvmParams {
         }
     }
 
-    /// Validates the parameters; the error names the field.
-    pub fn check(&self) -> Result<(), LearnError> {
-        self.gamma.check("gamma")?;
+    /// Validates the parameters; the error names the field (`reg`, `sigma2`).
+    pub fn check(&self) -> Result<ValidLsSvmParams, LearnError> {
+        self.gamma.check("reg")?;
         if self.kernel == KernelKind::Rbf {
             self.sigma2.check("sigma2")?;
         }
-        Ok(())
+        Ok(ValidLsSvmParams(self.clone()))
+    }
+
+    /// `self.check()?.fit(data)`.
+    pub fn fit(&self, data: &Dataset) -> Result<LsSvmModel, LearnError> {
+        self.check()?.fit(data)
+    }
+}
+
+/// [`LsSvmParams`] that passed [`LsSvmParams::check`]: the only way to fit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ValidLsSvmParams(LsSvmParams);
+
+impl ValidLsSvmParams {
+    /// The checked parameters.
+    pub fn params(&self) -> &LsSvmParams {
+        &self.0
+    }
+
+    /// True when fitting runs cross-validation first: a hyper-parameter is `"auto"`
+    /// or a `cv` block is given.
+    pub fn tunes(&self, cv_given: bool) -> bool {
+        let p = &self.0;
+        Search::plan(p.gamma, p.sigma2, p.kernel == KernelKind::Rbf, cv_given).is_some()
     }
 
     /// Fits on `data` (targets required). `"auto"` hyper-parameters are tuned first by
     /// CV with the default [`CvParams`].
     pub fn fit(&self, data: &Dataset) -> Result<LsSvmModel, LearnError> {
-        match train(self, None, data, &NoProgress)?.model {
-            AnyModel::LsSvm(m) => Ok(m),
-            _ => unreachable!("lssvm::train returns an lssvm model"),
-        }
+        Ok(self.fit_with(None, data, &NoProgress)?.model)
+    }
+
+    /// The training job: cross-validation first when a hyper-parameter is `"auto"` or
+    /// `cv` is given (see [`cv`] for which axes), then the final fit.
+    pub fn fit_with(
+        &self,
+        cv: Option<&CvParams>,
+        data: &Dataset,
+        progress: &dyn Progress,
+    ) -> Result<Fitted<LsSvmModel, LsSvmParams>, LearnError> {
+        train(&self.0, cv, data, progress)
     }
 }
 
@@ -259,10 +280,7 @@ fn fit_prepared(
 }
 
 pub(crate) fn kernel_of(kind: KernelKind, sigma2: f64) -> Kernel {
-    match kind {
-        KernelKind::Rbf => Kernel::Rbf { sigma2 },
-        KernelKind::Linear => Kernel::Linear,
-    }
+    kind.with_width(sigma2)
 }
 
 /// k-fold CV of the batch LS-SVM on prepared data: one kernel matrix per fold and σ²,
@@ -330,16 +348,14 @@ pub(crate) fn train_rmse(data: &Dataset, predict: impl Fn(&[f64]) -> f64) -> Opt
     Some((sse / data.n() as f64).sqrt())
 }
 
-/// Training job entry point for `lssvm`: cross-validation first when a hyper-parameter
-/// is `"auto"` or `cv` is given (see [`cv`] for which axes), then the final fit.
-pub fn train(
+/// [`ValidLsSvmParams::fit_with`] on checked `params`.
+fn train(
     params: &LsSvmParams,
     cv: Option<&CvParams>,
     data: &Dataset,
     progress: &dyn Progress,
-) -> Result<Trained, LearnError> {
+) -> Result<Fitted<LsSvmModel, LsSvmParams>, LearnError> {
     let started = Instant::now();
-    params.check()?;
     let p = Prepared::new(data, params.standardize)?;
     let has_width = params.kernel == KernelKind::Rbf;
     let mut report: Option<CvReport> = None;
@@ -383,9 +399,9 @@ pub fn train(
         cv: report,
         ..TrainingMetrics::default()
     };
-    Ok(Trained {
-        model: AnyModel::LsSvm(model),
-        params: ModelParams::LsSvm(effective),
+    Ok(Fitted {
+        model,
+        params: effective,
         metrics,
     })
 }

@@ -1,8 +1,8 @@
 //! Unit tests of the batch LS-SVM (`lssvm.rs`), kept beside it to keep that file short.
 
 use super::*;
-use crate::learn::ModelKind;
 use crate::learn::cv::make_folds;
+use crate::learn::{AnyModel, ModelKind, ModelParams};
 use nalgebra::{DMatrix, DVector};
 use rand::{Rng, SeedableRng, rngs::StdRng};
 
@@ -116,8 +116,11 @@ fn bad_params_are_refused_naming_the_field() {
         Err(LearnError::InvalidParams { field, .. }) => field,
         other => panic!("{other:?}"),
     };
+    // An error names the spelling the body used.
     assert_eq!(field(serde_json::json!({"gamma": -1.0})), "gamma");
+    assert_eq!(field(serde_json::json!({"reg": -1.0})), "reg");
     assert_eq!(field(serde_json::json!({"gamma": "big"})), "gamma");
+    assert_eq!(field(serde_json::json!({"reg": "big"})), "reg");
     assert_eq!(field(serde_json::json!({"sigma2": 0.0})), "sigma2");
     assert_eq!(field(serde_json::json!({"sigma2": true})), "sigma2");
     assert_eq!(field(serde_json::json!({"kernel": "poly"})), "kernel");
@@ -129,6 +132,18 @@ fn bad_params_are_refused_naming_the_field() {
     )
     .unwrap();
     assert_eq!(ok.to_json()["sigma2"], "auto");
+    // `reg` is the wire name; `gamma` its accepted old spelling, never both.
+    assert_eq!(ok.to_json()["reg"], 5.0);
+    assert!(ok.to_json().get("gamma").is_none());
+    let new = ModelParams::from_json(
+        ModelKind::LsSvm,
+        &serde_json::json!({"reg": 5, "kernel": "linear"}),
+    );
+    assert_eq!(new.unwrap(), ok);
+    assert!(
+        ModelParams::from_json(ModelKind::LsSvm, &serde_json::json!({"reg": 5, "gamma": 5}))
+            .is_err()
+    );
     let d = ModelParams::from_json(ModelKind::LsSvm, &serde_json::Value::Null).unwrap();
     assert_eq!(d, ModelParams::LsSvm(LsSvmParams::default()));
 }
@@ -207,10 +222,7 @@ fn cross_validation_picks_the_best_pair_of_its_grid() {
     // A known-good region for this function: σ² of order 1 (the sine's scale).
     let s = report.sigma2.unwrap();
     assert!((0.1..=10.0).contains(&s), "σ² {s}");
-    match t.params {
-        ModelParams::LsSvm(p) => assert_eq!(p.gamma, Hyper::Value(report.gamma)),
-        _ => unreachable!(),
-    }
+    assert_eq!(t.params.gamma, Hyper::Value(report.gamma));
 }
 
 #[test]

@@ -5,8 +5,10 @@
 //! no async.
 //!
 //! Every algorithm has linfa's shape (STYLE.md 10): `XParams` (what a REST body
-//! deserialises into) → `check()` → `fit(&Dataset)` → `XModel` (serde, with a
-//! format version) → `predict`.
+//! deserialises into) → `check()` → `ValidXParams` → `fit(&Dataset)` → `XModel`
+//! (serde, with a format version) → `predict`. `XParams::fit` is the shortcut
+//! `check()?.fit(..)`. Only [`model`] wraps an algorithm's own model into the stored
+//! [`AnyModel`]; the algorithms never import it.
 
 pub mod cv;
 pub mod dataset;
@@ -15,6 +17,7 @@ pub mod local;
 pub mod lssvm;
 pub mod lssvm_exact;
 pub mod lssvm_solve;
+pub mod metrics;
 pub mod model;
 pub mod online;
 pub mod outlier;
@@ -22,8 +25,9 @@ pub mod scale;
 pub mod svm;
 
 pub use dataset::Dataset;
-pub use kernel::Kernel;
-pub use model::{AnyModel, ModelKind, ModelParams, Prediction, Trained, TrainingMetrics, train};
+pub use kernel::{Kernel, KernelKind};
+pub use metrics::{Fitted, TrainingMetrics};
+pub use model::{AnyModel, ModelKind, ModelParams, Prediction, Trained, train};
 pub use scale::Standardizer;
 
 /// Why a model could not be trained or used. `InvalidParams` and `InvalidData` are the
@@ -64,6 +68,16 @@ impl LearnError {
         LearnError::InvalidParams {
             field: field.into(),
             reason: reason.into(),
+        }
+    }
+
+    /// The field an `InvalidParams` or `InvalidData` names (`None` for the others).
+    pub fn field(&self) -> Option<&str> {
+        match self {
+            LearnError::InvalidParams { field, .. } | LearnError::InvalidData { field, .. } => {
+                Some(field)
+            }
+            LearnError::Numerical(_) | LearnError::Cancelled => None,
         }
     }
 

@@ -8,11 +8,22 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
-use super::cv::{CvParams, CvReport};
+use super::cv::CvParams;
 use super::local::{LwLsSvmModel, LwLsSvmParams};
 use super::lssvm::{LsSvmModel, LsSvmParams};
-use super::svm::{OcSvmModel, OcSvmParams, SvcModel, SvcParams};
-use super::{Dataset, LearnError, Progress};
+use super::svm::{self, OcSvmModel, OcSvmParams, SvcModel, SvcParams};
+use super::{Dataset, Fitted, LearnError, Progress, TrainingMetrics};
+
+/// Deserialises `value` as `T`; on failure returns the dotted path of the failing
+/// value as serde_path_to_error tracked it (`""` at the top, `folds`, `x[2]`) and
+/// serde's reason. Used for `params` here and for `cv` by the service.
+pub fn parse_at<T: serde::de::DeserializeOwned>(value: &Value) -> Result<T, (String, String)> {
+    serde_path_to_error::deserialize(value).map_err(|e| {
+        let path = e.path().to_string();
+        let path = if path == "." { String::new() } else { path };
+        (path, e.into_inner().to_string())
+    })
+}
 
 /// Version of the stored model format; bumped when a model struct changes shape.
 pub const FORMAT_VERSION: u32 = 1;
@@ -71,20 +82,40 @@ pub enum ModelParams {
 
 impl ModelParams {
     /// Parses `params` for `kind` (missing fields take their documented defaults,
-    /// unknown fields are refused) and checks them.
+    /// unknown fields are refused) and checks them. A parse error names the exact
+    /// path inside `params` (serde_path_to_error), e.g. `sigma2` or `gama`.
     pub fn from_json(kind: ModelKind, params: &Value) -> Result<Self, LearnError> {
         let params = if params.is_null() {
             &Value::Object(Default::default())
         } else {
             params
         };
+        let name = if kind.is_regression() {
+            "reg"
+        } else {
+            "kernel_gamma"
+        };
+        if params.get(name).is_some() && params.get("gamma").is_some() {
+            return Err(LearnError::params(
+                "gamma",
+                format!("`gamma` is the old spelling of `{name}` for this kind: give one of them"),
+            ));
+        }
         let parsed = match kind {
             ModelKind::LsSvm => ModelParams::LsSvm(parse(params)?),
             ModelKind::LwLsSvm => ModelParams::LwLsSvm(parse(params)?),
             ModelKind::Svm => ModelParams::Svm(parse(params)?),
             ModelKind::OcSvm => ModelParams::OcSvm(parse(params)?),
         };
-        parsed.check()?;
+        // A range error names the spelling the body used.
+        parsed.check().map_err(|e| match e {
+            LearnError::InvalidParams { field, reason }
+                if field == name && params.get(name).is_none() && params.get("gamma").is_some() =>
+            {
+                LearnError::params("gamma", reason)
+            }
+            other => other,
+        })?;
         Ok(parsed)
     }
 
@@ -101,10 +132,21 @@ impl ModelParams {
     /// Validates every parameter; the error names the field.
     pub fn check(&self) -> Result<(), LearnError> {
         match self {
-            ModelParams::LsSvm(p) => p.check(),
-            ModelParams::LwLsSvm(p) => p.check(),
-            ModelParams::Svm(p) => p.check(),
-            ModelParams::OcSvm(p) => p.check(),
+            ModelParams::LsSvm(p) => p.check().map(drop),
+            ModelParams::LwLsSvm(p) => p.check().map(drop),
+            ModelParams::Svm(p) => p.check().map(drop),
+            ModelParams::OcSvm(p) => p.check().map(drop),
+        }
+    }
+
+    /// True when training runs cross-validation first: a regression kind with a
+    /// hyper-parameter `"auto"` that its kernel uses, or with a `cv` block. Read from
+    /// the typed parameters, never from their JSON.
+    pub fn tunes(&self, cv_given: bool) -> bool {
+        match self {
+            ModelParams::LsSvm(p) => p.check().is_ok_and(|v| v.tunes(cv_given)),
+            ModelParams::LwLsSvm(p) => p.check().is_ok_and(|v| v.tunes(cv_given)),
+            ModelParams::Svm(_) | ModelParams::OcSvm(_) => false,
         }
     }
 
@@ -120,53 +162,10 @@ impl ModelParams {
     }
 }
 
-/// Deserialises one kind's params, turning serde's message into an `InvalidParams`
-/// naming the field where serde says which one.
+/// Deserialises one kind's params; the error's field is the path serde_path_to_error
+/// tracked to the failing value (empty for `params` itself).
 fn parse<T: serde::de::DeserializeOwned>(params: &Value) -> Result<T, LearnError> {
-    serde_json::from_value(params.clone()).map_err(|e| {
-        let msg = e.to_string();
-        let field = field_in(&msg).unwrap_or_default();
-        LearnError::params(field, msg)
-    })
-}
-
-/// Pulls the field name out of serde messages such as "unknown field `x`, expected …".
-fn field_in(msg: &str) -> Option<String> {
-    let start = msg.find('`')? + 1;
-    let len = msg[start..].find('`')?;
-    Some(msg[start..start + len].to_owned())
-}
-
-/// What training measured, shown by `GET /api/v1/models/{id}` when ready.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct TrainingMetrics {
-    /// Training samples.
-    pub n: usize,
-    /// Input dimension.
-    pub dim: usize,
-    /// Wall time of training, s (cross-validation included).
-    pub seconds: f64,
-    /// Regression: root-mean-square error on the training set, original units.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub train_rmse: Option<f64>,
-    /// Classification: fraction of training labels reproduced.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub train_accuracy: Option<f64>,
-    /// One-class: fraction of training samples outside the boundary.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub outlier_fraction: Option<f64>,
-    /// SVM kinds: number of support vectors.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub support_vectors: Option<usize>,
-    /// SVM kinds: SMO iterations.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub iterations: Option<usize>,
-    /// SVM kinds: final dual objective.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub objective: Option<f64>,
-    /// The cross-validation that chose the hyper-parameters, when it ran.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub cv: Option<CvReport>,
+    parse_at(params).map_err(|(field, reason)| LearnError::params(field, reason))
 }
 
 /// A trained model, the parameters it was trained with (hyper-parameters chosen by
@@ -181,6 +180,22 @@ pub struct Trained {
     pub metrics: TrainingMetrics,
 }
 
+impl Trained {
+    /// One algorithm's [`Fitted`] result, wrapped: the only place an algorithm's own
+    /// model becomes an [`AnyModel`].
+    fn from<M, P>(
+        fitted: Fitted<M, P>,
+        model: impl FnOnce(M) -> AnyModel,
+        params: impl FnOnce(P) -> ModelParams,
+    ) -> Self {
+        Trained {
+            model: model(fitted.model),
+            params: params(fitted.params),
+            metrics: fitted.metrics,
+        }
+    }
+}
+
 /// Trains a model of `params.kind()` on `data`, running cross-validation first when
 /// `cv` is given or a hyper-parameter is `"auto"`. Blocking and CPU-heavy: the
 /// service calls it on the blocking pool.
@@ -190,7 +205,6 @@ pub fn train(
     data: &Dataset,
     progress: &dyn Progress,
 ) -> Result<Trained, LearnError> {
-    params.check()?;
     if let Some(cv) = cv {
         cv.check()?;
     }
@@ -199,10 +213,34 @@ pub fn train(
     }
     let started = Instant::now();
     let mut trained = match params {
-        ModelParams::LsSvm(p) => super::lssvm::train(p, cv, data, progress)?,
-        ModelParams::LwLsSvm(p) => super::local::train(p, cv, data, progress)?,
-        ModelParams::Svm(p) => super::svm::train_svc(p, cv, data, progress)?,
-        ModelParams::OcSvm(p) => super::svm::train_ocsvm(p, cv, data, progress)?,
+        ModelParams::LsSvm(p) => Trained::from(
+            p.check()?.fit_with(cv, data, progress)?,
+            AnyModel::LsSvm,
+            ModelParams::LsSvm,
+        ),
+        ModelParams::LwLsSvm(p) => Trained::from(
+            p.check()?.fit_with(cv, data, progress)?,
+            AnyModel::LwLsSvm,
+            ModelParams::LwLsSvm,
+        ),
+        ModelParams::Svm(p) => {
+            let valid = p.check()?;
+            svm::refuse_cv(cv)?;
+            Trained::from(
+                valid.fit_with(data, progress)?,
+                AnyModel::Svm,
+                ModelParams::Svm,
+            )
+        }
+        ModelParams::OcSvm(p) => {
+            let valid = p.check()?;
+            svm::refuse_cv(cv)?;
+            Trained::from(
+                valid.fit_with(data, progress)?,
+                AnyModel::OcSvm,
+                ModelParams::OcSvm,
+            )
+        }
     };
     trained.metrics.n = data.n();
     trained.metrics.dim = data.dim();
@@ -352,14 +390,46 @@ impl AnyModel {
 mod tests {
     use super::*;
 
+    fn field(kind: ModelKind, params: Value) -> String {
+        let e = ModelParams::from_json(kind, &params).unwrap_err();
+        assert!(matches!(e, LearnError::InvalidParams { .. }), "{e:?}");
+        e.field().unwrap_or_default().to_owned()
+    }
+
     #[test]
-    fn unknown_params_name_the_field() {
-        let e =
-            ModelParams::from_json(ModelKind::LsSvm, &serde_json::json!({"gama": 1})).unwrap_err();
-        match e {
-            LearnError::InvalidParams { field, .. } => assert_eq!(field, "gama"),
-            other => panic!("{other:?}"),
-        }
+    fn parse_errors_name_the_exact_path_of_the_bad_field() {
+        use serde_json::json;
+        assert_eq!(field(ModelKind::LsSvm, json!({"gama": 1})), "gama");
+        assert_eq!(field(ModelKind::LsSvm, json!({"sigma2": [1]})), "sigma2");
+        assert_eq!(field(ModelKind::LsSvm, json!({"kernel": "poly"})), "kernel");
+        assert_eq!(field(ModelKind::LwLsSvm, json!({"k": -3})), "k");
+        assert_eq!(field(ModelKind::Svm, json!({"C": "big"})), "C");
+        assert_eq!(field(ModelKind::Svm, json!({"max_iter": 1.5})), "max_iter");
+        assert_eq!(field(ModelKind::OcSvm, json!({"kernel": "rbf"})), "kernel");
+        assert_eq!(field(ModelKind::OcSvm, json!("x")), "");
+        // A name and its alias together: refused naming the alias.
+        assert_eq!(
+            field(ModelKind::LsSvm, json!({"reg": 1, "gamma": 1})),
+            "gamma"
+        );
+        assert_eq!(
+            field(ModelKind::Svm, json!({"kernel_gamma": 1, "gamma": 1})),
+            "gamma"
+        );
+    }
+
+    #[test]
+    fn tuning_is_read_from_the_typed_params() {
+        use serde_json::json;
+        let p = |kind, v| ModelParams::from_json(kind, &v).unwrap();
+        assert!(p(ModelKind::LsSvm, json!({})).tunes(false));
+        assert!(p(ModelKind::LsSvm, json!({"reg": 1, "sigma2": "auto"})).tunes(false));
+        assert!(!p(ModelKind::LsSvm, json!({"reg": 1, "sigma2": 2})).tunes(false));
+        assert!(p(ModelKind::LsSvm, json!({"reg": 1, "sigma2": 2})).tunes(true));
+        // The linear kernel has no width: its default sigma2 "auto" is not searched.
+        assert!(!p(ModelKind::LsSvm, json!({"gamma": 1, "kernel": "linear"})).tunes(false));
+        assert!(p(ModelKind::LwLsSvm, json!({"gamma": "auto", "sigma2": 1})).tunes(false));
+        assert!(!p(ModelKind::Svm, json!({})).tunes(false));
     }
 
     #[test]

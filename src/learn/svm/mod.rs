@@ -1,7 +1,8 @@
 //! C-SVC and one-class SVM (SVDD / ν-OCSVM) trained by SMO (seeds 002 and 003,
 //! DESIGN §3.7–3.8). The rimu monitor isolates a faulty gyro with a [`SvcModel`];
 //! the tacan monitor flags range anomalies with an [`OcSvmModel`]; the service
-//! trains both through [`train_svc`] and [`train_ocsvm`].
+//! trains both through `learn::model::train`, which refuses a `cv` block with
+//! [`refuse_cv`].
 //!
 //! Layout (linfa's split): this file is the API and the shared parameter rules;
 //! [`svc`] and [`ocsvm`] set up each dual problem and hold the models; [`smo`] is
@@ -10,7 +11,9 @@
 //!
 //! Kernel width, both conventions: the RBF kernel is `exp(−‖x − y‖² / sigma2)`
 //! (LS-SVMlab, DESIGN §3.5); scikit-learn / libsvm write `exp(−gamma‖x − y‖²)`, so
-//! `gamma = 1 / sigma2`. Give either `sigma2` or `gamma`, not both. Given neither,
+//! `gamma = 1 / sigma2`, given as `kernel_gamma` (`gamma` is accepted as its alias:
+//! for these kinds it always means this width, never a regularisation). Give either
+//! `sigma2` or `kernel_gamma`, not both. Given neither,
 //! `sigma2 = dim · Var(X)` over every entry of the (standardised, by default)
 //! training inputs — exactly scikit-learn's `gamma = "scale"` on the same matrix,
 //! and ≈ `dim` with standardisation on.
@@ -21,42 +24,20 @@ mod rows;
 pub mod smo;
 pub mod svc;
 
-pub use ocsvm::{OcSvmModel, OcSvmParams};
-pub use svc::{SvcKernel, SvcModel, SvcParams};
+pub use ocsvm::{OcSvmModel, OcSvmParams, ValidOcSvmParams};
+pub use svc::{SvcModel, SvcParams, ValidSvcParams};
 
 use super::cv::CvParams;
-use super::model::Trained;
-use super::{Dataset, LearnError, Progress, Standardizer};
+use super::{Dataset, LearnError, Standardizer};
 
 /// Default stopping tolerance on the maximal violating pair (libsvm's `-e`).
 pub const DEFAULT_TOL: f64 = 1e-3;
 /// Default kernel cache, MiB (scikit-learn's `cache_size`).
 pub const DEFAULT_CACHE_MB: f64 = 200.0;
 
-/// Training job entry point for `svm`. There is no hyper-parameter search for
-/// the SVM kinds: a `cv` block is refused (field `cv`).
-pub fn train_svc(
-    params: &SvcParams,
-    cv: Option<&CvParams>,
-    data: &Dataset,
-    progress: &dyn Progress,
-) -> Result<Trained, LearnError> {
-    refuse_cv(cv)?;
-    svc::train(params, data, progress)
-}
-
-/// Training job entry point for `ocsvm` (no `cv`, as for `svm`).
-pub fn train_ocsvm(
-    params: &OcSvmParams,
-    cv: Option<&CvParams>,
-    data: &Dataset,
-    progress: &dyn Progress,
-) -> Result<Trained, LearnError> {
-    refuse_cv(cv)?;
-    ocsvm::train(params, data, progress)
-}
-
-fn refuse_cv(cv: Option<&CvParams>) -> Result<(), LearnError> {
+/// There is no hyper-parameter search for the SVM kinds: a `cv` block is refused
+/// (field `cv`).
+pub fn refuse_cv(cv: Option<&CvParams>) -> Result<(), LearnError> {
     match cv {
         Some(_) => Err(LearnError::params(
             "cv",
@@ -87,15 +68,15 @@ fn check_common(
 ) -> Result<(), LearnError> {
     if sigma2.is_some() && gamma.is_some() {
         return Err(LearnError::params(
-            "gamma",
-            "give either sigma2 or gamma (= 1/sigma2), not both",
+            "kernel_gamma",
+            "give either sigma2 or kernel_gamma (alias gamma, = 1/sigma2), not both",
         ));
     }
     if let Some(s) = sigma2 {
         positive("sigma2", s)?;
     }
     if let Some(g) = gamma {
-        positive("gamma", g)?;
+        positive("kernel_gamma", g)?;
     }
     positive("tol", tol)?;
     positive("cache_mb", cache_mb)?;
@@ -172,16 +153,23 @@ mod tests {
     use serde_json::json;
 
     fn field_of(e: LearnError) -> String {
-        match e {
-            LearnError::InvalidParams { field, .. } => field,
-            other => panic!("expected InvalidParams, got {other:?}"),
-        }
+        assert!(matches!(e, LearnError::InvalidParams { .. }), "{e:?}");
+        e.field().unwrap_or_default().to_owned()
     }
 
     #[test]
     fn rest_params_are_checked_and_errors_name_the_field() {
         let e = ModelParams::from_json(ModelKind::Svm, &json!({"sigma2": 1, "gamma": 1}));
         assert_eq!(field_of(e.unwrap_err()), "gamma");
+        let e = ModelParams::from_json(ModelKind::Svm, &json!({"sigma2": 1, "kernel_gamma": 1}));
+        assert_eq!(field_of(e.unwrap_err()), "kernel_gamma");
+        // `kernel_gamma` is the wire name, `gamma` its alias: same params either way.
+        let new = ModelParams::from_json(ModelKind::OcSvm, &json!({"kernel_gamma": 0.5}));
+        let old = ModelParams::from_json(ModelKind::OcSvm, &json!({"gamma": 0.5}));
+        assert_eq!(new.unwrap(), old.unwrap());
+        let shown = ModelParams::from_json(ModelKind::Svm, &json!({"gamma": 0.5})).unwrap();
+        assert_eq!(shown.to_json()["kernel_gamma"], 0.5);
+        assert!(shown.to_json().get("gamma").is_none());
         let e = ModelParams::from_json(ModelKind::Svm, &json!({"C": -2}));
         assert_eq!(field_of(e.unwrap_err()), "C");
         let e = ModelParams::from_json(ModelKind::OcSvm, &json!({"nu": 1.5}));
@@ -198,10 +186,13 @@ mod tests {
     fn a_cv_block_is_refused_for_the_svm_kinds() {
         let data = Dataset::new(&[vec![0.0], vec![1.0]], Some(&[-1.0, 1.0])).unwrap();
         let cv = CvParams::default();
-        let e = train_svc(&SvcParams::default(), Some(&cv), &data, &NoProgress).unwrap_err();
-        assert_eq!(field_of(e), "cv");
-        let e = train_ocsvm(&OcSvmParams::default(), Some(&cv), &data, &NoProgress).unwrap_err();
-        assert_eq!(field_of(e), "cv");
+        for params in [
+            ModelParams::Svm(SvcParams::default()),
+            ModelParams::OcSvm(OcSvmParams::default()),
+        ] {
+            let e = train(&params, Some(&cv), &data, &NoProgress).unwrap_err();
+            assert_eq!(field_of(e), "cv");
+        }
     }
 
     #[test]

@@ -17,8 +17,9 @@ use super::{
     check_common, default_cache_mb, default_tol, default_true, iteration_limit, kernel_sum,
     positive, prepare_inputs, resolve_sigma2,
 };
-use crate::learn::model::{ModelParams, Trained, TrainingMetrics};
-use crate::learn::{AnyModel, Dataset, Kernel, LearnError, NoProgress, Progress, Standardizer};
+use crate::learn::{
+    Dataset, Fitted, Kernel, LearnError, NoProgress, Progress, Standardizer, TrainingMetrics,
+};
 
 /// Default ν when neither `nu` nor `C` is given.
 pub const DEFAULT_NU: f64 = 0.1;
@@ -42,8 +43,14 @@ pub struct OcSvmParams {
     /// the module docs of `learn::svm` (scikit-learn's `"scale"`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sigma2: Option<f64>,
-    /// scikit-learn / libsvm width `gamma = 1/σ²` (> 0); excludes `sigma2`.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    /// scikit-learn / libsvm RBF width `gamma = 1/σ²` (> 0); excludes `sigma2`. Wire
+    /// name `kernel_gamma`; `gamma` is accepted as an alias (never both).
+    #[serde(
+        rename = "kernel_gamma",
+        alias = "gamma",
+        default,
+        skip_serializing_if = "Option::is_none"
+    )]
     pub gamma: Option<f64>,
     /// Standardise inputs with the training mean and std (default true, DESIGN
     /// §3.5); `false` trains on raw values as libsvm and scikit-learn do.
@@ -81,7 +88,7 @@ impl Default for OcSvmParams {
 
 impl OcSvmParams {
     /// Validates the parameters; the error names the field.
-    pub fn check(&self) -> Result<(), LearnError> {
+    pub fn check(&self) -> Result<ValidOcSvmParams, LearnError> {
         match (self.nu, self.c) {
             (Some(_), Some(_)) => {
                 return Err(LearnError::params(
@@ -101,27 +108,44 @@ impl OcSvmParams {
             self.tol,
             self.cache_mb,
             self.max_iter,
-        )
+        )?;
+        Ok(ValidOcSvmParams(self.clone()))
+    }
+
+    /// `self.check()?.fit(data)`.
+    pub fn fit(&self, data: &Dataset) -> Result<OcSvmModel, LearnError> {
+        self.check()?.fit(data)
+    }
+}
+
+/// [`OcSvmParams`] that passed [`OcSvmParams::check`]: the only way to fit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ValidOcSvmParams(OcSvmParams);
+
+impl ValidOcSvmParams {
+    /// The checked parameters.
+    pub fn params(&self) -> &OcSvmParams {
+        &self.0
     }
 
     /// Trains on the rows of `data` (`y` is ignored).
     pub fn fit(&self, data: &Dataset) -> Result<OcSvmModel, LearnError> {
-        Ok(self.fit_with(data, &NoProgress)?.0)
+        Ok(self.fit_with(data, &NoProgress)?.model)
     }
 
-    /// [`OcSvmParams::fit`] with progress, also returning the effective parameters
-    /// (defaults filled in) and the training metrics.
+    /// [`ValidOcSvmParams::fit`] with progress, also returning the effective
+    /// parameters (defaults filled in) and the training metrics.
     pub fn fit_with(
         &self,
         data: &Dataset,
         progress: &dyn Progress,
-    ) -> Result<(OcSvmModel, OcSvmParams, TrainingMetrics), LearnError> {
-        self.check()?;
+    ) -> Result<Fitted<OcSvmModel, OcSvmParams>, LearnError> {
+        let params = &self.0;
         let n = data.n();
         let dim = data.dim();
-        let mut effective = self.clone();
+        let mut effective = params.clone();
         // SVDD ⇔ ν-OCSVM with ν = 1/(N·C) (module docs); scale turns d(z) into R² − f(z).
-        let (nu, scale) = match (self.nu, self.c) {
+        let (nu, scale) = match (params.nu, params.c) {
             (_, Some(c)) => {
                 let nu = 1.0 / (n as f64 * c);
                 if nu > 1.0 {
@@ -141,9 +165,9 @@ impl OcSvmParams {
                 (DEFAULT_NU, 1.0)
             }
         };
-        let (x, standardizer) = prepare_inputs(data, self.standardize);
-        let sigma2 = resolve_sigma2(self.sigma2, self.gamma, &x, dim);
-        if self.sigma2.is_none() && self.gamma.is_none() {
+        let (x, standardizer) = prepare_inputs(data, params.standardize);
+        let sigma2 = resolve_sigma2(params.sigma2, params.gamma, &x, dim);
+        if params.sigma2.is_none() && params.gamma.is_none() {
             effective.sigma2 = Some(sigma2);
         }
         let kernel = Kernel::Rbf { sigma2 };
@@ -167,10 +191,10 @@ impl OcSvmParams {
             c_neg: 1.0,
         };
         let options = Options {
-            tol: self.tol,
-            cache_mb: self.cache_mb,
-            shrinking: self.shrinking,
-            max_iter: iteration_limit(self.max_iter, n),
+            tol: params.tol,
+            cache_mb: params.cache_mb,
+            shrinking: params.shrinking,
+            max_iter: iteration_limit(params.max_iter, n),
         };
         let sol = smo::solve(&problem, &options, progress)?;
 
@@ -200,7 +224,11 @@ impl OcSvmParams {
             rho: sol.rho,
             scale,
         };
-        Ok((model, effective, metrics))
+        Ok(Fitted {
+            model,
+            params: effective,
+            metrics,
+        })
     }
 }
 
@@ -271,23 +299,10 @@ impl OcSvmModel {
     }
 }
 
-/// The `ocsvm` training job.
-pub(super) fn train(
-    params: &OcSvmParams,
-    data: &Dataset,
-    progress: &dyn Progress,
-) -> Result<Trained, LearnError> {
-    let (model, effective, metrics) = params.fit_with(data, progress)?;
-    Ok(Trained {
-        model: AnyModel::OcSvm(model),
-        params: ModelParams::OcSvm(effective),
-        metrics,
-    })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::learn::AnyModel;
     use approx::assert_relative_eq;
     use rand::SeedableRng;
     use rand::rngs::StdRng;
@@ -358,7 +373,12 @@ mod tests {
     fn nu_bounds_the_outlier_fraction_from_above_and_the_sv_fraction_from_below() {
         let data = random_set(400, 11);
         for nu in [0.05, 0.2, 0.5] {
-            let (m, _, metrics) = params(nu, 1.0).fit_with(&data, &NoProgress).unwrap();
+            let fitted = params(nu, 1.0)
+                .check()
+                .unwrap()
+                .fit_with(&data, &NoProgress)
+                .unwrap();
+            let (m, metrics) = (fitted.model, fitted.metrics);
             let decisions: Vec<f64> = (0..400).map(|i| m.decision_one(&data.row(i))).collect();
             // Free SVs sit on the boundary only up to the SMO tolerance (1e-5 here),
             // so "outside" is counted beyond that slack.
@@ -474,7 +494,7 @@ mod tests {
             gamma: Some(1.0),
             ..base.clone()
         };
-        assert_eq!(field(both_widths), "gamma");
+        assert_eq!(field(both_widths), "kernel_gamma");
         for nu in [0.0, -0.1, 1.5, f64::NAN] {
             assert_eq!(
                 field(OcSvmParams {
@@ -523,7 +543,12 @@ mod tests {
             serde_json::from_value::<OcSvmParams>(serde_json::json!({"kernel": "rbf"})).is_err()
         );
         let data = random_set(50, 2);
-        let (_, effective, _) = p.fit_with(&data, &NoProgress).unwrap();
+        let effective = p
+            .check()
+            .unwrap()
+            .fit_with(&data, &NoProgress)
+            .unwrap()
+            .params;
         assert_eq!(effective.nu, Some(DEFAULT_NU));
         // scikit-learn's gamma = "scale" on standardised data: dim · Var(z).
         let s = effective.sigma2.unwrap();
@@ -553,7 +578,11 @@ mod tests {
             }
         }
         let data = random_set(300, 6);
-        let e = params(0.1, 1.0).fit_with(&data, &Stop).unwrap_err();
+        let e = params(0.1, 1.0)
+            .check()
+            .unwrap()
+            .fit_with(&data, &Stop)
+            .unwrap_err();
         assert_eq!(e, LearnError::Cancelled);
     }
 }

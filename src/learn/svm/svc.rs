@@ -10,19 +10,10 @@ use super::{
     check_common, default_cache_mb, default_tol, default_true, iteration_limit, kernel_sum,
     positive, prepare_inputs, resolve_sigma2,
 };
-use crate::learn::model::{ModelParams, Trained, TrainingMetrics};
-use crate::learn::{AnyModel, Dataset, Kernel, LearnError, NoProgress, Progress, Standardizer};
-
-/// Which kernel a C-SVC uses.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum SvcKernel {
-    /// `exp(−‖x − y‖² / sigma2)` (default).
-    #[default]
-    Rbf,
-    /// `xᵀy` (no width).
-    Linear,
-}
+use crate::learn::{
+    Dataset, Fitted, Kernel, KernelKind, LearnError, NoProgress, Progress, Standardizer,
+    TrainingMetrics,
+};
 
 /// `params` of an `svm` model (C-SVC). Every field has a default.
 ///
@@ -37,13 +28,19 @@ pub struct SvcParams {
     pub c: f64,
     /// `"rbf"` (default) or `"linear"`.
     #[serde(default)]
-    pub kernel: SvcKernel,
+    pub kernel: KernelKind,
     /// RBF width σ² (> 0) in `exp(−‖x − y‖²/σ²)`; excludes `gamma`. Default: see
     /// the module docs (scikit-learn's `"scale"`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sigma2: Option<f64>,
-    /// scikit-learn / libsvm width `gamma = 1/σ²` (> 0); excludes `sigma2`.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    /// scikit-learn / libsvm RBF width `gamma = 1/σ²` (> 0); excludes `sigma2`. Wire
+    /// name `kernel_gamma`; `gamma` is accepted as an alias (never both).
+    #[serde(
+        rename = "kernel_gamma",
+        alias = "gamma",
+        default,
+        skip_serializing_if = "Option::is_none"
+    )]
     pub gamma: Option<f64>,
     /// Standardise inputs with the training mean and std (default true, DESIGN
     /// §3.5); `false` trains on raw values as libsvm and scikit-learn do.
@@ -72,7 +69,7 @@ impl Default for SvcParams {
     fn default() -> Self {
         SvcParams {
             c: 1.0,
-            kernel: SvcKernel::Rbf,
+            kernel: KernelKind::Rbf,
             sigma2: None,
             gamma: None,
             standardize: true,
@@ -86,10 +83,10 @@ impl Default for SvcParams {
 
 impl SvcParams {
     /// Validates the parameters; the error names the field.
-    pub fn check(&self) -> Result<(), LearnError> {
+    pub fn check(&self) -> Result<ValidSvcParams, LearnError> {
         positive("C", self.c)?;
-        if self.kernel == SvcKernel::Linear {
-            for (field, v) in [("sigma2", self.sigma2), ("gamma", self.gamma)] {
+        if self.kernel == KernelKind::Linear {
+            for (field, v) in [("sigma2", self.sigma2), ("kernel_gamma", self.gamma)] {
                 if v.is_some() {
                     return Err(LearnError::params(field, "only the rbf kernel has a width"));
                 }
@@ -101,22 +98,39 @@ impl SvcParams {
             self.tol,
             self.cache_mb,
             self.max_iter,
-        )
+        )?;
+        Ok(ValidSvcParams(self.clone()))
+    }
+
+    /// `self.check()?.fit(data)`.
+    pub fn fit(&self, data: &Dataset) -> Result<SvcModel, LearnError> {
+        self.check()?.fit(data)
+    }
+}
+
+/// [`SvcParams`] that passed [`SvcParams::check`]: the only way to fit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ValidSvcParams(SvcParams);
+
+impl ValidSvcParams {
+    /// The checked parameters.
+    pub fn params(&self) -> &SvcParams {
+        &self.0
     }
 
     /// Trains on `data` (labels `y` must be +1 / −1 with both present).
     pub fn fit(&self, data: &Dataset) -> Result<SvcModel, LearnError> {
-        Ok(self.fit_with(data, &NoProgress)?.0)
+        Ok(self.fit_with(data, &NoProgress)?.model)
     }
 
-    /// [`SvcParams::fit`] with progress, also returning the effective parameters
+    /// [`ValidSvcParams::fit`] with progress, also returning the effective parameters
     /// (default width filled in) and the training metrics.
     pub fn fit_with(
         &self,
         data: &Dataset,
         progress: &dyn Progress,
-    ) -> Result<(SvcModel, SvcParams, TrainingMetrics), LearnError> {
-        self.check()?;
+    ) -> Result<Fitted<SvcModel, SvcParams>, LearnError> {
+        let params = &self.0;
         let labels = data.require_y()?;
         let mut y = Vec::with_capacity(data.n());
         for (i, &v) in labels.iter().enumerate() {
@@ -135,13 +149,13 @@ impl SvcParams {
             ));
         }
         let dim = data.dim();
-        let (x, standardizer) = prepare_inputs(data, self.standardize);
-        let mut effective = self.clone();
-        let kernel = match self.kernel {
-            SvcKernel::Linear => Kernel::Linear,
-            SvcKernel::Rbf => {
-                let sigma2 = resolve_sigma2(self.sigma2, self.gamma, &x, dim);
-                if self.sigma2.is_none() && self.gamma.is_none() {
+        let (x, standardizer) = prepare_inputs(data, params.standardize);
+        let mut effective = params.clone();
+        let kernel = match params.kernel {
+            KernelKind::Linear => Kernel::Linear,
+            KernelKind::Rbf => {
+                let sigma2 = resolve_sigma2(params.sigma2, params.gamma, &x, dim);
+                if params.sigma2.is_none() && params.gamma.is_none() {
                     effective.sigma2 = Some(sigma2);
                 }
                 Kernel::Rbf { sigma2 }
@@ -155,14 +169,14 @@ impl SvcParams {
             p: vec![-1.0; n],
             alpha: vec![0.0; n],
             y,
-            c_pos: self.c,
-            c_neg: self.c,
+            c_pos: params.c,
+            c_neg: params.c,
         };
         let options = Options {
-            tol: self.tol,
-            cache_mb: self.cache_mb,
-            shrinking: self.shrinking,
-            max_iter: iteration_limit(self.max_iter, n),
+            tol: params.tol,
+            cache_mb: params.cache_mb,
+            shrinking: params.shrinking,
+            max_iter: iteration_limit(params.max_iter, n),
         };
         let sol = smo::solve(&problem, &options, progress)?;
 
@@ -208,7 +222,11 @@ impl SvcParams {
             b: -sol.rho,
             w,
         };
-        Ok((model, effective, metrics))
+        Ok(Fitted {
+            model,
+            params: effective,
+            metrics,
+        })
     }
 }
 
@@ -274,23 +292,10 @@ impl SvcModel {
     }
 }
 
-/// The `svm` training job.
-pub(super) fn train(
-    params: &SvcParams,
-    data: &Dataset,
-    progress: &dyn Progress,
-) -> Result<Trained, LearnError> {
-    let (model, effective, metrics) = params.fit_with(data, progress)?;
-    Ok(Trained {
-        model: AnyModel::Svm(model),
-        params: ModelParams::Svm(effective),
-        metrics,
-    })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::learn::AnyModel;
     use approx::assert_relative_eq;
 
     fn set(rows: &[[f64; 2]], y: &[f64]) -> Dataset {
@@ -301,7 +306,7 @@ mod tests {
     fn hard_margin() -> SvcParams {
         SvcParams {
             c: 1e6,
-            kernel: SvcKernel::Linear,
+            kernel: KernelKind::Linear,
             standardize: false,
             tol: 1e-8,
             ..SvcParams::default()
@@ -330,7 +335,12 @@ mod tests {
         ];
         let y = [1.0, 1.0, 1.0, -1.0, -1.0, -1.0];
         let data = set(&rows, &y);
-        let (m, _, metrics) = hard_margin().fit_with(&data, &NoProgress).unwrap();
+        let fitted = hard_margin()
+            .check()
+            .unwrap()
+            .fit_with(&data, &NoProgress)
+            .unwrap();
+        let (m, metrics) = (fitted.model, fitted.metrics);
         let w = m.weights().unwrap();
         assert_relative_eq!(w[0], 1.0, epsilon = 1e-6);
         assert_relative_eq!(w[1], 0.0, epsilon = 1e-6);
@@ -464,7 +474,7 @@ mod tests {
             gamma: Some(0.5),
             ..base.clone()
         };
-        assert_eq!(field(both), "gamma");
+        assert_eq!(field(both), "kernel_gamma");
         assert_eq!(
             field(SvcParams {
                 sigma2: Some(-1.0),
@@ -473,11 +483,11 @@ mod tests {
             "sigma2"
         );
         let linear_width = SvcParams {
-            kernel: SvcKernel::Linear,
+            kernel: KernelKind::Linear,
             gamma: Some(1.0),
             ..base.clone()
         };
-        assert_eq!(field(linear_width), "gamma");
+        assert_eq!(field(linear_width), "kernel_gamma");
         assert_eq!(
             field(SvcParams {
                 cache_mb: 0.0,
@@ -496,7 +506,7 @@ mod tests {
         let p: SvcParams = serde_json::from_value(json).unwrap();
         assert_eq!(
             (p.c, p.kernel, p.shrinking),
-            (3.0, SvcKernel::Linear, false)
+            (3.0, KernelKind::Linear, false)
         );
         assert!(
             serde_json::from_value::<SvcParams>(serde_json::json!({"kernel": "poly"})).is_err()
@@ -527,7 +537,12 @@ mod tests {
             &[[0.0, 0.0], [1.0, 0.2], [3.0, 3.0], [4.0, 3.5]],
             &[-1.0, -1.0, 1.0, 1.0],
         );
-        let (m, effective, metrics) = SvcParams::default().fit_with(&data, &NoProgress).unwrap();
+        let fitted = SvcParams::default()
+            .check()
+            .unwrap()
+            .fit_with(&data, &NoProgress)
+            .unwrap();
+        let (m, effective, metrics) = (fitted.model, fitted.params, fitted.metrics);
         assert!(effective.sigma2.is_some());
         assert_eq!(metrics.train_accuracy, Some(1.0));
         assert_eq!(m.predict_one(&[3.5, 3.2]), 1);
@@ -570,7 +585,7 @@ mod progress_tests {
             tol: 1e-6,
             ..SvcParams::default()
         };
-        let (_, _, metrics) = p.fit_with(&data, &record).unwrap();
+        let metrics = p.check().unwrap().fit_with(&data, &record).unwrap().metrics;
         let reports = record.0.into_inner().unwrap();
         assert!(metrics.iterations.unwrap() >= 1000, "{metrics:?}");
         assert!(!reports.is_empty());

@@ -13,7 +13,7 @@ use serde::Serialize;
 use serde_json::{Map, Value};
 
 use crate::learn::cv::CvParams;
-use crate::learn::{Dataset, LearnError, ModelKind, ModelParams, Prediction};
+use crate::learn::{self, Dataset, LearnError, ModelKind, ModelParams, Prediction};
 use crate::service::app::AppState;
 use crate::service::config::Limits;
 use crate::service::error::ApiError;
@@ -296,9 +296,12 @@ fn parse_train(body: Value, limits: &Limits) -> Result<TrainJob, ApiError> {
             ));
         }
         Some(v) => {
-            let cv: CvParams = serde_json::from_value(v).map_err(|e| {
-                let message = e.to_string();
-                let field = field_in(&message).map_or("cv".to_owned(), |f| format!("cv.{f}"));
+            let cv: CvParams = learn::model::parse_at(&v).map_err(|(path, message)| {
+                let field = if path.is_empty() {
+                    "cv".to_owned()
+                } else {
+                    format!("cv.{path}")
+                };
                 ApiError::invalid(field, message)
             })?;
             cv.check().map_err(|e| learn_error(e, true))?;
@@ -359,11 +362,7 @@ fn parse_train(body: Value, limits: &Limits) -> Result<TrainJob, ApiError> {
 /// Cross-validation (a `cv` block, or a hyper-parameter `"auto"`) needs at least
 /// one sample per fold.
 fn check_folds(params: &ModelParams, cv: Option<&CvParams>, n: usize) -> Result<(), ApiError> {
-    let auto = params
-        .to_json()
-        .as_object()
-        .is_some_and(|p| p.values().any(|v| v == "auto"));
-    let folds = match (cv, auto) {
+    let folds = match (cv, params.tunes(false)) {
         (Some(cv), _) => cv.folds,
         (None, true) => CvParams::default().folds,
         (None, false) => return Ok(()),
@@ -393,13 +392,6 @@ fn check_labels(y: &[f64]) -> Result<(), ApiError> {
         ));
     }
     Ok(())
-}
-
-/// Pulls the field name out of serde messages such as "unknown field `x`, expected …".
-fn field_in(msg: &str) -> Option<String> {
-    let start = msg.find('`')? + 1;
-    let len = msg[start..].find('`')?;
-    Some(msg[start..start + len].to_owned())
 }
 
 #[cfg(test)]
@@ -445,6 +437,17 @@ mod tests {
                 with("/params", json!({"gamma": 1, "sigma2": 1, "gama": 1})),
                 "params.gama",
             ),
+            (with("/params/sigma2", json!("wide")), "params.sigma2"),
+            (with("/params/sigma2", json!(-1.0)), "params.sigma2"),
+            (with("/params/gamma", json!(0)), "params.gamma"),
+            (
+                with("/params", json!({"reg": 0, "sigma2": 1})),
+                "params.reg",
+            ),
+            (
+                with("/params", json!({"reg": 1, "gamma": 1})),
+                "params.gamma",
+            ),
         ];
         for (body, want) in cases {
             assert_eq!(field(body.clone()), (422, Some(want.to_owned())), "{body}");
@@ -455,6 +458,20 @@ mod tests {
         cv = ok.clone();
         cv["cv"] = json!({"fold": 3});
         assert_eq!(field(cv), (422, Some("cv.fold".into())));
+        cv = ok.clone();
+        cv["cv"] = json!({"folds": "five"});
+        assert_eq!(field(cv), (422, Some("cv.folds".into())));
+        cv = ok.clone();
+        cv["cv"] = json!({"gamma_range": [1.0, "x"]});
+        assert_eq!(field(cv), (422, Some("cv.gamma_range[1]".into())));
+        cv = ok.clone();
+        cv["cv"] = json!(5);
+        assert_eq!(field(cv), (422, Some("cv".into())));
+        // Too few samples for the default 5 folds only when something is "auto".
+        let auto = with("/params", json!({"reg": "auto", "sigma2": 1}));
+        assert_eq!(field(auto), (422, Some("data.x".into())));
+        let linear = with("/params", json!({"reg": 1, "kernel": "linear"}));
+        assert_eq!(field(linear).0, 202);
         let mut named = ok.clone();
         named["name"] = json!(3);
         assert_eq!(field(named), (422, Some("name".into())));
