@@ -11,6 +11,9 @@
 //!
 //! Run: `cargo bench --bench federated_step`
 
+// criterion_group! defines a public function it cannot document.
+#![allow(missing_docs)]
+
 use std::hint::black_box;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};

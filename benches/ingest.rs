@@ -5,6 +5,9 @@
 //!
 //! Run: `cargo bench --bench ingest`
 
+// criterion_group! defines a public function it cannot document.
+#![allow(missing_docs)]
+
 use std::time::{Duration, Instant};
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};

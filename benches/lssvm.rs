@@ -9,6 +9,9 @@
 //!
 //! Run: `cargo bench --bench lssvm` (add `-- --quick` for a short run).
 
+// criterion_group! defines a public function it cannot document.
+#![allow(missing_docs)]
+
 use std::hint::black_box;
 use std::time::Duration;
 

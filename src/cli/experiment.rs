@@ -12,7 +12,7 @@ use navguard::sim::experiment::{ramp, seed000, seed001, seed002, seed003, seed00
 
 /// The experiments.
 #[derive(Debug, clap::Subcommand)]
-pub enum ExperimentCommand {
+pub(crate) enum ExperimentCommand {
     /// Seed 004: classic vs counter policy at thresholds 13 and 20 on the ship scenario.
     Seed004(Seed004Args),
     /// Seed 002: redundant-gyro fault isolation (parity FSS test + wavelet-packet C-SVC).
@@ -29,7 +29,7 @@ pub enum ExperimentCommand {
 
 /// `navguard experiment seed000` flags.
 #[derive(Debug, clap::Args)]
-pub struct Seed000Args {
+pub(crate) struct Seed000Args {
     /// Base seed of the flights.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -46,7 +46,7 @@ pub struct Seed000Args {
 
 /// `navguard experiment seed001` flags.
 #[derive(Debug, clap::Args)]
-pub struct Seed001Args {
+pub(crate) struct Seed001Args {
     /// Scenario seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -63,7 +63,7 @@ pub struct Seed001Args {
 
 /// `navguard experiment seed004` flags.
 #[derive(Debug, clap::Args)]
-pub struct Seed004Args {
+pub(crate) struct Seed004Args {
     /// Scenario seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -83,7 +83,7 @@ pub struct Seed004Args {
 
 /// `navguard experiment seed002` flags.
 #[derive(Debug, clap::Args)]
-pub struct Seed002Args {
+pub(crate) struct Seed002Args {
     /// Seed of the training windows; run r of each case uses seed + 1 + r.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -103,7 +103,7 @@ pub struct Seed002Args {
 
 /// `navguard experiment seed003` flags (defaults: the paper's sizes, training subsampled).
 #[derive(Debug, clap::Args)]
-pub struct Seed003Args {
+pub(crate) struct Seed003Args {
     /// Base seed of the flights.
     #[arg(long, default_value_t = 3)]
     pub seed: u64,
@@ -147,7 +147,7 @@ pub struct Seed003Args {
 
 /// `navguard experiment ramp` flags.
 #[derive(Debug, clap::Args)]
-pub struct RampArgs {
+pub(crate) struct RampArgs {
     /// Scenario seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -409,7 +409,7 @@ fn execute<E: Experiment>(experiment: &E) -> anyhow::Result<()> {
 }
 
 /// Runs the command.
-pub fn run(command: ExperimentCommand) -> anyhow::Result<()> {
+pub(crate) fn run(command: ExperimentCommand) -> anyhow::Result<()> {
     match command {
         ExperimentCommand::Seed004(args) => execute(&args),
         ExperimentCommand::Seed002(args) => execute(&args),

@@ -27,11 +27,11 @@ fn socket_config() -> tungstenite::protocol::WebSocketConfig {
 }
 
 /// A client WebSocket to the server.
-pub type Socket = WebSocketStream<MaybeTlsStream<TcpStream>>;
+pub(crate) type Socket = WebSocketStream<MaybeTlsStream<TcpStream>>;
 
 /// The navguard server a tool talks to, derived from the `--url` it was given.
 #[derive(Debug, Clone)]
-pub struct Endpoint {
+pub(crate) struct Endpoint {
     /// Host name or address.
     pub host: String,
     /// TCP port.
@@ -47,7 +47,7 @@ pub struct Endpoint {
 impl Endpoint {
     /// Parses `ws://host[:port][/prefix]` (also `http://`). `wss`/`https` are
     /// refused: this build's client has no TLS.
-    pub fn parse(url: &str, token: Option<String>) -> anyhow::Result<Self> {
+    pub(crate) fn parse(url: &str, token: Option<String>) -> anyhow::Result<Self> {
         let uri: Uri = url
             .parse()
             .with_context(|| format!("--url {url:?} is not a URL"))?;
@@ -84,24 +84,24 @@ impl Endpoint {
     }
 
     /// `http://host:port/prefix`, for messages.
-    pub fn http_base(&self) -> String {
+    pub(crate) fn http_base(&self) -> String {
         format!("http://{}{}", self.authority(), self.prefix)
     }
 
     /// `ws://host:port/prefix{path}`.
-    pub fn ws_url(&self, path: &str) -> String {
+    pub(crate) fn ws_url(&self, path: &str) -> String {
         format!("ws://{}{}{path}", self.authority(), self.prefix)
     }
 
     /// Sends a bodiless request (`GET`, `DELETE`) and returns the status and body.
-    pub async fn call(&self, method: &str, path: &str) -> anyhow::Result<(u16, String)> {
+    pub(crate) async fn call(&self, method: &str, path: &str) -> anyhow::Result<(u16, String)> {
         self.request::<()>(method, path, None).await
     }
 
     /// Sends one request with an optional JSON body (one of the service's own
     /// wire types) and returns the status and body. Connection failures and
     /// timeouts are errors that name the server.
-    pub async fn request<B: serde::Serialize + ?Sized>(
+    pub(crate) async fn request<B: serde::Serialize + ?Sized>(
         &self,
         method: &str,
         path: &str,
@@ -142,7 +142,7 @@ impl Endpoint {
 
     /// Opens the socket at `path` (offering the `navguard` subprotocol and the
     /// token) and waits for the server's `ready` message.
-    pub async fn connect(&self, path: &str) -> anyhow::Result<Socket> {
+    pub(crate) async fn connect(&self, path: &str) -> anyhow::Result<Socket> {
         let url = self.ws_url(path);
         let mut request = url.as_str().into_client_request()?;
         request.headers_mut().insert(
@@ -220,7 +220,7 @@ mod tests {
 /// own wire types (so a change to them breaks this at compile time).
 #[derive(Debug, Clone, serde::Deserialize)]
 #[serde(tag = "type", rename_all = "snake_case")]
-pub enum ServerEvent {
+pub(crate) enum ServerEvent {
     /// A test moved into suspect or isolated.
     Alarm(navguard::service::wire::AlarmRecord),
     /// A test changed health (the tools only count these; the body is parsed
@@ -238,7 +238,7 @@ pub enum ServerEvent {
 
 /// The `error` event's fields, owned (the service's `ErrorEvent` borrows).
 #[derive(Debug, Clone, serde::Deserialize)]
-pub struct RefusedFrame {
+pub(crate) struct RefusedFrame {
     /// Stable code (`time_backwards`, `numerical`, …).
     pub code: String,
     /// Reason.
@@ -250,7 +250,7 @@ pub struct RefusedFrame {
 /// from an owned body, so the session and monitor levels are spelt here with
 /// the fields the tools use.
 #[derive(Debug, Clone, Default, serde::Deserialize)]
-pub struct StatsView {
+pub(crate) struct StatsView {
     /// Frames accepted since the session started.
     pub frames: u64,
     /// Epochs processed.
@@ -265,14 +265,14 @@ pub struct StatsView {
 
 /// One monitor of a [`StatsView`].
 #[derive(Debug, Clone, Default, serde::Deserialize)]
-pub struct MonitorStatsView {
+pub(crate) struct MonitorStatsView {
     /// Per test, as the service's `TestStats`.
     pub tests: std::collections::BTreeMap<String, navguard::service::session::stats::TestStats>,
 }
 
 impl StatsView {
     /// Alarms counted, summed over every monitor and test.
-    pub fn alarms(&self) -> u64 {
+    pub(crate) fn alarms(&self) -> u64 {
         self.monitors
             .values()
             .flat_map(|m| m.tests.values())

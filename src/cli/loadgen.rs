@@ -52,7 +52,7 @@ const FAULT_STEP: f64 = 100.0;
 
 /// Frames per second per session, or as fast as the server takes them.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Rate {
+pub(crate) enum Rate {
     /// Back to back; the socket's backpressure sets the pace.
     Max,
     /// Frames per second per session.
@@ -77,7 +77,7 @@ impl FromStr for Rate {
 
 /// The monitor every loadgen session runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum MonitorArg {
+pub(crate) enum MonitorArg {
     /// INS/GNSS/DVL/CNS federated filter on the simulated ship (15 states, 3 aids).
     Federated,
     /// 4-state constant-velocity Kalman filter with 2 measurements.
@@ -87,7 +87,7 @@ pub enum MonitorArg {
 /// `navguard loadgen` flags.
 #[derive(Debug, clap::Args)]
 #[command(after_long_help = LOADGEN_HELP)]
-pub struct LoadgenArgs {
+pub(crate) struct LoadgenArgs {
     /// The server, as ws://host:port (REST calls go to http://host:port).
     #[arg(long, default_value = "ws://127.0.0.1:8080")]
     pub url: String,
@@ -343,7 +343,7 @@ async fn delete_sessions(endpoint: &Endpoint, ids: Vec<String>) -> usize {
 }
 
 /// Runs the command.
-pub async fn run(args: LoadgenArgs) -> anyhow::Result<()> {
+pub(crate) async fn run(args: LoadgenArgs) -> anyhow::Result<()> {
     if !(args.duration.is_finite() && args.duration > 0.0) {
         bail!("--duration must be a positive number of seconds");
     }

@@ -5,11 +5,11 @@
 //! Thin: parsing flags, files, sockets and printing; the algorithms live in
 //! the library. `anyhow` is used here and in `main.rs` only.
 
-pub mod experiment;
-pub mod http;
-pub mod loadgen;
-pub mod replay;
-pub mod simulate;
+pub(crate) mod experiment;
+pub(crate) mod http;
+pub(crate) mod loadgen;
+pub(crate) mod replay;
+pub(crate) mod simulate;
 
 use std::io::IsTerminal;
 use std::time::Duration;
@@ -19,7 +19,7 @@ use indicatif::{HumanCount, ProgressBar, ProgressStyle};
 /// A progress bar on stderr for a long run of `len` steps, drawn with
 /// `template` (an `indicatif` template). Hidden when `enabled` is false or
 /// stderr is not a terminal, so redirected logs and `--json` output stay clean.
-pub fn progress_bar(len: u64, template: &str, enabled: bool) -> ProgressBar {
+pub(crate) fn progress_bar(len: u64, template: &str, enabled: bool) -> ProgressBar {
     if !enabled || !std::io::stderr().is_terminal() {
         return ProgressBar::hidden();
     }
@@ -32,7 +32,7 @@ pub fn progress_bar(len: u64, template: &str, enabled: bool) -> ProgressBar {
 
 /// A spinner on stderr saying `message` while an in-process run works (same
 /// hiding rules as [`progress_bar`]).
-pub fn spinner(message: &str, enabled: bool) -> ProgressBar {
+pub(crate) fn spinner(message: &str, enabled: bool) -> ProgressBar {
     let bar = progress_bar(0, "{spinner} {msg} ({elapsed})", enabled);
     bar.set_message(message.to_owned());
     bar.enable_steady_tick(Duration::from_millis(100));
@@ -40,7 +40,7 @@ pub fn spinner(message: &str, enabled: bool) -> ProgressBar {
 }
 
 /// `12345678` → `12,345,678`.
-pub fn thousands(n: u64) -> String {
+pub(crate) fn thousands(n: u64) -> String {
     HumanCount(n).to_string()
 }
 

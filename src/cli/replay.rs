@@ -47,7 +47,7 @@ const MAX_ERROR_SAMPLES: usize = 5;
 
 /// How fast to stream: a multiple of real time, or as fast as the server takes it.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Speed {
+pub(crate) enum Speed {
     /// Batches back to back; the socket's backpressure sets the pace.
     Max,
     /// Epoch `t` paced at this multiple of real time (`10x`).
@@ -73,7 +73,7 @@ impl FromStr for Speed {
 
 /// The decision policy of a session `replay` creates.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum PolicyArg {
+pub(crate) enum PolicyArg {
     /// Traditional residual χ² test.
     Classic,
     /// Seed 004's counters (N1, N2).
@@ -83,7 +83,7 @@ pub enum PolicyArg {
 /// `navguard replay` flags.
 #[derive(Debug, clap::Args)]
 #[command(after_long_help = SPEC_HELP)]
-pub struct ReplayArgs {
+pub(crate) struct ReplayArgs {
     /// JSON-lines file: one ingest epoch per line (e.g. from `navguard simulate`).
     pub file: PathBuf,
     /// The server, as ws://host:port (REST calls go to http://host:port).
@@ -150,7 +150,7 @@ not when it refuses frames (those are counted in the summary).";
 
 /// What a first pass over the file found.
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct FileScan {
+pub(crate) struct FileScan {
     /// Epoch lines.
     pub epochs: u64,
     /// `t` of the first epoch.
@@ -191,7 +191,7 @@ fn peek(line: &str, number: usize) -> anyhow::Result<Peek> {
 }
 
 /// Reads the file once: epoch count, time span, which blocks occur.
-pub fn scan(path: &Path) -> anyhow::Result<FileScan> {
+pub(crate) fn scan(path: &Path) -> anyhow::Result<FileScan> {
     let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
     let mut out = FileScan::default();
     for (i, line) in std::io::BufReader::new(file).lines().enumerate() {
@@ -230,7 +230,7 @@ fn json_arg(text: &str, what: &str) -> anyhow::Result<Value> {
 }
 
 /// The `POST /api/v1/sessions` body for a new session (see `SPEC_HELP`).
-pub fn session_body(args: &ReplayArgs, scan: &FileScan) -> anyhow::Result<CreateSession> {
+pub(crate) fn session_body(args: &ReplayArgs, scan: &FileScan) -> anyhow::Result<CreateSession> {
     if let Some(path) = &args.session_spec {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("reading --session-spec {}", path.display()))?;
@@ -305,7 +305,7 @@ fn federated_config(aids: &[&str]) -> Value {
 
 /// Alarms of one monitor, test and state.
 #[derive(Debug, Clone, Serialize, PartialEq)]
-pub struct AlarmGroup {
+pub(crate) struct AlarmGroup {
     /// Monitor name.
     pub monitor: String,
     /// Test name.
@@ -322,7 +322,7 @@ pub struct AlarmGroup {
 
 /// One alarm as received.
 #[derive(Debug, Clone, Serialize, PartialEq)]
-pub struct AlarmEvent {
+pub(crate) struct AlarmEvent {
     /// Monitor name.
     pub monitor: String,
     /// Test name.
@@ -397,7 +397,7 @@ impl Tally {
 
 /// The end-of-run summary (`--summary-json` writes it).
 #[derive(Debug, Clone, Serialize)]
-pub struct ReplaySummary {
+pub(crate) struct ReplaySummary {
     /// Session id.
     pub session: String,
     /// The session was created by this run.
@@ -426,7 +426,7 @@ pub struct ReplaySummary {
 }
 
 /// Runs the command.
-pub async fn run(args: ReplayArgs) -> anyhow::Result<()> {
+pub(crate) async fn run(args: ReplayArgs) -> anyhow::Result<()> {
     if !valid_name(&args.session) {
         bail!("--session must be 1-64 characters of A-Z a-z 0-9 _ - .");
     }
@@ -718,7 +718,7 @@ fn num(v: Option<f64>, digits: usize) -> String {
 }
 
 /// Renders the summary as text.
-pub fn render(s: &ReplaySummary) -> String {
+pub(crate) fn render(s: &ReplaySummary) -> String {
     let mut out = String::new();
     let rate = if s.wall_s > 0.0 {
         s.epochs_sent as f64 / s.wall_s

@@ -15,7 +15,7 @@ use super::thousands;
 
 /// The scenarios `simulate` can write.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum ScenarioName {
+pub(crate) enum ScenarioName {
     /// Seed 004's ship: INS + GNSS (1 Hz) + DVL (1 Hz) + CNS (0.1 Hz), INS at 10 Hz, 3600 s.
     Ship,
 }
@@ -23,7 +23,7 @@ pub enum ScenarioName {
 /// `navguard simulate` flags.
 #[derive(Debug, clap::Args)]
 #[command(after_long_help = SIMULATE_HELP)]
-pub struct SimulateArgs {
+pub(crate) struct SimulateArgs {
     /// The scenario.
     #[arg(value_enum)]
     pub scenario: ScenarioName,
@@ -89,7 +89,7 @@ fn faults(spec: &str) -> anyhow::Result<Vec<Fault>> {
 }
 
 /// Builds the scenario the flags ask for.
-pub fn scenario(args: &SimulateArgs) -> anyhow::Result<Scenario> {
+pub(crate) fn scenario(args: &SimulateArgs) -> anyhow::Result<Scenario> {
     if let Some(d) = args.duration
         && !(d.is_finite() && d >= 0.0)
     {
@@ -126,7 +126,7 @@ fn create(path: &Path) -> anyhow::Result<Box<dyn Write>> {
 }
 
 /// Runs the command.
-pub fn run(args: SimulateArgs) -> anyhow::Result<()> {
+pub(crate) fn run(args: SimulateArgs) -> anyhow::Result<()> {
     let scenario = scenario(&args)?;
     let mut out = create(&args.out)?;
     let mut truth = args.truth.as_deref().map(create).transpose()?;

@@ -132,7 +132,7 @@ pub(crate) struct Prepared {
 
 impl Prepared {
     /// Standardises (or not) `data`, which must have targets.
-    pub fn new(data: &Dataset, standardize: bool) -> Result<Self, LearnError> {
+    pub(crate) fn new(data: &Dataset, standardize: bool) -> Result<Self, LearnError> {
         let y = data.require_y()?;
         let dim = data.dim();
         let mut rows = solve::pack_rows(data.x());
@@ -159,12 +159,12 @@ impl Prepared {
     }
 
     /// Number of samples.
-    pub fn n(&self) -> usize {
+    pub(crate) fn n(&self) -> usize {
         self.y.len()
     }
 
     /// The packed rows and targets of the samples `idx`.
-    pub fn subset(&self, idx: &[usize]) -> (Vec<f64>, Vec<f64>) {
+    pub(crate) fn subset(&self, idx: &[usize]) -> (Vec<f64>, Vec<f64>) {
         let d = self.dim;
         let mut rows = Vec::with_capacity(idx.len() * d);
         for &i in idx {

@@ -14,10 +14,10 @@ use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};
 
 /// A client socket.
-pub type Socket = WebSocketStream<MaybeTlsStream<TcpStream>>;
+pub(crate) type Socket = WebSocketStream<MaybeTlsStream<TcpStream>>;
 
 /// Starts a server on 127.0.0.1:0 with the given store file, token and limits.
-pub async fn start(db: &Path, token: Option<&str>, limits: Limits) -> Server {
+pub(crate) async fn start(db: &Path, token: Option<&str>, limits: Limits) -> Server {
     let mut config = ServiceConfig::new("127.0.0.1:0".parse().unwrap(), db);
     config.token = token.map(str::to_owned);
     config.limits = limits;
@@ -25,17 +25,17 @@ pub async fn start(db: &Path, token: Option<&str>, limits: Limits) -> Server {
 }
 
 /// `http://addr`
-pub fn http(server: &Server) -> String {
+pub(crate) fn http(server: &Server) -> String {
     format!("http://{}", server.addr)
 }
 
 /// `ws://addr`
-pub fn ws(server: &Server) -> String {
+pub(crate) fn ws(server: &Server) -> String {
     format!("ws://{}", server.addr)
 }
 
 /// Opens a WebSocket.
-pub async fn connect(url: &str) -> Socket {
+pub(crate) async fn connect(url: &str) -> Socket {
     tokio_tungstenite::connect_async(url)
         .await
         .expect("socket connects")
@@ -43,7 +43,7 @@ pub async fn connect(url: &str) -> Socket {
 }
 
 /// Receives the next text message as JSON (10 s timeout).
-pub async fn recv(socket: &mut Socket) -> Value {
+pub(crate) async fn recv(socket: &mut Socket) -> Value {
     loop {
         let msg = tokio::time::timeout(Duration::from_secs(10), socket.next())
             .await
@@ -59,7 +59,10 @@ pub async fn recv(socket: &mut Socket) -> Value {
 }
 
 /// Receives messages until one satisfies `pred`, returning it and everything before.
-pub async fn recv_until(socket: &mut Socket, pred: impl Fn(&Value) -> bool) -> (Value, Vec<Value>) {
+pub(crate) async fn recv_until(
+    socket: &mut Socket,
+    pred: impl Fn(&Value) -> bool,
+) -> (Value, Vec<Value>) {
     let mut seen = Vec::new();
     loop {
         let v = recv(socket).await;
@@ -71,7 +74,7 @@ pub async fn recv_until(socket: &mut Socket, pred: impl Fn(&Value) -> bool) -> (
 }
 
 /// Sends a JSON value as one text frame.
-pub async fn send(socket: &mut Socket, value: &Value) {
+pub(crate) async fn send(socket: &mut Socket, value: &Value) {
     socket
         .send(Message::Text(value.to_string().into()))
         .await
@@ -79,7 +82,7 @@ pub async fn send(socket: &mut Socket, value: &Value) {
 }
 
 /// Sends raw text as one frame.
-pub async fn send_text(socket: &mut Socket, text: &str) {
+pub(crate) async fn send_text(socket: &mut Socket, text: &str) {
     socket
         .send(Message::Text(text.to_owned().into()))
         .await
@@ -87,7 +90,7 @@ pub async fn send_text(socket: &mut Socket, text: &str) {
 }
 
 /// Opens the ingest socket of `session` and waits for its `ready` message.
-pub async fn ingest(server: &Server, session: &str) -> Socket {
+pub(crate) async fn ingest(server: &Server, session: &str) -> Socket {
     let mut socket = connect(&format!("{}/api/v1/sessions/{session}/ingest", ws(server))).await;
     let ready = recv(&mut socket).await;
     assert_eq!(ready["type"], "ready", "{ready}");
@@ -97,7 +100,7 @@ pub async fn ingest(server: &Server, session: &str) -> Socket {
 /// Opens the ingest socket of `session` again right after the client dropped its
 /// previous one. The server notices the old stream's close asynchronously and
 /// answers 409 until then, so this retries as a reconnecting client would.
-pub async fn reingest(server: &Server, session: &str) -> Socket {
+pub(crate) async fn reingest(server: &Server, session: &str) -> Socket {
     let url = format!("{}/api/v1/sessions/{session}/ingest", ws(server));
     for _ in 0..250 {
         if let Ok((mut socket, _)) = tokio_tungstenite::connect_async(&url).await {
@@ -111,14 +114,14 @@ pub async fn reingest(server: &Server, session: &str) -> Socket {
 }
 
 /// SplitMix64 with Box–Muller: a small, seeded, dependency-free Gaussian source.
-pub struct Gauss {
+pub(crate) struct Gauss {
     state: u64,
     spare: Option<f64>,
 }
 
 impl Gauss {
     /// A source seeded with `seed`.
-    pub fn new(seed: u64) -> Self {
+    pub(crate) fn new(seed: u64) -> Self {
         Gauss {
             state: seed,
             spare: None,
@@ -134,12 +137,12 @@ impl Gauss {
     }
 
     /// Uniform in (0, 1).
-    pub fn uniform(&mut self) -> f64 {
+    pub(crate) fn uniform(&mut self) -> f64 {
         ((self.next_u64() >> 11) as f64 + 0.5) / (1u64 << 53) as f64
     }
 
     /// Standard normal.
-    pub fn normal(&mut self) -> f64 {
+    pub(crate) fn normal(&mut self) -> f64 {
         if let Some(z) = self.spare.take() {
             return z;
         }
@@ -153,7 +156,7 @@ impl Gauss {
 
 /// The 1-D constant-velocity model used across the tests: dt = 1 s, white
 /// acceleration density `q`, position measured with standard deviation `sigma`.
-pub struct CvModel {
+pub(crate) struct CvModel {
     pub q: f64,
     pub sigma: f64,
     pub p0: f64,
@@ -161,12 +164,12 @@ pub struct CvModel {
 
 impl CvModel {
     /// Q for dt = 1: q·[[1/3, 1/2], [1/2, 1]].
-    pub fn q_matrix(&self) -> [[f64; 2]; 2] {
+    pub(crate) fn q_matrix(&self) -> [[f64; 2]; 2] {
         [[self.q / 3.0, self.q / 2.0], [self.q / 2.0, self.q]]
     }
 
     /// The `linear` monitor config.
-    pub fn config(&self) -> Value {
+    pub(crate) fn config(&self) -> Value {
         let q = self.q_matrix();
         json!({
             "f": [[1.0, 1.0], [0.0, 1.0]],
@@ -180,7 +183,12 @@ impl CvModel {
 
     /// Measurements z_k from a truth drawn from the model itself (x0 ~ N(0, P0),
     /// w ~ N(0, Q)), with `step(k)` added to measurement k.
-    pub fn measurements(&self, n: usize, seed: u64, step: impl Fn(usize) -> f64) -> Vec<f64> {
+    pub(crate) fn measurements(
+        &self,
+        n: usize,
+        seed: u64,
+        step: impl Fn(usize) -> f64,
+    ) -> Vec<f64> {
         let mut g = Gauss::new(seed);
         let mut x = [self.p0.sqrt() * g.normal(), self.p0.sqrt() * g.normal()];
         // Cholesky of Q = q[[1/3,1/2],[1/2,1]].
@@ -198,7 +206,13 @@ impl CvModel {
 }
 
 /// A session body with one `linear` monitor named `cv`.
-pub fn cv_session(id: &str, model: &CvModel, policy: Value, threshold: Value, echo: bool) -> Value {
+pub(crate) fn cv_session(
+    id: &str,
+    model: &CvModel,
+    policy: Value,
+    threshold: Value,
+    echo: bool,
+) -> Value {
     let mut monitor =
         json!({"name": "cv", "type": "linear", "config": model.config(), "policy": policy});
     for (k, v) in threshold.as_object().expect("threshold object") {
@@ -208,7 +222,11 @@ pub fn cv_session(id: &str, model: &CvModel, policy: Value, threshold: Value, ec
 }
 
 /// POSTs a session and asserts 201.
-pub async fn create_session(client: &reqwest::Client, server: &Server, body: &Value) -> Value {
+pub(crate) async fn create_session(
+    client: &reqwest::Client,
+    server: &Server,
+    body: &Value,
+) -> Value {
     let resp = client
         .post(format!("{}/api/v1/sessions", http(server)))
         .json(body)
@@ -222,7 +240,7 @@ pub async fn create_session(client: &reqwest::Client, server: &Server, body: &Va
 }
 
 /// Epoch frames for measurements starting at time index `from`.
-pub fn epochs(z: &[f64], from: usize) -> Vec<Value> {
+pub(crate) fn epochs(z: &[f64], from: usize) -> Vec<Value> {
     z.iter()
         .enumerate()
         .map(|(i, z)| json!({"t": (from + i) as f64, "z": [z]}))

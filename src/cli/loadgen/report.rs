@@ -10,7 +10,7 @@ use crate::cli::thousands;
 
 /// Latency percentiles, microseconds.
 #[derive(Debug, Clone, Copy, Default, Serialize)]
-pub struct Percentiles {
+pub(super) struct Percentiles {
     /// Observations.
     pub count: u64,
     /// Median.
@@ -42,7 +42,7 @@ pub(super) fn percentiles(samples: &mut [u32]) -> Percentiles {
 
 /// The report (`--json` prints it as is).
 #[derive(Debug, Clone, Serialize)]
-pub struct Report {
+pub(super) struct Report {
     /// Server URL.
     pub url: String,
     /// Monitor type.
@@ -102,7 +102,7 @@ pub(super) fn mib(bytes: Option<u64>) -> String {
 }
 
 /// The report as a text table.
-pub fn render(r: &Report) -> String {
+pub(super) fn render(r: &Report) -> String {
     let mut out = String::new();
     let rate = r.rate_hz.map_or("max".into(), |hz| format!("{hz} Hz"));
     let _ = writeln!(

@@ -21,20 +21,20 @@ type Reply = oneshot::Sender<Result<i64, StoreError>>;
 
 /// The handle callers hold: a queue to the writer task.
 #[derive(Debug, Clone)]
-pub struct AlarmWriter {
+pub(super) struct AlarmWriter {
     tx: mpsc::Sender<(AlarmRecord, Reply)>,
 }
 
 impl AlarmWriter {
     /// Starts the writer task on the current runtime.
-    pub fn spawn(pool: SqlitePool) -> Self {
+    pub(super) fn spawn(pool: SqlitePool) -> Self {
         let (tx, rx) = mpsc::channel(QUEUE);
         tokio::spawn(run(pool, rx));
         AlarmWriter { tx }
     }
 
     /// Commits `alarm` (with whatever else is queued) and returns its id.
-    pub async fn insert(&self, alarm: AlarmRecord) -> Result<i64, StoreError> {
+    pub(super) async fn insert(&self, alarm: AlarmRecord) -> Result<i64, StoreError> {
         let (reply, answer) = oneshot::channel();
         self.tx
             .send((alarm, reply))
