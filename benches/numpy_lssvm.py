@@ -15,6 +15,10 @@ Each figure is the median of `--repeat` runs. NumPy is a reference, not a depend
 Run (single-threaded BLAS, then the default thread count):
     OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 python3 benches/numpy_lssvm.py
     python3 benches/numpy_lssvm.py
+
+`--golden 250` prints, at full precision (repr), the solution entries
+`src/learn/lssvm_tests.rs` (`bench_system_matches_numpy_golden_numbers`) pins:
+b, alpha_0, alpha_124 and alpha_249 (alpha_k is entry k + 1 of the bordered solution).
 """
 import argparse
 import time
@@ -52,8 +56,20 @@ def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--sizes", type=int, nargs="*", default=[250, 500, 1000, 2000])
     p.add_argument("--repeat", type=int, default=10)
+    p.add_argument("--golden", type=int, metavar="N",
+                   help="print b and alpha_0, alpha_(N/2-1), alpha_(N-1) at n = N, then exit")
     args = p.parse_args()
     print(f"numpy {np.__version__}")
+    if args.golden:
+        n = args.golden
+        a, rhs, _ = system(n)
+        sol = np.linalg.solve(a, rhs)
+        b, alpha = sol[0], sol[1:]
+        print(f"n={n}  b={float(b)!r}")
+        for k in (0, n // 2 - 1, n - 1):
+            print(f"alpha[{k}]={float(alpha[k])!r}")
+        print(f"max |residual| = {np.abs(a @ sol - rhs).max():.3e}")
+        return
     for n in args.sizes:
         a, rhs, h = system(n)
         sol = np.linalg.solve(a, rhs)

@@ -160,17 +160,48 @@ fn operation<'a>(doc: &'a Value, template: &str, method: &str) -> &'a Value {
     op
 }
 
-// ------------------------------------------------------------ a small JSON Schema checker
+// ------------------------------------------------------------ JSON Schema validation
 
-/// Enough of JSON Schema 2020-12 for this spec: `$ref`, `type`, `const`, `enum`,
-/// numeric bounds, arrays, objects (`required`, `properties`,
-/// `additionalProperties`, `unevaluatedProperties`, `minProperties`) and the
-/// combinators (`allOf`, `anyOf`, `oneOf`, `not`, `if`/`then`). Not `pattern`.
+/// Validates values against the spec's schemas with the `jsonschema` crate.
+/// OpenAPI 3.1 schemas are JSON Schema 2020-12 (no `nullable`: the spec writes
+/// `type: [string, 'null']`), so the only conversion is the references: a schema
+/// taken out of the document is compiled as `allOf: [schema]` beside `$defs`
+/// holding every `components/schemas` entry, with `#/components/schemas/X`
+/// rewritten to `#/$defs/X`. Every keyword of the dialect is enforced, `pattern`
+/// included; `format` stays an annotation, as 2020-12 has it.
 struct Checker<'a> {
     doc: &'a Value,
+    /// `components/schemas` with their references rewritten.
+    defs: Value,
+}
+
+/// Rewrites `#/components/schemas/…` references to `#/$defs/…`, in place.
+fn rebase_refs(v: &mut Value) {
+    match v {
+        Value::Object(map) => {
+            for (key, child) in map.iter_mut() {
+                if let (true, Value::String(r)) = (key == "$ref", &*child)
+                    && let Some(name) = r.strip_prefix("#/components/schemas/")
+                {
+                    *child = Value::String(format!("#/$defs/{name}"));
+                } else {
+                    rebase_refs(child);
+                }
+            }
+        }
+        Value::Array(items) => items.iter_mut().for_each(rebase_refs),
+        _ => {}
+    }
 }
 
 impl<'a> Checker<'a> {
+    fn new(doc: &'a Value) -> Self {
+        let mut defs = doc["components"]["schemas"].clone();
+        assert!(defs.is_object(), "spec has components/schemas");
+        rebase_refs(&mut defs);
+        Checker { doc, defs }
+    }
+
     fn pointer(&self, reference: &str) -> &'a Value {
         reference
             .strip_prefix('#')
@@ -182,214 +213,39 @@ impl<'a> Checker<'a> {
         self.pointer(&format!("#/components/schemas/{name}"))
     }
 
-    fn check(&self, schema: &'a Value, value: &Value) -> Vec<String> {
-        let mut errors = Vec::new();
-        self.errors(schema, value, "$", &mut errors);
-        errors
+    /// `schema` (a node of the spec) compiled with the spec's definitions.
+    fn validator(&self, schema: &Value) -> jsonschema::Validator {
+        let mut schema = schema.clone();
+        rebase_refs(&mut schema);
+        let root = json!({
+            "$schema": "https://json-schema.org/draft/2020-12/schema",
+            "$defs": self.defs,
+            "allOf": [schema],
+        });
+        jsonschema::options()
+            .with_draft(jsonschema::Draft::Draft202012)
+            .build(&root)
+            .unwrap_or_else(|e| panic!("the spec's schema does not compile: {e}\n{schema}"))
     }
 
-    fn matches(&self, schema: &'a Value, value: &Value) -> bool {
-        self.check(schema, value).is_empty()
+    fn check(&self, schema: &Value, value: &Value) -> Vec<String> {
+        self.validator(schema)
+            .iter_errors(value)
+            .map(|e| format!("${}: {e}", e.instance_path()))
+            .collect()
     }
 
-    fn assert_valid(&self, schema: &'a Value, value: &Value, what: &str) {
+    fn matches(&self, schema: &Value, value: &Value) -> bool {
+        self.validator(schema).is_valid(value)
+    }
+
+    fn assert_valid(&self, schema: &Value, value: &Value, what: &str) {
         let errors = self.check(schema, value);
         assert!(
             errors.is_empty(),
             "{what} does not match its schema:\n  {}\nvalue: {value}",
             errors.join("\n  ")
         );
-    }
-
-    fn errors(&self, schema: &'a Value, value: &Value, at: &str, out: &mut Vec<String>) {
-        if let Some(reference) = schema.get("$ref").and_then(Value::as_str) {
-            self.errors(self.pointer(reference), value, at, out);
-        }
-        let Some(s) = schema.as_object() else { return };
-        if let Some(t) = s.get("type") {
-            let types: Vec<&str> = match t {
-                Value::String(t) => vec![t.as_str()],
-                Value::Array(a) => a.iter().filter_map(Value::as_str).collect(),
-                _ => vec![],
-            };
-            if !types.iter().any(|t| type_matches(t, value)) {
-                out.push(format!("{at}: expected {types:?}, got {}", short(value)));
-                return;
-            }
-        }
-        if let Some(c) = s.get("const").filter(|c| *c != value) {
-            out.push(format!("{at}: expected {c}, got {}", short(value)));
-        }
-        if let Some(Value::Array(options)) = s.get("enum")
-            && !options.contains(value)
-        {
-            out.push(format!("{at}: {} is not one of {options:?}", short(value)));
-        }
-        if let Some(x) = value.as_f64() {
-            let bound = |k: &str| s.get(k).and_then(Value::as_f64);
-            let broken = bound("minimum").is_some_and(|b| x < b)
-                || bound("maximum").is_some_and(|b| x > b)
-                || bound("exclusiveMinimum").is_some_and(|b| x <= b)
-                || bound("exclusiveMaximum").is_some_and(|b| x >= b);
-            if broken {
-                out.push(format!("{at}: {x} is out of bounds"));
-            }
-        }
-        if let Some(items) = value.as_array() {
-            let count = |k: &str| s.get(k).and_then(Value::as_u64).map(|n| n as usize);
-            if count("minItems").is_some_and(|n| items.len() < n)
-                || count("maxItems").is_some_and(|n| items.len() > n)
-            {
-                out.push(format!("{at}: {} items is out of bounds", items.len()));
-            }
-            if let Some(item_schema) = s.get("items") {
-                for (i, item) in items.iter().enumerate() {
-                    self.errors(item_schema, item, &format!("{at}[{i}]"), out);
-                }
-            }
-        }
-        if let Some(object) = value.as_object() {
-            self.object_errors(schema, object, at, out);
-        }
-        for sub in s
-            .get("allOf")
-            .and_then(Value::as_array)
-            .into_iter()
-            .flatten()
-        {
-            self.errors(sub, value, at, out);
-        }
-        if let Some(Value::Array(options)) = s.get("anyOf")
-            && !options.iter().any(|o| self.matches(o, value))
-        {
-            out.push(format!("{at}: matches none of anyOf"));
-        }
-        if let Some(Value::Array(options)) = s.get("oneOf") {
-            let n = options.iter().filter(|o| self.matches(o, value)).count();
-            if n != 1 {
-                out.push(format!("{at}: matches {n} of oneOf, not exactly one"));
-            }
-        }
-        if let Some(not) = s.get("not")
-            && self.matches(not, value)
-        {
-            out.push(format!("{at}: matches `not`"));
-        }
-        if let Some(condition) = s.get("if") {
-            let branch = if self.matches(condition, value) {
-                s.get("then")
-            } else {
-                s.get("else")
-            };
-            if let Some(branch) = branch {
-                self.errors(branch, value, at, out);
-            }
-        }
-    }
-
-    fn object_errors(
-        &self,
-        schema: &'a Value,
-        object: &serde_json::Map<String, Value>,
-        at: &str,
-        out: &mut Vec<String>,
-    ) {
-        let empty = serde_json::Map::new();
-        let properties = schema
-            .get("properties")
-            .and_then(Value::as_object)
-            .unwrap_or(&empty);
-        for key in schema
-            .get("required")
-            .and_then(Value::as_array)
-            .into_iter()
-            .flatten()
-            .filter_map(Value::as_str)
-        {
-            if !object.contains_key(key) {
-                out.push(format!("{at}: missing required `{key}`"));
-            }
-        }
-        if schema
-            .get("minProperties")
-            .and_then(Value::as_u64)
-            .is_some_and(|n| (object.len() as u64) < n)
-        {
-            out.push(format!("{at}: too few properties"));
-        }
-        for (key, v) in object {
-            let here = format!("{at}.{key}");
-            match (properties.get(key), schema.get("additionalProperties")) {
-                (Some(sub), _) => self.errors(sub, v, &here, out),
-                (None, Some(Value::Bool(false))) => out.push(format!("{here}: not allowed")),
-                (None, Some(extra)) if extra.is_object() => self.errors(extra, v, &here, out),
-                _ => {}
-            }
-        }
-        if schema.get("unevaluatedProperties") == Some(&Value::Bool(false)) {
-            let value = Value::Object(object.clone());
-            let known = self.evaluated(schema, &value);
-            for key in object.keys().filter(|k| !known.contains(*k)) {
-                out.push(format!("{at}.{key}: not allowed (unevaluated)"));
-            }
-        }
-    }
-
-    /// Property names a schema and its applicable subschemas evaluate.
-    fn evaluated(&self, schema: &'a Value, value: &Value) -> BTreeSet<String> {
-        let mut names = BTreeSet::new();
-        if let Some(reference) = schema.get("$ref").and_then(Value::as_str) {
-            names.extend(self.evaluated(self.pointer(reference), value));
-        }
-        if let Some(p) = schema.get("properties").and_then(Value::as_object) {
-            names.extend(p.keys().cloned());
-        }
-        for sub in schema
-            .get("allOf")
-            .and_then(Value::as_array)
-            .into_iter()
-            .flatten()
-        {
-            names.extend(self.evaluated(sub, value));
-        }
-        for key in ["anyOf", "oneOf"] {
-            for sub in schema
-                .get(key)
-                .and_then(Value::as_array)
-                .into_iter()
-                .flatten()
-            {
-                if self.matches(sub, value) {
-                    names.extend(self.evaluated(sub, value));
-                }
-            }
-        }
-        names
-    }
-}
-
-fn type_matches(t: &str, v: &Value) -> bool {
-    match t {
-        "object" => v.is_object(),
-        "array" => v.is_array(),
-        "string" => v.is_string(),
-        "number" => v.is_number(),
-        "integer" => v.is_i64() || v.is_u64(),
-        "boolean" => v.is_boolean(),
-        "null" => v.is_null(),
-        _ => false,
-    }
-}
-
-fn short(v: &Value) -> String {
-    let s = v.to_string();
-    if s.len() > 80 {
-        format!(
-            "{}…",
-            &s[..s.char_indices().nth(80).map_or(s.len(), |(i, _)| i)]
-        )
-    } else {
-        s
     }
 }
 
@@ -421,7 +277,7 @@ impl Contract {
     }
 
     fn verify(&self, method: &str, template: &str, uri: &str, answer: &Answer) -> Value {
-        let checker = Checker { doc: &self.doc };
+        let checker = Checker::new(&self.doc);
         let op = operation(&self.doc, template, method);
         let status = answer.status.to_string();
         let declared = op["responses"].get(&status).unwrap_or_else(|| {
@@ -544,7 +400,7 @@ fn every_ref_in_the_spec_resolves() {
 #[test]
 fn every_path_parameter_is_declared_and_required() {
     let doc = spec();
-    let checker = Checker { doc: &doc };
+    let checker = Checker::new(&doc);
     for (path, item) in doc["paths"].as_object().unwrap() {
         let names: BTreeSet<&str> = path
             .split('{')
@@ -837,7 +693,7 @@ async fn rest_answers_match_their_schemas() {
 #[tokio::test]
 async fn spec_examples_are_accepted_by_the_server() {
     let doc = spec();
-    let checker = Checker { doc: &doc };
+    let checker = Checker::new(&doc);
     let dir = tempfile::tempdir().unwrap();
     let c = Contract {
         router: app(state(dir.path(), None).await),
@@ -883,7 +739,7 @@ async fn spec_examples_are_accepted_by_the_server() {
 #[test]
 fn schema_checker_rejects_what_the_spec_forbids() {
     let doc = spec();
-    let c = Checker { doc: &doc };
+    let c = Checker::new(&doc);
     let alarm = json!({
         "type": "alarm", "id": 1, "session": "s", "monitor": "m", "test": "residual",
         "state": "isolated", "t": 1.0, "statistic": 30.0, "threshold": 9.5, "dof": 1,
@@ -930,6 +786,12 @@ fn schema_checker_rejects_what_the_spec_forbids() {
         ("AlarmMessage", alarm.clone(), true),
         ("AlarmMessage", alarm_plus, false),
         ("AlarmRecord", alarm, false),
+        // `pattern` is enforced (the hand-written checker this replaced ignored it).
+        ("Name", json!("ok_id-1.2"), true),
+        ("Name", json!("has space"), false),
+        ("Name", json!("x".repeat(65)), false),
+        ("CreateSession", session_body("s/1", false), false),
+        ("CreateSession", session_body("s.1", false), true),
     ];
     for (name, value, valid) in cases {
         assert_eq!(
@@ -959,7 +821,7 @@ where
 #[tokio::test]
 async fn socket_messages_match_their_schemas() {
     let doc = spec();
-    let checker = Checker { doc: &doc };
+    let checker = Checker::new(&doc);
     let x_websocket = |path: &str, side: &str| &operation(&doc, path, "GET")["x-websocket"][side];
     let ingest_path = "/api/v1/sessions/{id}/ingest";
     let events_path = "/api/v1/sessions/{id}/events";
@@ -1093,7 +955,7 @@ async fn model_and_feature_answers_match_their_schemas() {
 
     // Every example of the spec is accepted (202) and becomes a record.
     let train = &operation(&doc, models, "POST")["requestBody"]["content"]["application/json"];
-    let checker = Checker { doc: &doc };
+    let checker = Checker::new(&doc);
     let mut ids = Vec::new();
     for (name, example) in train["examples"].as_object().unwrap() {
         checker.assert_valid(checker.schema("TrainRequest"), &example["value"], name);
@@ -1112,6 +974,11 @@ async fn model_and_feature_answers_match_their_schemas() {
 
     let listed = c.call("GET", models, models, None).await;
     assert_eq!(listed["models"].as_array().unwrap().len(), ids.len());
+    // A model id is held to its pattern.
+    let mut forged = listed["models"][0].clone();
+    assert!(checker.matches(checker.schema("ModelRecord"), &forged));
+    forged["id"] = json!("m-NOT-HEX");
+    assert!(!checker.matches(checker.schema("ModelRecord"), &forged));
     // Wait for each job to end (ready or failed, whatever the learners can do).
     for id in &ids {
         let uri = format!("{models}/{id}");
@@ -1181,7 +1048,7 @@ async fn model_and_feature_answers_match_their_schemas() {
 fn learned_monitor_outputs_match_the_result_schema() {
     use navguard::monitor::Outputs;
     let doc = spec();
-    let c = Checker { doc: &doc };
+    let c = Checker::new(&doc);
     let outputs = [
         Outputs::Channel {
             prediction: [("h".into(), vec![1.0])].into(),
@@ -1220,7 +1087,7 @@ async fn federated_stats_with_a_track_match_their_schemas() {
     use navguard::service::wire::epoch_to_wire;
     use navguard::sim::scenario::ship_with;
     let doc = spec();
-    let checker = Checker { doc: &doc };
+    let checker = Checker::new(&doc);
     let events_schema =
         &operation(&doc, "/api/v1/sessions/{id}/events", "GET")["x-websocket"]["server"];
 

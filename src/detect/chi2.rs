@@ -798,11 +798,13 @@ mod tests {
     ];
 
     #[test]
-    fn threshold_matches_mpmath_quantiles_to_1e_12_relative() {
+    fn threshold_matches_mpmath_quantiles_to_2e_15_relative() {
+        // Measured worst case: 8.8e-16 (4 ulp). The table is exact to half an ulp
+        // (re-checked against mpmath at 50 digits).
         for (dof, p_fa, want) in THRESHOLD_REFERENCE {
             let got = threshold(dof, p_fa).unwrap();
             assert!(
-                rel_err(got, want) <= 1e-12,
+                rel_err(got, want) <= 2e-15,
                 "dof {dof} p_fa {p_fa}: {got} vs {want}"
             );
         }
@@ -816,8 +818,10 @@ mod tests {
             ] {
                 let t = threshold(dof, p_fa).unwrap();
                 let back = false_alarm_probability(dof, t).unwrap();
-                // 5e-324 has a single bit of precision; elsewhere ask for 1e-12.
-                let tol = if p_fa < 1e-307 { 0.5 } else { 1e-12 };
+                // 5e-324 has a single bit of precision; elsewhere ask for 1e-13
+                // (measured worst case 4.8e-14: the survival function's slope
+                // amplifies the quantile's rounding).
+                let tol = if p_fa < 1e-307 { 0.5 } else { 1e-13 };
                 assert!(
                     rel_err(back, p_fa) <= tol,
                     "dof {dof} p_fa {p_fa}: T {t} -> {back}"
@@ -1057,24 +1061,22 @@ mod tests {
     ];
 
     #[test]
-    fn noncentral_cdf_and_sf_match_mpmath_to_1e_9_relative() {
-        let mut worst: f64 = 0.0;
+    fn noncentral_cdf_and_sf_match_mpmath_to_1e_13_relative() {
+        // The table is exact to 1 ulp at the f64 x shown (re-checked with the
+        // mpmath code above); the measured worst case is 9.1e-14.
         for &(dof, lambda, x, cdf, sf) in NCX2_REFERENCE {
             let got_cdf = noncentral_cdf(x, dof, lambda).unwrap();
             let got_sf = noncentral_sf(x, dof, lambda).unwrap();
             let (e_cdf, e_sf) = (rel_err(got_cdf, cdf), rel_err(got_sf, sf));
             assert!(
-                e_cdf <= 1e-9,
+                e_cdf <= 1e-13,
                 "CDF dof {dof} λ {lambda} x {x}: {got_cdf:e} vs {cdf:e}"
             );
             assert!(
-                e_sf <= 1e-9,
+                e_sf <= 1e-13,
                 "SF dof {dof} λ {lambda} x {x}: {got_sf:e} vs {sf:e}"
             );
-            worst = worst.max(e_cdf).max(e_sf);
         }
-        // Regression guard: the measured worst case is 9.1e-14.
-        assert!(worst <= 1e-12, "worst relative error {worst:e}");
     }
 
     #[test]
@@ -1124,9 +1126,10 @@ mod tests {
     #[test]
     fn noncentrality_for_missed_detection_matches_mpmath() {
         for (dof, t, p_md, want) in NONCENTRALITY_REFERENCE {
+            // Measured worst case 3.4e-16.
             let got = noncentrality_for_missed_detection(dof, t, p_md).unwrap();
             assert!(
-                rel_err(got, want) <= 1e-9,
+                rel_err(got, want) <= 1e-15,
                 "dof {dof} T {t} P_MD {p_md}: {got} vs {want}"
             );
         }
@@ -1140,8 +1143,9 @@ mod tests {
                 for p_md in [0.5, 1e-3, 1e-7, 1e-12, 1e-100] {
                     let lambda = noncentrality_for_missed_detection(dof, t, p_md).unwrap();
                     let back = missed_detection(dof, t, lambda).unwrap();
+                    // Measured worst case 6.8e-14.
                     assert!(
-                        rel_err(back, p_md) <= 1e-9,
+                        rel_err(back, p_md) <= 1e-13,
                         "dof {dof} T {t}: {p_md} -> {back}"
                     );
                 }

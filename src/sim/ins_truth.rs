@@ -365,6 +365,42 @@ mod tests {
                 }
             }));
         assert_relative_eq!(g * q * g.transpose(), qd, epsilon = 1e-30);
+
+        // One seeded step from zero errors leaves x = G n, which must be N(0, Q_d).
+        // For each direction u (every attitude/velocity axis and every pair sum, so
+        // the cross terms count too) Σ (uᵀx)² / uᵀQ_d u is χ²(runs); it must lie in
+        // the two-sided 99.99 % interval (21 directions: ≤ 0.21 % false alarms in all).
+        let runs: u64 = 4000;
+        let samples: Vec<ErrorVector> = (0..runs)
+            .map(|seed| {
+                let mut sim = InsErrorSim::from_state(ErrorVector::zeros(), imu, true, seed);
+                sim.step(truth, dt);
+                *sim.errors()
+            })
+            .collect();
+        // Position and biases are driven by nothing in one step: exactly zero, as Q_d says.
+        for i in POS..crate::filter::ins::N {
+            assert_eq!(qd[(i, i)], 0.0, "Q_d[{i},{i}]");
+            assert!(samples.iter().all(|x| x[i] == 0.0), "x[{i}] moved");
+        }
+        let mut directions = Vec::new();
+        for i in 0..6 {
+            directions.push(ErrorVector::ith(i, 1.0));
+            for j in i + 1..6 {
+                directions.push(ErrorVector::ith(i, 1.0) + ErrorVector::ith(j, 1.0));
+            }
+        }
+        assert_eq!(directions.len(), 21);
+        let lo = chi2::threshold(runs as u32, 1.0 - 5e-5).unwrap();
+        let hi = chi2::threshold(runs as u32, 5e-5).unwrap();
+        for u in &directions {
+            let variance = (u.transpose() * qd * u)[0];
+            assert!(variance > 0.0, "uᵀQ_d u for u = {u}");
+            let stat: f64 = samples.iter().map(|x| u.dot(x).powi(2)).sum::<f64>() / variance;
+            assert!(stat > lo && stat < hi, "u = {u}: {lo} < {stat} < {hi}");
+        }
+        // The test has power: a noise 10 % too strong in variance would be caught.
+        assert!(hi / (runs as f64) < 1.1);
     }
 
     #[test]

@@ -1,14 +1,35 @@
-//! A small SVG line-chart writer for the experiments' figures (seed 004 Figs.
-//! 3–10): axes, ticks, labels, several series, an optional horizontal threshold
-//! line and an optional logarithmic y axis. Pure: returns the document as a
-//! `String`; the CLI writes it to a file.
+//! The experiments' figures (seed 004 Figs. 3–10) as SVG line charts, drawn by
+//! `plotters`' SVG backend: axes, ticks, labels, several series with a legend,
+//! an optional horizontal threshold line and an optional logarithmic y axis.
+//! Pure: returns the document as a `String`; the CLI writes it to a file.
+//!
+//! What this module adds to `plotters`: the axis ranges (fitted to the data and
+//! the threshold, 1–2–5 ticks, whole decades on a log axis), the thinning of long
+//! series, and the clamping of out-of-range values to the axis. `plotters` works
+//! in whole pixels, so drawn coordinates are within a pixel of
+//! [`Chart::x_to_px`]/[`Chart::y_to_px`]. Text is written as SVG `<text>`
+//! (the crate's `ttf`/`ab_glyph` features are off): no system fonts are read;
+//! label sizes for layout are estimated.
 
-use std::fmt::Write as _;
+use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 /// Colours given to series in order (colour-blind-safe Okabe–Ito palette).
-const PALETTE: [&str; 8] = [
-    "#0072b2", "#d55e00", "#009e73", "#cc79a7", "#e69f00", "#56b4e9", "#000000", "#f0e442",
+const PALETTE: [RGBColor; 8] = [
+    RGBColor(0x00, 0x72, 0xb2),
+    RGBColor(0xd5, 0x5e, 0x00),
+    RGBColor(0x00, 0x9e, 0x73),
+    RGBColor(0xcc, 0x79, 0xa7),
+    RGBColor(0xe6, 0x9f, 0x00),
+    RGBColor(0x56, 0xb4, 0xe9),
+    RGBColor(0x00, 0x00, 0x00),
+    RGBColor(0xf0, 0xe4, 0x42),
 ];
+
+/// The threshold line's colour.
+const THRESHOLD_COLOUR: RGBColor = RGBColor(0xc0, 0x00, 0x00);
+/// Grid lines.
+const GRID_COLOUR: RGBColor = RGBColor(0xe0, 0xe0, 0xe0);
 
 /// Above this many points a series is thinned to a min/max envelope per pixel
 /// column, which draws the same picture with a bounded file size.
@@ -205,186 +226,141 @@ impl Chart {
 
     /// Renders the chart as a standalone SVG document.
     pub fn to_svg(&self) -> String {
-        let mut s = String::with_capacity(16 * 1024);
-        let (w, h) = (self.width, self.height);
+        let mut svg = String::with_capacity(16 * 1024);
+        if let Err(e) = self.draw(&mut svg) {
+            // Drawing into a String cannot fail on I/O; keep whatever was drawn.
+            svg.push_str(&format!("<!-- plotters: {e} -->\n"));
+        }
+        svg
+    }
+
+    /// Draws the chart into `svg` with `plotters`.
+    fn draw(&self, svg: &mut String) -> Result<(), String> {
         let f = self.frame();
-        let (left, top, pw, ph) = (f.left, f.top, f.w, f.h);
-        let _ = writeln!(
-            s,
-            r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" viewBox="0 0 {w} {h}" font-family="sans-serif" font-size="12">"#
+        let (w, h) = (self.width.max(1.0) as u32, self.height.max(1.0) as u32);
+        let root = SVGBackend::with_string(svg, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let title = ("sans-serif", 15)
+            .into_font()
+            .color(&BLACK)
+            .pos(Pos::new(HPos::Center, VPos::Center));
+        root.draw_text(&self.title, &title, ((w / 2) as i32, 20))
+            .map_err(|e| e.to_string())?;
+
+        // A log axis is drawn as a linear axis over log10(y), ticked at whole decades.
+        let ay = |y: f64| if self.log_y { y.log10() } else { y };
+        let (x_lo, x_hi) = f.x;
+        let (y_lo, y_hi) = (ay(f.y.0), ay(f.y.1));
+        let x_step = nice_step((x_hi - x_lo) / 8.0);
+        let y_step = if self.log_y {
+            1.0
+        } else {
+            nice_step((y_hi - y_lo) / 6.0)
+        };
+        let (left, right, top, bottom) = (
+            f.left,
+            self.width - f.left - f.w,
+            f.top,
+            self.height - f.top - f.h,
         );
-        let _ = writeln!(
-            s,
-            r#"<rect x="0" y="0" width="{w}" height="{h}" fill="white"/>"#
-        );
-        let _ = writeln!(
-            s,
-            r#"<text x="{:.1}" y="22" text-anchor="middle" font-size="15">{}</text>"#,
-            w / 2.0,
-            escape(&self.title)
-        );
-        self.draw_x_axis(&mut s, &f);
-        self.draw_y_axis(&mut s, &f);
-        let _ = writeln!(
-            s,
-            r#"<rect x="{left:.2}" y="{top:.2}" width="{pw:.2}" height="{ph:.2}" fill="none" stroke="black"/>"#
-        );
-        let _ = writeln!(
-            s,
-            r#"<clipPath id="plot"><rect x="{left:.2}" y="{top:.2}" width="{pw:.2}" height="{ph:.2}"/></clipPath>"#
-        );
+        let mut chart = ChartBuilder::on(&root)
+            .margin_top(top as u32)
+            .margin_right(right.max(0.0) as u32)
+            .x_label_area_size(bottom.max(0.0) as u32)
+            .y_label_area_size(left as u32)
+            .build_cartesian_2d(x_lo..x_hi, y_lo..y_hi)
+            .map_err(|e| e.to_string())?;
+        // The mesh draws the axes and their descriptions; the ticks are ours (1–2–5
+        // steps, decades on a log axis), as plotters' own key points cannot be
+        // bound to its f64 formatter.
+        chart
+            .configure_mesh()
+            .disable_mesh()
+            .x_labels(0)
+            .y_labels(0)
+            .axis_style(BLACK)
+            .axis_desc_style(("sans-serif", 12))
+            .x_desc(self.x_label.as_str())
+            .y_desc(self.y_label.as_str())
+            .draw()
+            .map_err(|e| e.to_string())?;
+        let grid = |from: (f64, f64), to: (f64, f64)| PathElement::new([from, to], GRID_COLOUR);
+        let tick_font = ("sans-serif", 12).into_font().color(&BLACK);
+        let below = tick_font.pos(Pos::new(HPos::Center, VPos::Top));
+        for v in ticks(x_lo, x_hi, x_step) {
+            chart
+                .draw_series([grid((v, y_lo), (v, y_hi))])
+                .map_err(|e| e.to_string())?;
+            let at = (f.px(v) as i32, (f.top + f.h + 6.0) as i32);
+            root.draw_text(&tick_label(v, x_step), &below, at)
+                .map_err(|e| e.to_string())?;
+        }
+        let left_of = tick_font.pos(Pos::new(HPos::Right, VPos::Center));
+        for v in ticks(y_lo, y_hi, y_step) {
+            chart
+                .draw_series([grid((x_lo, v), (x_hi, v))])
+                .map_err(|e| e.to_string())?;
+            let (label, y) = if self.log_y {
+                (format!("1e{}", v.round() as i32), 10f64.powf(v))
+            } else {
+                (tick_label(v, y_step), v)
+            };
+            let at = ((f.left - 6.0) as i32, f.py(y) as i32);
+            root.draw_text(&label, &left_of, at)
+                .map_err(|e| e.to_string())?;
+        }
+
         for (i, series) in self.series.iter().enumerate() {
-            self.draw_series(&mut s, &f, series, PALETTE[i % PALETTE.len()]);
+            let colour = PALETTE[i % PALETTE.len()];
+            let points: Vec<(f64, f64)> = series
+                .points
+                .iter()
+                .copied()
+                .filter(|(x, y)| x.is_finite() && y.is_finite())
+                .map(|(x, y)| (x, ay(if self.log_y { y.max(f.y.0) } else { y })))
+                .map(|(x, y)| (x, y.clamp(y_lo, y_hi)))
+                .collect();
+            chart
+                .draw_series(LineSeries::new(
+                    thin(&points, MAX_POINTS),
+                    colour.stroke_width(1),
+                ))
+                .map_err(|e| e.to_string())?
+                .label(series.label.as_str())
+                .legend(move |(x, y)| {
+                    PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(2))
+                });
         }
         if let Some(th) = &self.threshold
             && th.y.is_finite()
+            && (!self.log_y || th.y > 0.0)
         {
-            let y = f.py(th.y);
-            let _ = writeln!(
-                s,
-                r##"<line class="threshold" x1="{left:.2}" y1="{y:.2}" x2="{:.2}" y2="{y:.2}" stroke="#c00000" stroke-width="1.5" stroke-dasharray="6 4"/>"##,
-                left + pw
-            );
-            let _ = writeln!(
-                s,
-                r##"<text x="{:.2}" y="{:.2}" text-anchor="end" fill="#c00000" stroke="white" stroke-width="3" paint-order="stroke">{}</text>"##,
-                left + pw - 4.0,
-                y - 4.0,
-                escape(&th.label)
-            );
+            let y = ay(th.y).clamp(y_lo, y_hi);
+            chart
+                .draw_series(LineSeries::new(
+                    [(x_lo, y), (x_hi, y)],
+                    THRESHOLD_COLOUR.stroke_width(2),
+                ))
+                .map_err(|e| e.to_string())?;
+            let style = ("sans-serif", 12)
+                .into_font()
+                .color(&THRESHOLD_COLOUR)
+                .pos(Pos::new(HPos::Right, VPos::Bottom));
+            let (px, py) = (f.left + f.w - 4.0, f.py(th.y) - 4.0);
+            root.draw_text(&th.label, &style, (px as i32, py as i32))
+                .map_err(|e| e.to_string())?;
         }
-        self.draw_legend(&mut s);
-        s.push_str("</svg>\n");
-        s
-    }
-
-    fn draw_x_axis(&self, s: &mut String, f: &Frame) {
-        let (lo, hi) = f.x;
-        let (left, top, pw, ph) = (f.left, f.top, f.w, f.h);
-        let step = nice_step((hi - lo) / 8.0);
-        let mut v = (lo / step).ceil() * step;
-        while v <= hi + step * 1e-9 {
-            let x = f.px(v);
-            let _ = writeln!(
-                s,
-                r##"<line x1="{x:.2}" y1="{top:.2}" x2="{x:.2}" y2="{:.2}" stroke="#e0e0e0"/>"##,
-                top + ph
-            );
-            let _ = writeln!(
-                s,
-                r#"<text x="{x:.2}" y="{:.2}" text-anchor="middle">{}</text>"#,
-                top + ph + 16.0,
-                tick_label(v, step)
-            );
-            v += step;
+        if self.series.len() >= 2 {
+            chart
+                .configure_series_labels()
+                .position(SeriesLabelPosition::UpperRight)
+                .background_style(WHITE.mix(0.85))
+                .border_style(RGBColor(0x99, 0x99, 0x99))
+                .label_font(("sans-serif", 12))
+                .draw()
+                .map_err(|e| e.to_string())?;
         }
-        let _ = writeln!(
-            s,
-            r#"<text x="{:.2}" y="{:.2}" text-anchor="middle">{}</text>"#,
-            left + pw / 2.0,
-            self.height - 12.0,
-            escape(&self.x_label)
-        );
-    }
-
-    fn draw_y_axis(&self, s: &mut String, f: &Frame) {
-        let (lo, hi) = f.y;
-        let (left, top, pw, ph) = (f.left, f.top, f.w, f.h);
-        let ticks: Vec<(f64, String)> = if self.log_y {
-            let (a, b) = (lo.log10().round() as i32, hi.log10().round() as i32);
-            (a..=b).map(|e| (10f64.powi(e), format!("1e{e}"))).collect()
-        } else {
-            let step = nice_step((hi - lo) / 6.0);
-            let mut out = Vec::new();
-            let mut v = (lo / step).ceil() * step;
-            while v <= hi + step * 1e-9 {
-                out.push((v, tick_label(v, step)));
-                v += step;
-            }
-            out
-        };
-        for (v, label) in ticks {
-            let y = f.py(v);
-            let _ = writeln!(
-                s,
-                r##"<line x1="{left:.2}" y1="{y:.2}" x2="{:.2}" y2="{y:.2}" stroke="#e0e0e0"/>"##,
-                left + pw
-            );
-            let _ = writeln!(
-                s,
-                r#"<text x="{:.2}" y="{:.2}" text-anchor="end">{label}</text>"#,
-                left - 6.0,
-                y + 4.0
-            );
-        }
-        let (cx, cy) = (16.0, top + ph / 2.0);
-        let _ = writeln!(
-            s,
-            r#"<text x="{cx:.2}" y="{cy:.2}" text-anchor="middle" transform="rotate(-90 {cx:.2} {cy:.2})">{}</text>"#,
-            escape(&self.y_label)
-        );
-    }
-
-    fn draw_series(&self, s: &mut String, f: &Frame, series: &Series, colour: &str) {
-        let (lo_y, _) = f.y;
-        let points: Vec<(f64, f64)> = series
-            .points
-            .iter()
-            .copied()
-            .filter(|(x, y)| x.is_finite() && y.is_finite())
-            .map(|(x, y)| (x, if self.log_y { y.max(lo_y) } else { y }))
-            .collect();
-        let points = thin(&points, MAX_POINTS);
-        let _ = write!(
-            s,
-            r#"<polyline fill="none" stroke="{colour}" stroke-width="1.2" clip-path="url(#plot)" points=""#
-        );
-        for (i, (x, y)) in points.iter().enumerate() {
-            if i > 0 {
-                s.push(' ');
-            }
-            let _ = write!(s, "{:.2},{:.2}", f.px(*x), f.py(*y));
-        }
-        s.push_str("\"/>\n");
-    }
-
-    fn draw_legend(&self, s: &mut String) {
-        if self.series.len() < 2 {
-            return;
-        }
-        let (left, top, pw, _) = self.plot_box();
-        let longest = self
-            .series
-            .iter()
-            .map(|x| x.label.chars().count())
-            .max()
-            .unwrap_or(0) as f64;
-        let box_w = 34.0 + 7.0 * longest;
-        let x0 = (left + pw - box_w - 8.0).max(left + 4.0);
-        let y0 = top + 8.0;
-        let _ = writeln!(
-            s,
-            r##"<rect x="{x0:.2}" y="{y0:.2}" width="{box_w:.2}" height="{:.2}" fill="white" fill-opacity="0.85" stroke="#999999"/>"##,
-            8.0 + 16.0 * self.series.len() as f64
-        );
-        for (i, series) in self.series.iter().enumerate() {
-            let y = y0 + 14.0 + 16.0 * i as f64;
-            let _ = writeln!(
-                s,
-                r#"<line x1="{:.2}" y1="{:.2}" x2="{:.2}" y2="{:.2}" stroke="{}" stroke-width="2"/>"#,
-                x0 + 6.0,
-                y - 4.0,
-                x0 + 26.0,
-                y - 4.0,
-                PALETTE[i % PALETTE.len()]
-            );
-            let _ = writeln!(
-                s,
-                r#"<text x="{:.2}" y="{y:.2}">{}</text>"#,
-                x0 + 30.0,
-                escape(&series.label)
-            );
-        }
+        root.present().map_err(|e| e.to_string())
     }
 }
 
@@ -495,18 +471,13 @@ fn thin(points: &[(f64, f64)], max: usize) -> Vec<(f64, f64)> {
     out
 }
 
-/// Escapes text for XML content and attributes.
-fn escape(text: &str) -> String {
-    let mut out = String::with_capacity(text.len());
-    for c in text.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            '\'' => out.push_str("&apos;"),
-            c => out.push(c),
-        }
+/// The multiples of `step` within `[lo, hi]`.
+fn ticks(lo: f64, hi: f64, step: f64) -> Vec<f64> {
+    let mut out = Vec::new();
+    let mut k = (lo / step).ceil();
+    while k * step <= hi + step * 1e-9 && out.len() < 1000 {
+        out.push(k * step);
+        k += 1.0;
     }
     out
 }
@@ -537,12 +508,55 @@ mod tests {
         stack.is_empty()
     }
 
-    fn attr(element: &str, name: &str) -> f64 {
+    /// Every `<polyline>`: its stroke colour and its points.
+    fn polylines(svg: &str) -> Vec<(String, Vec<(f64, f64)>)> {
+        svg.split("<polyline")
+            .skip(1)
+            .map(|p| {
+                let element = &p[..p.find("/>").unwrap()];
+                let points = text_attr(element, "points")
+                    .split_whitespace()
+                    .map(|xy| {
+                        let (x, y) = xy.split_once(',').unwrap();
+                        (x.parse().unwrap(), y.parse().unwrap())
+                    })
+                    .collect();
+                (text_attr(element, "stroke").to_lowercase(), points)
+            })
+            .collect()
+    }
+
+    fn text_attr<'a>(element: &'a str, name: &str) -> &'a str {
         let key = format!(" {name}=\"");
         let i = element.find(&key).unwrap() + key.len();
-        element[i..i + element[i..].find('"').unwrap()]
-            .parse()
-            .unwrap()
+        &element[i..i + element[i..].find('"').unwrap()]
+    }
+
+    /// The contents of every `<text>` element, trimmed.
+    fn texts(svg: &str) -> Vec<String> {
+        svg.split("<text")
+            .skip(1)
+            .map(|t| {
+                let body = &t[t.find('>').unwrap() + 1..];
+                body[..body.find("</text>").unwrap()].trim().to_owned()
+            })
+            .collect()
+    }
+
+    fn hex(c: RGBColor) -> String {
+        format!("#{:02x}{:02x}{:02x}", c.0, c.1, c.2)
+    }
+
+    /// The longest polyline drawn in `colour`, the first on a tie (legend samples
+    /// are two points, drawn after the lines).
+    fn line_in(svg: &str, colour: RGBColor) -> Vec<(f64, f64)> {
+        polylines(svg)
+            .into_iter()
+            .rev()
+            .filter(|(c, _)| *c == hex(colour))
+            .map(|(_, p)| p)
+            .max_by_key(Vec::len)
+            .unwrap_or_default()
     }
 
     fn chart() -> Chart {
@@ -561,34 +575,70 @@ mod tests {
     }
 
     #[test]
-    fn chart_is_well_formed_with_one_polyline_per_series() {
-        let svg = chart().with_threshold(20.0, "T_D = 20").to_svg();
-        assert!(svg.starts_with("<svg "));
+    fn chart_is_well_formed_with_one_line_per_series_and_its_labels() {
+        let c = chart().with_threshold(20.0, "T_D = 20");
+        let svg = c.to_svg();
+        assert!(svg.starts_with("<svg "), "{svg}");
         assert!(balanced(&svg), "{svg}");
-        assert_eq!(svg.matches("<polyline").count(), 3);
-        assert!(svg.contains("errors &amp; λ &lt;test&gt;"));
-        // Each polyline carries all its points.
-        let first = svg.split("<polyline").nth(1).unwrap();
-        let points = &first[first.find("points=\"").unwrap() + 8..];
-        let points = &points[..points.find('"').unwrap()];
-        assert_eq!(points.split(' ').count(), 100);
+        // Each series is one polyline in its colour carrying all its points, where
+        // the chart's mapping puts them (plotters draws in whole pixels: within two).
+        for (i, series) in c.series.iter().enumerate() {
+            let line = line_in(&svg, PALETTE[i]);
+            assert_eq!(line.len(), series.points.len(), "series {i}");
+            for (&(x, y), &(px, py)) in series.points.iter().zip(&line) {
+                assert!((px - c.x_to_px(x)).abs() <= 2.0, "x {x}: {px}");
+                assert!((py - c.y_to_px(y)).abs() <= 2.0, "y {y}: {py}");
+            }
+        }
+        let labels = texts(&svg);
+        for expected in [
+            "errors &amp; λ &lt;test&gt;",
+            "t, s",
+            "error, m",
+            "T_D = 20",
+        ] {
+            assert!(
+                labels.iter().any(|t| t == expected),
+                "{expected}: {labels:?}"
+            );
+        }
+        // The legend names every series; x ticks are the 1–2–5 steps over 0..99.
+        for expected in ["a", "b", "c", "0", "20", "40", "60", "80"] {
+            assert!(
+                labels.iter().any(|t| t == expected),
+                "{expected}: {labels:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_single_series_has_no_legend() {
+        let svg = Chart::new("one", "x", "y")
+            .with_series(Series::new("only", vec![(0.0, 1.0), (1.0, 2.0)]))
+            .to_svg();
+        assert!(!texts(&svg).iter().any(|t| t == "only"));
+        assert_eq!(line_in(&svg, PALETTE[0]).len(), 2);
     }
 
     #[test]
     fn threshold_line_sits_at_its_value_on_the_axis() {
         // Plot box: top 40, height 400 − 40 − 52 = 308; y in [0, 40] → 20 is mid-height.
-        let svg = chart()
-            .with_y_range(0.0, 40.0)
-            .with_threshold(20.0, "T")
-            .to_svg();
-        let line = svg
-            .lines()
-            .find(|l| l.contains("class=\"threshold\""))
-            .unwrap();
-        assert!((attr(line, "y1") - (40.0 + 308.0 * 0.5)).abs() < 0.01);
-        assert_eq!(attr(line, "y1"), attr(line, "y2"));
-        assert!((attr(line, "x1") - 72.0).abs() < 1e-9);
-        assert!((attr(line, "x2") - (800.0 - 24.0)).abs() < 1e-9);
+        let c = chart().with_y_range(0.0, 40.0).with_threshold(20.0, "T");
+        assert!((c.y_to_px(20.0) - (40.0 + 308.0 * 0.5)).abs() < 1e-9);
+        let svg = c.to_svg();
+        let line = line_in(&svg, THRESHOLD_COLOUR);
+        assert_eq!(line.len(), 2);
+        assert_eq!(line[0].1, line[1].1);
+        assert!((line[0].1 - (40.0 + 308.0 * 0.5)).abs() <= 2.0, "{line:?}");
+        assert!((line[0].0 - 72.0).abs() <= 1.0, "{line:?}");
+        assert!((line[1].0 - (800.0 - 24.0)).abs() <= 2.0, "{line:?}");
+        // Values beyond a fixed range are drawn on its edge, not outside the box.
+        let clipped = Chart::new("c", "x", "y")
+            .with_series(Series::new("s", vec![(0.0, -5.0), (1.0, 100.0)]))
+            .with_y_range(0.0, 10.0);
+        let line = line_in(&clipped.to_svg(), PALETTE[0]);
+        assert!((line[0].1 - clipped.y_to_px(0.0)).abs() <= 2.0);
+        assert!((line[1].1 - clipped.y_to_px(10.0)).abs() <= 2.0);
     }
 
     #[test]
@@ -605,9 +655,17 @@ mod tests {
         assert!((c.y_to_px(20.0) - expected).abs() < 1e-9);
         let svg = c.to_svg();
         assert!(balanced(&svg));
+        let labels = texts(&svg);
         for label in ["1e-1", "1e0", "1e1", "1e2"] {
-            assert!(svg.contains(&format!(">{label}</text>")), "{label}");
+            assert!(labels.iter().any(|t| t == label), "{label}: {labels:?}");
         }
+        // The zero is drawn at the axis floor; the threshold at 20 on the log scale.
+        let line = line_in(&svg, PALETTE[0]);
+        assert_eq!(line.len(), 3);
+        assert!((line[1].1 - c.y_to_px(50.0)).abs() <= 2.0, "{line:?}");
+        assert!((line[2].1 - c.y_to_px(0.1)).abs() <= 2.0, "{line:?}");
+        let th = line_in(&svg, THRESHOLD_COLOUR);
+        assert!((th[0].1 - expected).abs() <= 2.0, "{th:?}");
     }
 
     #[test]
