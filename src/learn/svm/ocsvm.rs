@@ -120,27 +120,10 @@ impl OcSvmParams {
         let n = data.n();
         let dim = data.dim();
         let mut effective = self.clone();
-        // SVDD ⇔ ν-OCSVM with ν = 1/(N·C) (module docs); scale turns d(z) into R² − f(z).
-        let (nu, scale) = match (self.nu, self.c) {
-            (_, Some(c)) => {
-                let nu = 1.0 / (n as f64 * c);
-                if nu > 1.0 {
-                    return Err(LearnError::params(
-                        "C",
-                        format!(
-                            "must be at least 1/N = {} (Σβ = 1 with β ≤ C)",
-                            1.0 / n as f64
-                        ),
-                    ));
-                }
-                (nu, 2.0 * c)
-            }
-            (Some(nu), None) => (nu, 1.0),
-            (None, None) => {
-                effective.nu = Some(DEFAULT_NU);
-                (DEFAULT_NU, 1.0)
-            }
-        };
+        let (nu, scale) = self.nu_and_scale(n)?;
+        if self.nu.is_none() && self.c.is_none() {
+            effective.nu = Some(DEFAULT_NU);
+        }
         let (x, standardizer) = prepare_inputs(data, self.standardize);
         let sigma2 = resolve_sigma2(self.sigma2, self.gamma, &x, dim);
         if self.sigma2.is_none() && self.gamma.is_none() {
@@ -148,14 +131,7 @@ impl OcSvmParams {
         }
         let kernel = Kernel::Rbf { sigma2 };
 
-        // libsvm's feasible start: the first ⌊νl⌋ at 1, the next at the remainder.
-        let total = nu * n as f64;
-        let full = (total as usize).min(n);
-        let mut alpha = vec![0.0; n];
-        alpha[..full].fill(1.0);
-        if full < n {
-            alpha[full] = total - full as f64;
-        }
+        let alpha = feasible_start(nu, n);
         let problem = Problem {
             x: &x,
             dim,
@@ -202,6 +178,40 @@ impl OcSvmParams {
         };
         Ok((model, effective, metrics))
     }
+
+    /// `(ν, scale)` for the solver: SVDD ⇔ ν-OCSVM with ν = 1/(N·C) (module docs), `scale`
+    /// turning d(z) into R² − f(z); without `C` or `ν`, [`DEFAULT_NU`].
+    fn nu_and_scale(&self, n: usize) -> Result<(f64, f64), LearnError> {
+        match (self.nu, self.c) {
+            (_, Some(c)) => {
+                let nu = 1.0 / (n as f64 * c);
+                if nu > 1.0 {
+                    return Err(LearnError::params(
+                        "C",
+                        format!(
+                            "must be at least 1/N = {} (Σβ = 1 with β ≤ C)",
+                            1.0 / n as f64
+                        ),
+                    ));
+                }
+                Ok((nu, 2.0 * c))
+            }
+            (Some(nu), None) => Ok((nu, 1.0)),
+            (None, None) => Ok((DEFAULT_NU, 1.0)),
+        }
+    }
+}
+
+/// libsvm's feasible start for `Σα = νl`: the first ⌊νl⌋ at 1, the next at the remainder.
+fn feasible_start(nu: f64, n: usize) -> Vec<f64> {
+    let total = nu * n as f64;
+    let full = (total as usize).min(n);
+    let mut alpha = vec![0.0; n];
+    alpha[..full].fill(1.0);
+    if full < n {
+        alpha[full] = total - full as f64;
+    }
+    alpha
 }
 
 /// A trained one-class SVM: `decision(x) = scale · (Σ_k α_k K(sv_k, z) − ρ)` with

@@ -117,23 +117,7 @@ impl SvcParams {
         progress: &dyn Progress,
     ) -> Result<(SvcModel, SvcParams, TrainingMetrics), LearnError> {
         self.check()?;
-        let labels = data.require_y()?;
-        let mut y = Vec::with_capacity(data.n());
-        for (i, &v) in labels.iter().enumerate() {
-            if v != 1.0 && v != -1.0 {
-                return Err(LearnError::data(
-                    format!("y[{i}]"),
-                    format!("C-SVC labels must be +1 or -1, got {v}"),
-                ));
-            }
-            y.push(v);
-        }
-        if y.iter().all(|&v| v == y[0]) {
-            return Err(LearnError::data(
-                "y",
-                "C-SVC needs both classes (+1 and -1) in the training set",
-            ));
-        }
+        let y = checked_labels(data)?;
         let dim = data.dim();
         let (x, standardizer) = prepare_inputs(data, self.standardize);
         let mut effective = self.clone();
@@ -183,15 +167,7 @@ impl SvcParams {
             }
         }
         // Linear kernel: w = Σ y_i α_i x_i, so a decision is one dot product.
-        let w = (kernel == Kernel::Linear).then(|| {
-            let mut w = vec![0.0; dim];
-            for (s, c) in sv.chunks_exact(dim).zip(&coef) {
-                for (wk, sk) in w.iter_mut().zip(s) {
-                    *wk += c * sk;
-                }
-            }
-            w
-        });
+        let w = (kernel == Kernel::Linear).then(|| linear_weights(&sv, &coef, dim));
         let metrics = TrainingMetrics {
             train_accuracy: Some(correct as f64 / n as f64),
             support_vectors: Some(coef.len()),
@@ -210,6 +186,40 @@ impl SvcParams {
         };
         Ok((model, effective, metrics))
     }
+}
+
+/// The labels of `data`, checked: each +1 or −1, and both present.
+fn checked_labels(data: &Dataset) -> Result<Vec<f64>, LearnError> {
+    let labels = data.require_y()?;
+    let mut y = Vec::with_capacity(data.n());
+    for (i, &v) in labels.iter().enumerate() {
+        if v != 1.0 && v != -1.0 {
+            return Err(LearnError::data(
+                format!("y[{i}]"),
+                format!("C-SVC labels must be +1 or -1, got {v}"),
+            ));
+        }
+        y.push(v);
+    }
+    if y.iter().all(|&v| v == y[0]) {
+        return Err(LearnError::data(
+            "y",
+            "C-SVC needs both classes (+1 and -1) in the training set",
+        ));
+    }
+    Ok(y)
+}
+
+/// `w = Σ_k coef_k sv_k` (`coef_k = y_k α_k`): the linear kernel's decision is one dot
+/// product.
+fn linear_weights(sv: &[f64], coef: &[f64], dim: usize) -> Vec<f64> {
+    let mut w = vec![0.0; dim];
+    for (s, c) in sv.chunks_exact(dim).zip(coef) {
+        for (wk, sk) in w.iter_mut().zip(s) {
+            *wk += c * sk;
+        }
+    }
+    w
 }
 
 /// A trained C-SVC: `f(x) = Σ_k coef_k K(sv_k, z) + b` with `z` the standardised
