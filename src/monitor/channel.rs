@@ -431,6 +431,9 @@ struct StepReport {
     residual: BTreeMap<String, Vec<f64>>,
 }
 
+/// A test's outcome and its policy's next state, previewed for the commit.
+type Preview = (TestOutcome, crate::detect::PolicyState);
+
 impl ChannelState {
     /// The channel's value in `epoch`, when present.
     fn value_in<'e>(&self, epoch: &'e Epoch) -> Option<&'e Vec<f64>> {
@@ -501,14 +504,7 @@ impl ChannelState {
         y: &[f64],
         yhat: &[f64],
         bank: &TestBank,
-    ) -> Result<
-        (
-            Vec<f64>,
-            bool,
-            Option<(TestOutcome, crate::detect::PolicyState)>,
-        ),
-        StepError,
-    > {
+    ) -> Result<(Vec<f64>, bool, Option<Preview>), StepError> {
         if yhat.iter().any(|v| !v.is_finite()) {
             return Err(StepError::Filter(FilterError::NonFinite(
                 "channel prediction",
