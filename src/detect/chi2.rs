@@ -538,6 +538,8 @@ fn ln_chernoff_bound(x: f64, d: f64, lambda: f64) -> f64 {
 }
 
 /// `F(x)` (`Lower`) or `1 − F(x)` (`Upper`) of `χ²(dof, λ)`, inputs validated.
+// Over 80 lines: one series evaluation whose start term, scale and two sweeps share a
+// dozen coupled locals; split, each piece would take them all as parameters.
 fn noncentral_tail(x: f64, dof: u32, lambda: f64, tail: Tail) -> f64 {
     let lower = tail == Tail::Lower;
     if x == 0.0 {

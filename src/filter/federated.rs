@@ -347,6 +347,9 @@ impl FederatedFilter {
         self.step_from(Some(&base), trans, obs, decide)
     }
 
+    /// The epoch of [`FederatedFilter::step`] from `base` (or the current state), in the
+    /// module doc's five stages, each a method of [`EpochWork`]. Every working array lives
+    /// on the stack; the next state is written in place into the other buffer.
     fn step_from(
         &mut self,
         base: Option<&FederatedState>,
@@ -355,7 +358,6 @@ impl FederatedFilter {
         mut decide: impl FnMut(usize, Option<LocalTest>) -> Decision,
     ) -> Result<FederatedStep, FilterError> {
         self.pending_ready = false;
-        let (n, betas) = (self.n, self.betas);
         let [first, second] = &mut self.states;
         let (current, next) = if self.current == 0 {
             (&*first, second)
@@ -363,52 +365,117 @@ impl FederatedFilter {
             (&*second, first)
         };
         let current = base.unwrap_or(current);
+        let mut work = EpochWork::new(&self.betas[..self.n], obs);
 
-        // 1. Prediction: the master once (the shared local filters are its β-shares), and
-        //    every filter with its own estimate with Q/β_i.
-        predict_into(&current.master, trans, &mut next.master)?;
-        let mut own_prior: [Option<ErrorEstimate>; MAX_AIDS] = [None, None, None];
-        for (i, own) in current.own.iter().enumerate().take(n) {
-            if let Some(e) = own {
-                let local = LinearTransition {
-                    f: trans.f,
-                    q: trans.q / betas[i],
-                };
-                let mut prior = e.clone();
-                predict_into(e, &local, &mut prior)?;
-                own_prior[i] = Some(prior);
-            }
-        }
-        let master_prior = &next.master;
-        let observation = |i: usize| obs.get(i).and_then(Option::as_ref);
+        // 1. Prediction (into the master buffer, which then holds the prior x_g⁻, P_g⁻).
+        work.predict(current, trans, &mut next.master)?;
+        // 2. Tests and decisions, in aid order.
+        work.test_and_decide(&next.master, &mut decide)?;
+        // 3. Local updates of the filters that do not share the master's estimate.
+        let (total, shared_total) = work.fused_shares();
+        let mut own_fused: [Option<ErrorEstimate>; MAX_AIDS] = [None, None, None];
+        work.update_locals(&next.master, total, &mut next.own, &mut own_fused)?;
+        // 4. Fusion, in place in the master.
+        work.fuse(&mut next.master, total, shared_total, &mut own_fused)?;
+        // 5. HPL slopes onto the fused solution.
+        work.slopes(&next.master);
 
-        // 2. Tests and decisions, in aid order. A shared filter's prior is (x_g⁻, P_g⁻/β_i).
+        self.pending_ready = true;
+        Ok(FederatedStep { aids: work.aids })
+    }
+}
+
+/// The working set of one [`FederatedFilter::step`]: the stage methods below read and fill
+/// it in order. Fixed-size arrays only, so an epoch allocates nothing.
+struct EpochWork<'a> {
+    /// `β_i` of the configured aids (`n` entries).
+    betas: &'a [f64],
+    /// The epoch's measurements, one entry per aid (missing entries: no data).
+    obs: &'a [Option<Observation>],
+    /// Stage 1: the predicted local estimate of each filter that has its own.
+    own_prior: [Option<ErrorEstimate>; MAX_AIDS],
+    /// Stage 2 on: the per-aid report.
+    aids: [AidStep; MAX_AIDS],
+    /// Diagonal of each local test's S⁻¹ (first M entries), for the slopes.
+    s_local: [SVector<f64, 6>; MAX_AIDS],
+    /// The filter shares the master's estimate this epoch (it had no own one, or is reset).
+    shared: [bool; MAX_AIDS],
+}
+
+impl<'a> EpochWork<'a> {
+    fn new(betas: &'a [f64], obs: &'a [Option<Observation>]) -> Self {
         let idle = Decision {
             health: crate::detect::Health::Healthy,
             update: false,
             fuse: false,
             reset: false,
         };
-        let mut aids = [AidStep {
-            test: None,
-            decision: idle,
-            updated: false,
-            fused: false,
-            slope: None,
-        }; MAX_AIDS];
-        // Diagonal of each local test's S⁻¹ (first M entries), for the slopes.
-        let mut s_local = [SVector::<f64, 6>::zeros(); MAX_AIDS];
-        let mut shared = [false; MAX_AIDS];
-        for i in 0..n {
-            let o = observation(i);
+        EpochWork {
+            betas,
+            obs,
+            own_prior: [None, None, None],
+            aids: [AidStep {
+                test: None,
+                decision: idle,
+                updated: false,
+                fused: false,
+                slope: None,
+            }; MAX_AIDS],
+            s_local: [SVector::<f64, 6>::zeros(); MAX_AIDS],
+            shared: [false; MAX_AIDS],
+        }
+    }
+
+    /// Number of aids.
+    fn n(&self) -> usize {
+        self.betas.len()
+    }
+
+    /// Aid `i`'s measurement this epoch.
+    fn observation(&self, i: usize) -> Option<&'a Observation> {
+        self.obs.get(i).and_then(Option::as_ref)
+    }
+
+    /// Stage 1: the master predicted once into `master` (the shared local filters are its
+    /// β-shares, `P_i⁻ = P_g⁻/β_i`), and every filter with its own estimate with `Q/β_i`.
+    fn predict(
+        &mut self,
+        current: &FederatedState,
+        trans: &LinearTransition<U15>,
+        master: &mut ErrorEstimate,
+    ) -> Result<(), FilterError> {
+        predict_into(&current.master, trans, master)?;
+        for (i, own) in current.own.iter().enumerate().take(self.n()) {
+            if let Some(e) = own {
+                let local = LinearTransition {
+                    f: trans.f,
+                    q: trans.q / self.betas[i],
+                };
+                let mut prior = e.clone();
+                predict_into(e, &local, &mut prior)?;
+                self.own_prior[i] = Some(prior);
+            }
+        }
+        Ok(())
+    }
+
+    /// Stage 2: each aid's local test `λ_i = rᵀ S⁻¹ r` against its prior (a shared filter's
+    /// is `(x_g⁻, P_g⁻/β_i)`) and the policy's decision, in aid order.
+    fn test_and_decide(
+        &mut self,
+        master_prior: &ErrorEstimate,
+        decide: &mut impl FnMut(usize, Option<LocalTest>) -> Decision,
+    ) -> Result<(), FilterError> {
+        for i in 0..self.n() {
+            let o = self.observation(i);
             let test = match o {
                 Some(o) => {
-                    let (prior, beta) = match &own_prior[i] {
+                    let (prior, beta) = match &self.own_prior[i] {
                         Some(e) => (e, 1.0),
-                        None => (master_prior, betas[i]),
+                        None => (master_prior, self.betas[i]),
                     };
                     let (statistic, s) = with_measurement!(o, m => share_test(prior, beta, m)?);
-                    s_local[i] = s;
+                    self.s_local[i] = s;
                     Some(LocalTest {
                         statistic,
                         dof: o.dof(),
@@ -417,57 +484,86 @@ impl FederatedFilter {
                 None => None,
             };
             let decision = decide(i, test);
-            shared[i] = own_prior[i].is_none() || decision.reset;
-            aids[i] = AidStep {
+            let has_own = self.own_prior[i].is_some();
+            self.shared[i] = !has_own || decision.reset;
+            self.aids[i] = AidStep {
                 test,
                 decision,
                 updated: decision.update && o.is_some(),
                 fused: decision.fuse,
                 slope: None,
             };
-            if let (true, true, Some(o)) = (decision.reset, own_prior[i].is_some(), o) {
+            if let (true, true, Some(o)) = (decision.reset, has_own, o) {
                 // The test ran on the stale own prior; the update and the slope use the
                 // master's share the filter was just reset to.
-                s_local[i] = with_measurement!(o, m => share_test(master_prior, betas[i], m)?.1);
+                self.s_local[i] =
+                    with_measurement!(o, m => share_test(master_prior, self.betas[i], m)?.1);
             }
         }
+        Ok(())
+    }
 
-        // 3. Local updates of the filters that do not share the master's estimate. The
-        //    fused filters share the whole prior information: each one's share becomes
-        //    β_i / B with B = Σ_fused β (renormalisation; without it every epoch of
-        //    isolation would throw away 1 − B of the common information).
+    /// `(B, B_shared)`: the sharing factors of the fused filters, and of those among them
+    /// that share the master's estimate (renormalisation, module doc).
+    fn fused_shares(&self) -> (f64, f64) {
+        let (n, aids, betas) = (self.n(), &self.aids, self.betas);
         let total: f64 = (0..n).filter(|&i| aids[i].fused).map(|i| betas[i]).sum();
         let shared_total: f64 = (0..n)
-            .filter(|&i| aids[i].fused && shared[i])
+            .filter(|&i| aids[i].fused && self.shared[i])
             .map(|i| betas[i])
             .sum();
-        let mut own_fused: [Option<ErrorEstimate>; MAX_AIDS] = [None, None, None];
-        for i in 0..n {
-            next.own[i] = None;
-            if shared[i] && aids[i].fused {
-                continue; // the master's filter below
+        (total, shared_total)
+    }
+
+    /// Stage 3: local updates of the filters that do not share the master's estimate. The
+    /// fused filters share the whole prior information: each one's share becomes `β_i / B`
+    /// with `B = Σ_fused β` (renormalisation; without it every epoch of isolation would
+    /// throw away `1 − B` of the common information). Filters left out of fusion go to
+    /// `own_next`, fused ones with an estimate of their own to `own_fused`.
+    fn update_locals(
+        &mut self,
+        master_prior: &ErrorEstimate,
+        total: f64,
+        own_next: &mut [Option<ErrorEstimate>; MAX_AIDS],
+        own_fused: &mut [Option<ErrorEstimate>; MAX_AIDS],
+    ) -> Result<(), FilterError> {
+        for i in 0..self.n() {
+            own_next[i] = None;
+            let (shared, aid) = (self.shared[i], self.aids[i]);
+            if shared && aid.fused {
+                continue; // the master's filter, stage 4
             }
-            let mut local = match (own_prior[i].take(), shared[i]) {
+            let mut local = match (self.own_prior[i].take(), shared) {
                 (Some(e), false) => e,
-                _ => scaled(master_prior, betas[i]),
+                _ => scaled(master_prior, self.betas[i]),
             };
-            if aids[i].fused {
+            if aid.fused {
                 local.p *= total;
             }
-            if let (true, Some(o)) = (aids[i].updated, observation(i)) {
+            if let (true, Some(o)) = (aid.updated, self.observation(i)) {
                 with_measurement!(o, m => joseph_update(&mut local, m)?);
             }
-            if aids[i].fused {
+            if aid.fused {
                 own_fused[i] = Some(local);
             } else {
-                next.own[i] = Some(local);
+                own_next[i] = Some(local);
             }
         }
+        Ok(())
+    }
 
-        // 4. Fusion. Shared fused filters: one Kalman filter from (x_g⁻, P_g⁻ B / B_shared)
-        //    through the updated aids' measurements (module doc), in place in the master.
-        //    With nothing fused the master keeps its prediction (x_g⁻, P_g⁻).
-        let master = &mut next.master;
+    /// Stage 4: fusion into `master`, which holds the prior `(x_g⁻, P_g⁻)`. The shared fused
+    /// filters are one Kalman filter from `(x_g⁻, P_g⁻ B / B_shared)` through the updated
+    /// aids' measurements (module doc); the filters fused with their own estimate join by
+    /// independent-estimate fusion. With nothing fused the master keeps its prediction.
+    fn fuse(
+        &self,
+        master: &mut ErrorEstimate,
+        total: f64,
+        shared_total: f64,
+        own_fused: &mut [Option<ErrorEstimate>; MAX_AIDS],
+    ) -> Result<(), FilterError> {
+        let n = self.n();
         let mut any_fused = false;
         if shared_total > 0.0 {
             any_fused = true;
@@ -476,14 +572,16 @@ impl FederatedFilter {
                 master.p *= ratio;
             }
             for i in 0..n {
-                if let (true, true, Some(o)) =
-                    (shared[i] && aids[i].fused, aids[i].updated, observation(i))
-                {
+                let aid = &self.aids[i];
+                if let (true, true, Some(o)) = (
+                    self.shared[i] && aid.fused,
+                    aid.updated,
+                    self.observation(i),
+                ) {
                     with_measurement!(o, m => joseph_update(master, m)?);
                 }
             }
         }
-        // Filters fused with their own estimate: independent-estimate fusion.
         for own in own_fused.iter_mut().take(n) {
             if let Some(own) = own.take() {
                 *master = if any_fused {
@@ -494,16 +592,19 @@ impl FederatedFilter {
                 any_fused = true;
             }
         }
+        Ok(())
+    }
 
-        // 5. HPL slopes: gain onto the fused solution P_g H_iᵀ R_i⁻¹, local S_i.
-        for i in 0..n {
-            if let (true, true, Some(o)) = (aids[i].updated, aids[i].fused, observation(i)) {
-                let slope = with_measurement!(o, m => fused_slope(&master.p, m, &s_local[i]));
-                aids[i].slope = slope.ok();
+    /// Stage 5: each updated, fused aid's HPL slope from its gain onto the fused solution,
+    /// `P_g H_iᵀ R_i⁻¹`, and its local `S_i` ([`AidStep::slope`]).
+    fn slopes(&mut self, master: &ErrorEstimate) {
+        for i in 0..self.n() {
+            let aid = &self.aids[i];
+            if let (true, true, Some(o)) = (aid.updated, aid.fused, self.observation(i)) {
+                let slope = with_measurement!(o, m => fused_slope(&master.p, m, &self.s_local[i]));
+                self.aids[i].slope = slope.ok();
             }
         }
-        self.pending_ready = true;
-        Ok(FederatedStep { aids })
     }
 }
 

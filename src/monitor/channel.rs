@@ -448,6 +448,175 @@ struct Pending {
     policy: Option<crate::detect::PolicyState>,
 }
 
+/// What one epoch reports besides the channels' pending changes: the tests that ran and
+/// the `prediction` and `residual` outputs, by channel name.
+#[derive(Default)]
+struct StepReport {
+    tests: Vec<TestOutcome>,
+    prediction: BTreeMap<TestName, Vec<f64>>,
+    residual: BTreeMap<TestName, Vec<f64>>,
+}
+
+/// A test's outcome and its policy's next state, previewed for the commit.
+type Preview = (TestOutcome, crate::detect::PolicyState);
+
+impl ChannelState {
+    /// The channel's value in `epoch`, when present.
+    fn value_in<'e>(&self, epoch: &'e Epoch) -> Option<&'e Vec<f64>> {
+        epoch
+            .channels
+            .iter()
+            .flatten()
+            .find(|(n, _)| **n == *self.config.name)
+            .map(|(_, v)| v)
+    }
+
+    /// One epoch of the channel (module doc) with value `y`, without changing anything:
+    /// ŷ_k from the history, `r_k = y_k − ŷ_k` tested with T_a under the policy, and what
+    /// the commit will learn. The test and the outputs go to `report`.
+    fn step(
+        &self,
+        channel: usize,
+        y: &[f64],
+        bank: &TestBank,
+        report: &mut StepReport,
+    ) -> Result<Pending, StepError> {
+        if y.len() != self.config.dim {
+            return Err(StepError::Filter(FilterError::Dimension {
+                what: "channel value",
+                got_rows: y.len(),
+                got_cols: 1,
+                want_rows: self.config.dim,
+                want_cols: 1,
+            }));
+        }
+        let x = self.input();
+        let yhat = x.as_deref().and_then(|x| self.predict(x));
+        let mut health = bank.slots()[self.test].policy.health();
+        let mut residual = None;
+        let mut policy = None;
+        if let Some(yhat) = yhat {
+            let (r, ready, test) = self.test_residual(y, &yhat, bank)?;
+            if let Some((outcome, state)) = test {
+                health = outcome.decision.health;
+                report.tests.push(outcome);
+                policy = Some(state);
+            }
+            report.prediction.insert(self.config.name.clone(), yhat);
+            report.residual.insert(self.config.name.clone(), r.clone());
+            residual = ready.then_some((r, health == Health::Healthy));
+        }
+        let healthy = health == Health::Healthy;
+        let (value, filters) = self.history_value(y, healthy);
+        let windows = self.learned_windows(x.as_deref(), &value, healthy)?;
+        Ok(Pending {
+            channel,
+            value,
+            windows,
+            filters,
+            residual,
+            policy,
+        })
+    }
+
+    /// The residual `r = y − ŷ`, whether it is tested (an online window's residuals are,
+    /// and feed T_a's V, once the window is full: before that its predictions are still
+    /// learning, not the channel's noise), and T_a's outcome previewed under the policy
+    /// (`None` in warm-up or with a residual that never varies: the test does not run).
+    fn test_residual(
+        &self,
+        y: &[f64],
+        yhat: &[f64],
+        bank: &TestBank,
+    ) -> Result<(Vec<f64>, bool, Option<Preview>), StepError> {
+        if yhat.iter().any(|v| !v.is_finite()) {
+            return Err(StepError::Filter(FilterError::NonFinite(
+                "channel prediction",
+            )));
+        }
+        let r: Vec<f64> = y.iter().zip(yhat).map(|(a, b)| a - b).collect();
+        let ready = match &self.predictor {
+            Predictor::Online(w) => w.iter().all(|w| w.len() >= w.params().window),
+            Predictor::Stored(_) => true,
+        };
+        let test = match self.ta.evaluate(&r).map(|t| t.filter(|_| ready)) {
+            Ok(Some(t)) => Some(bank.preview(self.test, t, self.config.dim as u32)?),
+            Ok(None) | Err(TaError::Singular) => None,
+            Err(TaError::NonFinite | TaError::Dimension { .. }) => {
+                return Err(StepError::Filter(FilterError::NonFinite(
+                    "channel residual",
+                )));
+            }
+        };
+        Ok((r, ready, test))
+    }
+
+    /// What enters the history (module doc): the measurement, through the outlier filter
+    /// while healthy, with the filters after filtering (`None`: none ran).
+    fn history_value(&self, y: &[f64], healthy: bool) -> (Vec<f64>, Option<Vec<OutlierFilter>>) {
+        match (&self.filters, healthy) {
+            (Some(f), true) => {
+                let mut f = f.clone();
+                let v = y
+                    .iter()
+                    .zip(f.iter_mut())
+                    .map(|(&v, f)| f.filter(v).0)
+                    .collect();
+                (v, Some(f))
+            }
+            _ => (y.to_vec(), None),
+        }
+    }
+
+    /// The online windows with the sample `(x, value)` learned, while healthy and once the
+    /// history gives an input (`None`: keep the current windows).
+    fn learned_windows(
+        &self,
+        x: Option<&[f64]>,
+        value: &[f64],
+        healthy: bool,
+    ) -> Result<Option<Vec<OnlineLsSvm>>, StepError> {
+        match (&self.predictor, x, healthy) {
+            (Predictor::Online(w), Some(x), true) => {
+                let mut w = w.clone();
+                for (win, &v) in w.iter_mut().zip(value) {
+                    win.push(x, v)
+                        .map_err(|_| StepError::Filter(FilterError::NotPositiveDefinite))?;
+                }
+                Ok(Some(w))
+            }
+            _ => Ok(None),
+        }
+    }
+
+    /// Applies the channel's pending changes: its policy state, T_a's window, the learned
+    /// windows, the outlier filters (restarted when the channel leaves healthy) and the
+    /// history.
+    fn commit(&mut self, p: Pending, bank: &mut TestBank) {
+        if let Some(state) = p.policy {
+            bank.commit(self.test, state);
+        }
+        if let Some((r, healthy)) = &p.residual {
+            // Cannot fail: the residual was checked by `evaluate` in the step.
+            let _ = self.ta.commit(r, *healthy);
+        }
+        if let Some(w) = p.windows {
+            self.predictor = Predictor::Online(w);
+        }
+        match (p.filters, self.config.outlier_c) {
+            (Some(f), _) => self.filters = Some(f),
+            (None, Some(c)) if p.residual.as_ref().is_some_and(|(_, h)| !h) => {
+                self.filters = Some(vec![OutlierFilter::new(c); self.config.dim]);
+            }
+            _ => {}
+        }
+        if self.history.len() == self.config.embedding {
+            self.history.pop_front();
+        }
+        self.history.push_back(p.value);
+    }
+}
+
 impl Monitor for ChannelMonitor {
     fn kind(&self) -> MonitorKind {
         MonitorKind::Channel
@@ -477,133 +646,24 @@ impl Monitor for ChannelMonitor {
         Ok(())
     }
 
+    /// Every channel present in the epoch is stepped without changing anything; only when
+    /// all have succeeded are their changes committed.
     fn step(&mut self, epoch: &Epoch) -> Result<MonitorReport, StepError> {
-        let mut prediction = BTreeMap::new();
-        let mut residuals = BTreeMap::new();
-        let mut tests: Vec<TestOutcome> = Vec::new();
+        let mut report = StepReport::default();
         let mut pending = Vec::new();
         for (ci, ch) in self.channels.iter().enumerate() {
-            let Some(y) = epoch
-                .channels
-                .iter()
-                .flatten()
-                .find(|(n, _)| **n == *ch.config.name)
-                .map(|(_, v)| v)
-            else {
-                continue;
-            };
-            if y.len() != ch.config.dim {
-                return Err(StepError::Filter(FilterError::Dimension {
-                    what: "channel value",
-                    got_rows: y.len(),
-                    got_cols: 1,
-                    want_rows: ch.config.dim,
-                    want_cols: 1,
-                }));
+            if let Some(y) = ch.value_in(epoch) {
+                pending.push(ch.step(ci, y, &self.bank, &mut report)?);
             }
-            let x = ch.input();
-            let yhat = x.as_deref().and_then(|x| ch.predict(x));
-            let mut health = self.bank.slots()[ch.test].policy.health();
-            let mut residual = None;
-            let mut policy = None;
-            if let Some(yhat) = &yhat {
-                if yhat.iter().any(|v| !v.is_finite()) {
-                    return Err(StepError::Filter(FilterError::NonFinite(
-                        "channel prediction",
-                    )));
-                }
-                let r: Vec<f64> = y.iter().zip(yhat).map(|(a, b)| a - b).collect();
-                // An online window's residuals are tested (and feed V) once it is full:
-                // before that its predictions are still learning, not the channel's noise.
-                let ready = match &ch.predictor {
-                    Predictor::Online(w) => w.iter().all(|w| w.len() >= w.params().window),
-                    Predictor::Stored(_) => true,
-                };
-                match ch.ta.evaluate(&r).map(|t| t.filter(|_| ready)) {
-                    Ok(Some(t)) => {
-                        let (outcome, state) =
-                            self.bank.preview(ch.test, t, ch.config.dim as u32)?;
-                        health = outcome.decision.health;
-                        tests.push(outcome);
-                        policy = Some(state);
-                    }
-                    // Warm-up, or a residual that never varies: the test does not run.
-                    Ok(None) | Err(TaError::Singular) => {}
-                    Err(TaError::NonFinite | TaError::Dimension { .. }) => {
-                        return Err(StepError::Filter(FilterError::NonFinite(
-                            "channel residual",
-                        )));
-                    }
-                }
-                prediction.insert(ch.config.name.clone(), yhat.clone());
-                residuals.insert(ch.config.name.clone(), r.clone());
-                residual = ready.then_some((r, health == Health::Healthy));
-            }
-            let healthy = health == Health::Healthy;
-            // What enters the history (module doc): the measurement, through the outlier
-            // filter while healthy.
-            let (value, filters) = match (&ch.filters, healthy) {
-                (Some(f), true) => {
-                    let mut f = f.clone();
-                    let v = y
-                        .iter()
-                        .zip(f.iter_mut())
-                        .map(|(&v, f)| f.filter(v).0)
-                        .collect();
-                    (v, Some(f))
-                }
-                _ => (y.clone(), None),
-            };
-            let windows = match (&ch.predictor, &x, healthy) {
-                (Predictor::Online(w), Some(x), true) => {
-                    let mut w = w.clone();
-                    for (win, &v) in w.iter_mut().zip(&value) {
-                        win.push(x, v)
-                            .map_err(|_| StepError::Filter(FilterError::NotPositiveDefinite))?;
-                    }
-                    Some(w)
-                }
-                _ => None,
-            };
-            pending.push(Pending {
-                channel: ci,
-                value,
-                windows,
-                filters,
-                residual,
-                policy,
-            });
         }
-        // Every channel succeeded: commit.
         for p in pending {
-            let ch = &mut self.channels[p.channel];
-            if let Some(state) = p.policy {
-                self.bank.commit(ch.test, state);
-            }
-            if let Some((r, healthy)) = &p.residual {
-                // Cannot fail: the residual was checked by `evaluate` above.
-                let _ = ch.ta.commit(r, *healthy);
-            }
-            if let Some(w) = p.windows {
-                ch.predictor = Predictor::Online(w);
-            }
-            match (p.filters, ch.config.outlier_c) {
-                (Some(f), _) => ch.filters = Some(f),
-                (None, Some(c)) if p.residual.as_ref().is_some_and(|(_, h)| !h) => {
-                    ch.filters = Some(vec![OutlierFilter::new(c); ch.config.dim]);
-                }
-                _ => {}
-            }
-            if ch.history.len() == ch.config.embedding {
-                ch.history.pop_front();
-            }
-            ch.history.push_back(p.value);
+            self.channels[p.channel].commit(p, &mut self.bank);
         }
         Ok(MonitorReport {
-            tests,
+            tests: report.tests,
             outputs: Outputs::Channel {
-                prediction,
-                residual: residuals,
+                prediction: report.prediction,
+                residual: report.residual,
             },
         })
     }

@@ -545,6 +545,186 @@ impl FederatedMonitor {
             .map(|(_, a)| a.as_str())
             .collect()
     }
+
+    /// The transition since the last INS epoch and whether the filter restarts (module
+    /// doc, Epochs): a first epoch, a gap over [`MAX_GAP_S`] or time going back restarts
+    /// with `Φ = I`, `Q = 0`; otherwise [`federated::ins_transition`] over `dt`.
+    fn transition(
+        &self,
+        nav: &NavSolution,
+        t: f64,
+    ) -> Result<(LinearTransition<nalgebra::U15>, bool), StepError> {
+        let dt = self.last_t.map(|last| t - last);
+        let restart = !matches!(dt, Some(d) if (0.0..=MAX_GAP_S).contains(&d));
+        let trans = if restart {
+            LinearTransition {
+                f: ErrorMatrix::identity(),
+                q: ErrorMatrix::zeros(),
+            }
+        } else {
+            federated::ins_transition(nav, &self.config.imu, dt.unwrap_or(0.0))
+                .map_err(|_| FilterError::NonFinite("prediction interval"))?
+        };
+        Ok((trans, restart))
+    }
+
+    /// The federated filter's epoch, its state left pending. Each aid's test goes through
+    /// its policy with [`TestBank::preview`]; the previews are returned for the commit, so
+    /// nothing in the bank changes until the whole step has succeeded.
+    fn filter_step(
+        &mut self,
+        trans: &LinearTransition<nalgebra::U15>,
+        obs: &[Option<Observation>],
+        restart: bool,
+    ) -> Result<(federated::FederatedStep, Previews), StepError> {
+        let mut pending: Previews = [None, None, None];
+        let mut threshold_error: Option<ThresholdError> = None;
+        let bank = &self.bank;
+        let decide = |i: usize, test: Option<LocalTest>| match test {
+            Some(t) => match bank.preview(i, t.statistic, t.dof) {
+                Ok((outcome, state)) => {
+                    let d = outcome.decision;
+                    pending[i] = Some((outcome, state));
+                    d
+                }
+                Err(e) => {
+                    threshold_error = Some(e);
+                    bank.idle(i)
+                }
+            },
+            None => bank.idle(i),
+        };
+        let step = if restart {
+            let initial = self.config.initial_estimate();
+            self.filter.restart_step(&initial, trans, obs, decide)?
+        } else {
+            self.filter.step(trans, obs, decide)?
+        };
+        if let Some(e) = threshold_error {
+            return Err(e.into());
+        }
+        Ok((step, pending))
+    }
+
+    /// The protection level (module doc, HPL): `HPL₁ = k_md σ_h` from the fused `P_g`,
+    /// `HPL₂ = max_i` of the aids' `terms` ([`FederatedMonitor::hpl2_terms`]), combined by
+    /// [`hpl::combine`] and previewed against the alert limit on the `hpl` test.
+    fn protection_level(
+        &self,
+        master: &ErrorEstimate,
+        terms: [Option<f64>; MAX_AIDS],
+    ) -> Result<HplStep, StepError> {
+        let p_h = Matrix2::new(
+            master.p[(POS, POS)],
+            master.p[(POS, POS + 1)],
+            master.p[(POS + 1, POS)],
+            master.p[(POS + 1, POS + 1)],
+        );
+        let hpl1 = self.k_md * hpl::sigma_h(&p_h);
+        let n = self.config.aids.len();
+        let hpl2_max = terms[..n].iter().flatten().fold(0.0_f64, |m, &v| m.max(v));
+        let value = hpl::combine(hpl1, hpl2_max);
+        let (outcome, state) = self.bank.preview(self.hpl_test, value, 2)?;
+        Ok(HplStep {
+            value,
+            terms,
+            outcome,
+            state,
+        })
+    }
+
+    /// Per aid (`aids`, one step per configured aid), `slope_i sqrt(λ_det,i)` with
+    /// `λ_det,i` for the dof and threshold its test used: renewed when the aid updates
+    /// while fused, kept from `previous` while it is fused without an update, dropped when
+    /// it is left out of fusion. A restart forgets the slopes of the old solution.
+    fn hpl2_terms(
+        lambda_det: &mut DetectionNoncentrality,
+        previous: [Option<f64>; MAX_AIDS],
+        aids: &[federated::AidStep],
+        pending: &Previews,
+        restart: bool,
+    ) -> Result<[Option<f64>; MAX_AIDS], StepError> {
+        let mut hpl2 = if restart { [None; MAX_AIDS] } else { previous };
+        for (i, a) in aids.iter().enumerate() {
+            if !a.fused {
+                hpl2[i] = None;
+            } else if let (Some(slope), Some((outcome, _))) = (a.slope, &pending[i]) {
+                let s = outcome.statistic;
+                let l = lambda_det.get(s.dof, s.threshold).map_err(|e| match e {
+                    HplError::Chi2(c) => StepError::Threshold(c.into()),
+                    _ => StepError::Filter(FilterError::NotPositiveDefinite),
+                })?;
+                hpl2[i] = Some(slope * l.sqrt());
+            }
+        }
+        Ok(hpl2)
+    }
+
+    /// Makes the step current: the aids' and the `hpl` test's policy states, the filter's
+    /// pending state (a restart included), the HPL terms, the time and the outputs.
+    /// Returns the epoch's test outcomes, aids first.
+    fn commit(
+        &mut self,
+        t: f64,
+        pending: Previews,
+        hpl: HplStep,
+        solution: FederatedSolution,
+    ) -> Vec<TestOutcome> {
+        let n = self.config.aids.len();
+        let mut tests = Vec::with_capacity(n + 1);
+        for (i, p) in pending.into_iter().enumerate().take(n) {
+            if let Some((outcome, state)) = p {
+                self.bank.commit(i, state);
+                tests.push(outcome);
+            }
+        }
+        self.bank.commit(self.hpl_test, hpl.state);
+        tests.push(hpl.outcome);
+        self.filter.commit();
+        self.hpl2 = hpl.terms;
+        self.last_t = Some(t);
+        self.outputs = Outputs::Federated {
+            solution: Some(solution),
+            hpl: Some(hpl.value),
+            isolated: self.isolated(),
+        };
+        tests
+    }
+}
+
+/// Each aid's previewed test outcome and policy state, committed with the step.
+type Previews = [Option<(TestOutcome, PolicyState)>; MAX_AIDS];
+
+/// One epoch's protection level, committed with the step.
+struct HplStep {
+    /// The HPL, m.
+    value: f64,
+    /// Per aid, its `HPL₂` term.
+    terms: [Option<f64>; MAX_AIDS],
+    /// The `hpl` test's outcome and policy state.
+    outcome: TestOutcome,
+    state: PolicyState,
+}
+
+/// The corrected solution: the INS minus the fused error estimate (open loop), on the
+/// wire in degrees; a non-finite one fails the step.
+fn corrected_solution(
+    nav: &NavSolution,
+    master: &ErrorEstimate,
+) -> Result<FederatedSolution, StepError> {
+    let x = &master.x;
+    let dp = Vector3::new(x[POS], x[POS + 1], x[POS + 2]);
+    let fixed = geo::apply_offset(&nav.lla, &-dp);
+    let vel = nav.vel - Vector3::new(x[VEL], x[VEL + 1], x[VEL + 2]);
+    if !(fixed.lat.is_finite() && fixed.lon.is_finite() && vel.iter().all(|v| v.is_finite())) {
+        return Err(FilterError::NonFinite("corrected solution").into());
+    }
+    Ok(FederatedSolution {
+        lat: fixed.lat.to_degrees(),
+        lon: fixed.lon.to_degrees(),
+        h: fixed.h,
+        vel: [vel.x, vel.y, vel.z],
+    })
 }
 
 impl Monitor for FederatedMonitor {
@@ -568,6 +748,9 @@ impl Monitor for FederatedMonitor {
         Ok(())
     }
 
+    /// One INS epoch: transition, the aids' measurements, the filter with the policies,
+    /// the protection level and the corrected solution, then the commit (module doc).
+    /// Any failure leaves the monitor as it was.
     fn step(&mut self, epoch: &Epoch) -> Result<MonitorReport, StepError> {
         let Some(ins) = &epoch.ins else {
             return Ok(MonitorReport {
@@ -576,122 +759,26 @@ impl Monitor for FederatedMonitor {
             });
         };
         let nav = NavSolution::from_ins(ins);
-        let imu = self.config.imu;
-        // The transition and, after a long gap, a fresh start (module doc).
-        let dt = self.last_t.map(|t| epoch.t - t);
-        let restart = !matches!(dt, Some(d) if (0.0..=MAX_GAP_S).contains(&d));
-        let trans = if restart {
-            LinearTransition {
-                f: ErrorMatrix::identity(),
-                q: ErrorMatrix::zeros(),
-            }
-        } else {
-            federated::ins_transition(&nav, &imu, dt.unwrap_or(0.0))
-                .map_err(|_| FilterError::NonFinite("prediction interval"))?
-        };
+        let (trans, restart) = self.transition(&nav, epoch.t)?;
         let n = self.config.aids.len();
         let mut obs: [Option<Observation>; MAX_AIDS] = [None, None, None];
         for (i, &aid) in self.config.aids.iter().enumerate() {
             obs[i] = self.observation(aid, &nav, epoch);
         }
-
-        // Decisions are previewed, committed only once the whole step has succeeded.
-        let mut pending: [Option<(TestOutcome, PolicyState)>; MAX_AIDS] = [None, None, None];
-        let mut threshold_error: Option<ThresholdError> = None;
-        let bank = &self.bank;
-        let decide = |i: usize, test: Option<LocalTest>| match test {
-            Some(t) => match bank.preview(i, t.statistic, t.dof) {
-                Ok((outcome, state)) => {
-                    let d = outcome.decision;
-                    pending[i] = Some((outcome, state));
-                    d
-                }
-                Err(e) => {
-                    threshold_error = Some(e);
-                    bank.idle(i)
-                }
-            },
-            None => bank.idle(i),
-        };
-        let step = if restart {
-            let initial = self.config.initial_estimate();
-            self.filter
-                .restart_step(&initial, &trans, &obs[..n], decide)?
-        } else {
-            self.filter.step(&trans, &obs[..n], decide)?
-        };
-        if let Some(e) = threshold_error {
-            return Err(e.into());
-        }
-
-        // HPL from the fused covariance and the aids' slopes.
+        let (step, pending) = self.filter_step(&trans, &obs[..n], restart)?;
         let Some(next) = self.filter.pending() else {
             return Err(FilterError::NonFinite("federated step").into());
         };
-        let master = &next.master;
-        let p_h = Matrix2::new(
-            master.p[(POS, POS)],
-            master.p[(POS, POS + 1)],
-            master.p[(POS + 1, POS)],
-            master.p[(POS + 1, POS + 1)],
-        );
-        let hpl1 = self.k_md * hpl::sigma_h(&p_h);
-        // A restart forgets the slopes of the old solution.
-        let mut hpl2 = if restart { [None; MAX_AIDS] } else { self.hpl2 };
-        for i in 0..n {
-            let a = &step.aids[i];
-            if !a.fused {
-                hpl2[i] = None;
-            } else if let (Some(slope), Some((outcome, _))) = (a.slope, &pending[i]) {
-                let s = outcome.statistic;
-                let l = self
-                    .lambda_det
-                    .get(s.dof, s.threshold)
-                    .map_err(|e| match e {
-                        HplError::Chi2(c) => StepError::Threshold(c.into()),
-                        _ => StepError::Filter(FilterError::NotPositiveDefinite),
-                    })?;
-                hpl2[i] = Some(slope * l.sqrt());
-            }
-        }
-        let hpl2_max = hpl2[..n].iter().flatten().fold(0.0_f64, |m, &v| m.max(v));
-        let hpl_value = hpl::combine(hpl1, hpl2_max);
-        let (hpl_outcome, hpl_state) = self.bank.preview(self.hpl_test, hpl_value, 2)?;
-
-        // Corrected solution: INS minus the fused error (open loop).
-        let x = master.x;
-        let dp = Vector3::new(x[POS], x[POS + 1], x[POS + 2]);
-        let fixed = geo::apply_offset(&nav.lla, &-dp);
-        let vel = nav.vel - Vector3::new(x[VEL], x[VEL + 1], x[VEL + 2]);
-        if !(fixed.lat.is_finite() && fixed.lon.is_finite() && vel.iter().all(|v| v.is_finite())) {
-            return Err(FilterError::NonFinite("corrected solution").into());
-        }
-        let solution = FederatedSolution {
-            lat: fixed.lat.to_degrees(),
-            lon: fixed.lon.to_degrees(),
-            h: fixed.h,
-            vel: [vel.x, vel.y, vel.z],
-        };
-
-        // Commit.
-        let mut tests = Vec::with_capacity(n + 1);
-        for (i, p) in pending.into_iter().enumerate().take(n) {
-            if let Some((outcome, state)) = p {
-                self.bank.commit(i, state);
-                tests.push(outcome);
-            }
-        }
-        self.bank.commit(self.hpl_test, hpl_state);
-        tests.push(hpl_outcome);
-        // The pending state carries the whole next state (a restart included).
-        self.filter.commit();
-        self.hpl2 = hpl2;
-        self.last_t = Some(epoch.t);
-        self.outputs = Outputs::Federated {
-            solution: Some(solution),
-            hpl: Some(hpl_value),
-            isolated: self.isolated(),
-        };
+        let terms = Self::hpl2_terms(
+            &mut self.lambda_det,
+            self.hpl2,
+            &step.aids[..n],
+            &pending,
+            restart,
+        )?;
+        let hpl = self.protection_level(&next.master, terms)?;
+        let solution = corrected_solution(&nav, &next.master)?;
+        let tests = self.commit(epoch.t, pending, hpl, solution);
         Ok(MonitorReport {
             tests,
             outputs: self.outputs.clone(),

@@ -305,6 +305,8 @@ impl Smo {
     }
 
     /// Analytic solution of the two-variable subproblem, clipped to the box.
+    // Over 80 lines: the two-variable analytic step with its box clipping for equal and
+    // opposite labels, written out as in LIBSVM's solver so it can be checked against it.
     fn update_pair(&mut self, i: usize, j: usize) {
         let active = self.active_size;
         self.q.ensure(i, active);
@@ -419,6 +421,8 @@ impl Smo {
 
 /// Solves `problem`, reporting progress as stage `"smo"` and stopping with
 /// [`LearnError::Cancelled`] when asked.
+// Over 80 lines: LIBSVM's main loop (shrinking, cancellation, the optimality re-check on
+// the full set, progress) kept in one piece so it can be read against the reference.
 pub fn solve(
     problem: &Problem<'_>,
     options: &Options,
