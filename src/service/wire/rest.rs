@@ -8,11 +8,11 @@ use crate::detect::PolicyConfig;
 use crate::monitor::MonitorKind;
 
 /// `POST /api/v1/sessions` body.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CreateSession {
     /// Optional id; generated when absent.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub id: Option<String>,
     /// The monitors to run on the stream.
     pub monitors: Vec<MonitorSpecWire>,
