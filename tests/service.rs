@@ -750,8 +750,13 @@ async fn every_monitor_names_the_field_path_of_a_bad_config() {
     let base = http(&server);
     let c = client();
     let linear = MODEL.config();
+    // Sets (or adds) the value at a JSON pointer.
     let with = |mut base: Value, pointer: &str, v: Value| {
-        *base.pointer_mut(pointer).unwrap() = v;
+        let (parent, key) = pointer.rsplit_once('/').unwrap();
+        match base.pointer_mut(parent).unwrap() {
+            Value::Array(a) => a[key.parse::<usize>().unwrap()] = v,
+            other => other[key] = v,
+        }
         base
     };
     let add = |mut base: Value, key: &str, v: Value| {

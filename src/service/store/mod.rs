@@ -29,6 +29,46 @@ pub enum StoreError {
     Corrupt(String),
 }
 
+/// The format version written with every stored session spec (`"format"` in the row's
+/// JSON). Format 0 is the original one, without the field; it still loads.
+pub const SESSION_FORMAT: u32 = 1;
+
+/// A session spec as the `sessions.spec` column holds it: the format version beside the
+/// session's fields. Loading dispatches on `format` (absent: 0); formats 0 and 1 share
+/// the same fields, and a later format would convert here.
+#[derive(Debug, serde::Serialize, serde::Deserialize)]
+struct StoredSpec<S> {
+    /// Format version.
+    #[serde(default)]
+    format: u32,
+    /// The session.
+    #[serde(flatten)]
+    session: S,
+}
+
+impl StoredSpec<&StoredSession> {
+    fn encode(session: &StoredSession) -> Result<String, StoreError> {
+        serde_json::to_string(&StoredSpec {
+            format: SESSION_FORMAT,
+            session,
+        })
+        .map_err(|e| StoreError::Corrupt(e.to_string()))
+    }
+}
+
+impl StoredSpec<StoredSession> {
+    fn decode(text: &str) -> Result<StoredSession, StoreError> {
+        let spec: StoredSpec<StoredSession> =
+            serde_json::from_str(text).map_err(|e| StoreError::Corrupt(e.to_string()))?;
+        match spec.format {
+            0 | SESSION_FORMAT => Ok(spec.session),
+            other => Err(StoreError::Corrupt(format!(
+                "session spec format {other} is newer than this server's {SESSION_FORMAT}"
+            ))),
+        }
+    }
+}
+
 /// A stored session: its spec as created and as changed since.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StoredSession {
@@ -125,8 +165,7 @@ impl Store {
 
     /// Inserts or replaces a session's spec.
     pub async fn put_session(&self, session: &StoredSession) -> Result<(), StoreError> {
-        let spec =
-            serde_json::to_string(session).map_err(|e| StoreError::Corrupt(e.to_string()))?;
+        let spec = StoredSpec::encode(session)?;
         sqlx::query("INSERT INTO sessions (id, spec, created_at_ms) VALUES (?, ?, ?) ON CONFLICT(id) DO UPDATE SET spec = excluded.spec")
             .bind(&session.id)
             .bind(spec)
@@ -153,7 +192,7 @@ impl Store {
         rows.iter()
             .map(|row| {
                 let spec: String = row.try_get("spec")?;
-                serde_json::from_str(&spec).map_err(|e| StoreError::Corrupt(e.to_string()))
+                StoredSpec::decode(&spec)
             })
             .collect()
     }
@@ -430,5 +469,45 @@ mod tests {
         assert_eq!(store.sessions().await.unwrap(), vec![s]);
         assert!(store.delete_session("x").await.unwrap());
         assert!(store.sessions().await.unwrap().is_empty());
+    }
+
+    #[tokio::test]
+    async fn a_spec_stored_by_the_previous_format_still_loads() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = Store::open(&dir.path().join("v0.db")).await.unwrap();
+        // Format 0, as written before the format version existed: no `format` field.
+        let v0 = r#"{"id":"old","echo":false,"monitors":[{"name":"cv","type":"linear","config":{"f":[[1.0]],"h":[[1.0]],"q":[[0.1]],"r":[[1.0]],"x0":[0.0],"p0":[[1.0]]},"policy":{"kind":"classic"},"p_fa":0.002}],"created_at_ms":7}"#;
+        sqlx::query("INSERT INTO sessions (id, spec, created_at_ms) VALUES ('old', ?, 7)")
+            .bind(v0)
+            .execute(&store.pool)
+            .await
+            .unwrap();
+        let loaded = store.sessions().await.unwrap();
+        assert_eq!(loaded.len(), 1);
+        assert_eq!((loaded[0].id.as_str(), loaded[0].created_at_ms), ("old", 7));
+        assert_eq!(loaded[0].monitors[0].name, "cv");
+        assert_eq!(
+            loaded[0].monitors[0].config["q"],
+            serde_json::json!([[0.1]])
+        );
+        // Written back, it carries the current format and reads the same.
+        store.put_session(&loaded[0]).await.unwrap();
+        let row: String = sqlx::query("SELECT spec FROM sessions WHERE id = 'old'")
+            .fetch_one(&store.pool)
+            .await
+            .unwrap()
+            .get("spec");
+        assert!(row.starts_with(r#"{"format":1,"#), "{row}");
+        assert_eq!(store.sessions().await.unwrap(), loaded);
+        // A format from the future is refused, not misread.
+        sqlx::query("UPDATE sessions SET spec = ? WHERE id = 'old'")
+            .bind(row.replace(r#""format":1"#, r#""format":9"#))
+            .execute(&store.pool)
+            .await
+            .unwrap();
+        assert!(matches!(
+            store.sessions().await,
+            Err(StoreError::Corrupt(_))
+        ));
     }
 }

@@ -1,97 +1,13 @@
-//! Wire types: the JSON the service reads and writes, parsed and validated once
-//! here and converted into domain types (`Epoch`, `MonitorSpec`) that cannot hold
-//! a bad value. Units on the wire are degrees; inside they are radians.
+//! Ingest frames: the epochs a client streams in, parsed and validated once into
+//! [`Epoch`]s (degrees on the wire, radians inside), their error codes, and epochs
+//! written back as frames.
 
 use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::detect::{Health, PolicyConfig, Statistic};
 use crate::epoch::Epoch;
 use crate::epoch::{AdsBlock, CnsBlock, GnssBlock, InsBlock};
-use crate::monitor::{MonitorKind, MonitorReport};
-
-/// `POST /api/v1/sessions` body.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct CreateSession {
-    /// Optional id; generated when absent.
-    #[serde(default)]
-    pub id: Option<String>,
-    /// The monitors to run on the stream.
-    pub monitors: Vec<MonitorSpecWire>,
-    /// Send one `result` per epoch back on the ingest socket.
-    #[serde(default)]
-    pub echo: bool,
-}
-
-/// One monitor in a session spec, as the user writes it and as it is stored.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct MonitorSpecWire {
-    /// Name, unique within the session.
-    pub name: String,
-    /// Monitor kind.
-    #[serde(rename = "type")]
-    pub kind: MonitorKind,
-    /// Kind-specific configuration.
-    #[serde(default = "empty_object")]
-    pub config: serde_json::Value,
-    /// Decision policy (default classic).
-    #[serde(default)]
-    pub policy: PolicyConfig,
-    /// False-alarm probability (exclusive with `threshold`; default 0.002).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub p_fa: Option<f64>,
-    /// Raw threshold (exclusive with `p_fa`).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub threshold: Option<f64>,
-}
-
-fn empty_object() -> serde_json::Value {
-    serde_json::Value::Object(serde_json::Map::new())
-}
-
-/// `PUT /api/v1/sessions/{id}/monitors/{name}/threshold` body.
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ThresholdUpdate {
-    /// New false-alarm probability.
-    #[serde(default)]
-    pub p_fa: Option<f64>,
-    /// New raw threshold.
-    #[serde(default)]
-    pub threshold: Option<f64>,
-    /// New policy.
-    #[serde(default)]
-    pub policy: Option<PolicyConfig>,
-}
-
-/// A test's effective threshold, as reported by the threshold routes.
-#[derive(Debug, Clone, Serialize)]
-pub struct TestThreshold {
-    /// Degrees of freedom.
-    pub dof: u32,
-    /// Effective threshold.
-    pub threshold: f64,
-    /// False-alarm probability that threshold gives for the dof.
-    pub p_fa: f64,
-}
-
-/// Threshold and policy of one monitor (`GET`/`PUT …/threshold`).
-#[derive(Debug, Clone, Serialize)]
-pub struct ThresholdView {
-    /// Monitor name.
-    pub monitor: String,
-    /// The stated false-alarm probability, when the spec is a probability.
-    pub p_fa: Option<f64>,
-    /// The stated raw threshold, when the spec is a raw value.
-    pub threshold: Option<f64>,
-    /// Decision policy.
-    pub policy: PolicyConfig,
-    /// Effective threshold per test.
-    pub tests: BTreeMap<String, TestThreshold>,
-}
 
 // ---------------------------------------------------------------- ingest frames
 
@@ -327,45 +243,93 @@ fn longitude(what: &str, lon_deg: f64) -> Result<f64, FrameError> {
     }
 }
 
+impl TryFrom<WireIns> for InsBlock {
+    type Error = FrameError;
+
+    fn try_from(i: WireIns) -> Result<Self, FrameError> {
+        finite("ins", &[i.lat, i.lon, i.h])?;
+        finite("ins.vel", &i.vel)?;
+        finite("ins.att", &i.att)?;
+        if let Some(f) = &i.f_b {
+            finite("ins.f_b", f)?;
+        }
+        Ok(InsBlock {
+            lat: latitude("ins.lat", i.lat)?,
+            lon: longitude("ins.lon", i.lon)?,
+            h: i.h,
+            vel: i.vel,
+            att: i.att.map(f64::to_radians),
+            f_b: i.f_b,
+        })
+    }
+}
+
+impl TryFrom<WireGnss> for GnssBlock {
+    type Error = FrameError;
+
+    fn try_from(g: WireGnss) -> Result<Self, FrameError> {
+        finite("gnss", &[g.lat, g.lon, g.h])?;
+        if let Some(v) = &g.vel {
+            finite("gnss.vel", v)?;
+        }
+        Ok(GnssBlock {
+            lat: latitude("gnss.lat", g.lat)?,
+            lon: longitude("gnss.lon", g.lon)?,
+            h: g.h,
+            vel: g.vel,
+        })
+    }
+}
+
+impl TryFrom<WireCns> for CnsBlock {
+    type Error = FrameError;
+
+    fn try_from(c: WireCns) -> Result<Self, FrameError> {
+        finite("cns", &[c.lat, c.lon])?;
+        Ok(CnsBlock {
+            lat: latitude("cns.lat", c.lat)?,
+            lon: longitude("cns.lon", c.lon)?,
+        })
+    }
+}
+
+impl TryFrom<WireAds> for AdsBlock {
+    type Error = FrameError;
+
+    fn try_from(a: WireAds) -> Result<Self, FrameError> {
+        finite("ads.baro_h", &[a.baro_h])?;
+        if let Some(tas) = a.tas {
+            finite("ads.tas", &[tas])?;
+        }
+        Ok(AdsBlock {
+            baro_h: a.baro_h,
+            tas: a.tas,
+        })
+    }
+}
+
+/// The named channels, each value checked finite (`channels.<name>`).
+fn channels(map: BTreeMap<String, WireChannel>) -> Result<Vec<(String, Vec<f64>)>, FrameError> {
+    let mut out = Vec::with_capacity(map.len());
+    for (name, value) in map {
+        let values = match value {
+            WireChannel::Scalar(v) => vec![v],
+            WireChannel::Vector(v) => v,
+        };
+        finite(&format!("channels.{name}"), &values)?;
+        out.push((name, values));
+    }
+    Ok(out)
+}
+
 impl TryFrom<WireEpoch> for Epoch {
     type Error = FrameError;
 
     fn try_from(w: WireEpoch) -> Result<Self, FrameError> {
         finite("t", &[w.t])?;
-        let ins = match w.ins {
-            Some(i) => {
-                finite("ins", &[i.lat, i.lon, i.h])?;
-                finite("ins.vel", &i.vel)?;
-                finite("ins.att", &i.att)?;
-                if let Some(f) = &i.f_b {
-                    finite("ins.f_b", f)?;
-                }
-                Some(InsBlock {
-                    lat: latitude("ins.lat", i.lat)?,
-                    lon: longitude("ins.lon", i.lon)?,
-                    h: i.h,
-                    vel: i.vel,
-                    att: i.att.map(f64::to_radians),
-                    f_b: i.f_b,
-                })
-            }
-            None => None,
-        };
-        let gnss = match w.gnss {
-            Some(g) => {
-                finite("gnss", &[g.lat, g.lon, g.h])?;
-                if let Some(v) = &g.vel {
-                    finite("gnss.vel", v)?;
-                }
-                Some(GnssBlock {
-                    lat: latitude("gnss.lat", g.lat)?,
-                    lon: longitude("gnss.lon", g.lon)?,
-                    h: g.h,
-                    vel: g.vel,
-                })
-            }
-            None => None,
-        };
+        // Blocks are checked in frame order, so the first bad one is the one reported.
+        let ins = w.ins.map(InsBlock::try_from).transpose()?;
+        let gnss = w.gnss.map(GnssBlock::try_from).transpose()?;
         let dvl_vel_b = match w.dvl {
             Some(d) => {
                 finite("dvl.vel_b", &d.vel_b)?;
@@ -373,29 +337,8 @@ impl TryFrom<WireEpoch> for Epoch {
             }
             None => None,
         };
-        let cns = match w.cns {
-            Some(c) => {
-                finite("cns", &[c.lat, c.lon])?;
-                Some(CnsBlock {
-                    lat: latitude("cns.lat", c.lat)?,
-                    lon: longitude("cns.lon", c.lon)?,
-                })
-            }
-            None => None,
-        };
-        let ads = match w.ads {
-            Some(a) => {
-                finite("ads.baro_h", &[a.baro_h])?;
-                if let Some(tas) = a.tas {
-                    finite("ads.tas", &[tas])?;
-                }
-                Some(AdsBlock {
-                    baro_h: a.baro_h,
-                    tas: a.tas,
-                })
-            }
-            None => None,
-        };
+        let cns = w.cns.map(CnsBlock::try_from).transpose()?;
+        let ads = w.ads.map(AdsBlock::try_from).transpose()?;
         let tacan_range_m = match w.tacan {
             Some(t) => {
                 finite("tacan.range_m", &[t.range_m])?;
@@ -403,30 +346,11 @@ impl TryFrom<WireEpoch> for Epoch {
             }
             None => None,
         };
-        if let Some(g) = &w.gyros {
-            finite("gyros", g)?;
-        }
-        if let Some(z) = &w.z {
-            finite("z", z)?;
-        }
-        if let Some(u) = &w.u {
-            finite("u", u)?;
-        }
-        let channels = match w.channels {
-            Some(map) => {
-                let mut out = Vec::with_capacity(map.len());
-                for (name, value) in map {
-                    let values = match value {
-                        WireChannel::Scalar(v) => vec![v],
-                        WireChannel::Vector(v) => v,
-                    };
-                    finite(&format!("channels.{name}"), &values)?;
-                    out.push((name, values));
-                }
-                Some(out)
+        for (what, values) in [("gyros", &w.gyros), ("z", &w.z), ("u", &w.u)] {
+            if let Some(v) = values {
+                finite(what, v)?;
             }
-            None => None,
-        };
+        }
         Ok(Epoch {
             t: w.t,
             ins,
@@ -436,7 +360,7 @@ impl TryFrom<WireEpoch> for Epoch {
             ads,
             tacan_range_m,
             gyros: w.gyros,
-            channels,
+            channels: w.channels.map(channels).transpose()?,
             z: w.z,
             u: w.u,
         })
@@ -482,156 +406,6 @@ pub fn parse_frame(text: &str, max_batch: usize) -> Result<Vec<Epoch>, FrameErro
         epochs.push(epoch);
     }
     Ok(epochs)
-}
-
-// ------------------------------------------------------------- server messages
-
-/// One test's result in a `result` frame.
-#[derive(Debug, Clone, Serialize)]
-pub struct TestResultWire {
-    /// The statistic.
-    pub statistic: f64,
-    /// Effective threshold.
-    pub threshold: f64,
-    /// Degrees of freedom.
-    pub dof: u32,
-    /// statistic / threshold.
-    pub test_ratio: f64,
-    /// Health after this epoch.
-    pub state: Health,
-}
-
-impl TestResultWire {
-    /// From a statistic and the decided health.
-    pub fn new(s: &Statistic, state: Health) -> Self {
-        TestResultWire {
-            statistic: s.value,
-            threshold: s.threshold,
-            dof: s.dof,
-            test_ratio: s.test_ratio(),
-            state,
-        }
-    }
-}
-
-/// One monitor's part of a `result` frame.
-#[derive(Debug, Clone, Serialize)]
-pub struct MonitorResultWire<'a> {
-    /// Tests that ran this epoch.
-    pub tests: BTreeMap<crate::monitor::TestName, TestResultWire>,
-    /// Monitor outputs, flattened beside `tests`.
-    #[serde(flatten)]
-    pub outputs: &'a crate::monitor::Outputs,
-}
-
-/// Builds the wire form of one monitor's report.
-pub fn monitor_result(report: &MonitorReport) -> MonitorResultWire<'_> {
-    MonitorResultWire {
-        tests: report
-            .tests
-            .iter()
-            .map(|o| {
-                (
-                    o.name.clone(),
-                    TestResultWire::new(&o.statistic, o.decision.health),
-                )
-            })
-            .collect(),
-        outputs: &report.outputs,
-    }
-}
-
-/// An alarm: a test's transition into suspect or isolated, as stored and sent.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-pub struct AlarmRecord {
-    /// Store id (increasing).
-    pub id: i64,
-    /// Session id.
-    pub session: String,
-    /// Monitor name.
-    pub monitor: String,
-    /// Test name.
-    pub test: String,
-    /// The state entered: `suspect` or `isolated`.
-    pub state: Health,
-    /// Epoch time of the transition, s.
-    pub t: f64,
-    /// Statistic at the transition.
-    pub statistic: f64,
-    /// Threshold at the transition.
-    pub threshold: f64,
-    /// Degrees of freedom.
-    pub dof: u32,
-    /// statistic / threshold.
-    pub test_ratio: f64,
-    /// Seconds from the first exceedance of this episode to the alarm.
-    pub delay_s: f64,
-    /// Wall-clock time the alarm was raised, Unix milliseconds.
-    pub raised_at_ms: i64,
-    /// Epoch time the test returned to healthy, once it has.
-    pub cleared_t: Option<f64>,
-}
-
-/// A health change of one test.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-pub struct StateChange {
-    /// Session id.
-    pub session: String,
-    /// Monitor name.
-    pub monitor: String,
-    /// Test name.
-    pub test: String,
-    /// Epoch time, s.
-    pub t: f64,
-    /// Previous state.
-    pub from: Health,
-    /// New state.
-    pub to: Health,
-}
-
-/// The `error` event.
-#[derive(Debug, Clone, Serialize)]
-pub struct ErrorEvent<'a> {
-    /// Always `error`.
-    #[serde(rename = "type")]
-    pub kind: &'static str,
-    /// Stable code.
-    pub code: FrameErrorCode,
-    /// Reason.
-    pub message: &'a str,
-    /// Offending epoch within a batch, when known.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub index: Option<usize>,
-}
-
-impl<'a> From<&'a FrameError> for ErrorEvent<'a> {
-    fn from(e: &'a FrameError) -> Self {
-        ErrorEvent {
-            kind: "error",
-            code: e.code,
-            message: &e.message,
-            index: e.index,
-        }
-    }
-}
-
-/// Wraps a serialisable body as `{"type": kind, ...body}`.
-#[derive(Debug, Clone, Serialize)]
-pub struct Tagged<'a, T: Serialize> {
-    /// Message type.
-    #[serde(rename = "type")]
-    pub kind: &'static str,
-    /// The body, flattened.
-    #[serde(flatten)]
-    pub body: &'a T,
-}
-
-/// Serialises `{"type": kind, ...body}` to a string.
-pub fn tagged<T: Serialize>(kind: &'static str, body: &T) -> String {
-    serde_json::to_string(&Tagged { kind, body }).unwrap_or_else(|e| {
-        // Serialising our own plain structs cannot fail; keep the socket alive if it ever does.
-        format!(r#"{{"type":"error","code":"internal","message":"{e}"}}"#)
-    })
 }
 
 // ------------------------------------------------------- epochs back to the wire
@@ -893,84 +667,5 @@ mod epoch_to_wire_tests {
             epoch_to_wire(&epoch).unwrap_err().code.as_str(),
             "non_finite"
         );
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn one_epoch_and_batches_parse() {
-        let e = parse_frame(r#"{"t": 1.5, "z": [1, 2]}"#, 10).unwrap();
-        assert_eq!(e.len(), 1);
-        assert_eq!(e[0].z, Some(vec![1.0, 2.0]));
-        let e = parse_frame(r#"[{"t": 1}, {"t": 1}, {"t": 2}]"#, 10).unwrap();
-        assert_eq!(e.len(), 3);
-    }
-
-    #[test]
-    fn degrees_become_radians() {
-        let e = parse_frame(
-            r#"{"t":0,"ins":{"lat":30,"lon":114,"h":10,"vel":[1,2,3],"att":[0,0,90]},"gnss":{"lat":-45,"lon":0,"h":0}}"#,
-            1,
-        )
-        .unwrap();
-        let ins = e[0].ins.as_ref().unwrap();
-        assert!((ins.lat - 30f64.to_radians()).abs() < 1e-15);
-        assert!((ins.att[2] - std::f64::consts::FRAC_PI_2).abs() < 1e-15);
-        assert!((e[0].gnss.as_ref().unwrap().lat + std::f64::consts::FRAC_PI_4).abs() < 1e-15);
-    }
-
-    #[test]
-    fn bad_frames_get_their_codes() {
-        let code = |s: &str| parse_frame(s, 3).unwrap_err().code.as_str();
-        assert_eq!(code(r#"{"t": 1, "z": [1,"#), "malformed_json");
-        assert_eq!(code(r#"{"t": NaN}"#), "non_finite");
-        assert_eq!(code(r#"{"t": 1, "z": [Infinity]}"#), "non_finite");
-        assert_eq!(code(r#"{"t": 1e999}"#), "non_finite");
-        assert_eq!(code(r#"{"t": 1, "lidar": {}}"#), "unknown_input");
-        assert_eq!(
-            code(r#"{"t": 1, "ins": {"lat":0,"lon":0,"h":0,"vel":[1,2],"att":[0,0,0]}}"#),
-            "wrong_length"
-        );
-        assert_eq!(
-            code(r#"{"t": 1, "gnss": {"lat":91,"lon":0,"h":0}}"#),
-            "invalid_epoch"
-        );
-        assert_eq!(code(r#"{"z": [1]}"#), "invalid_epoch");
-        assert_eq!(code(r#"[{"t": 2}, {"t": 1}]"#), "time_backwards");
-        assert_eq!(code(r#"[]"#), "empty_batch");
-        assert_eq!(
-            code(r#"[{"t":1},{"t":2},{"t":3},{"t":4}]"#),
-            "batch_too_large"
-        );
-        // A NaN inside a string is not a non-finite number.
-        assert_eq!(code(r#"{"t": 1, "note": "NaN"}"#), "unknown_input");
-    }
-
-    #[test]
-    fn batch_errors_name_the_epoch() {
-        let e = parse_frame(
-            r#"[{"t": 0}, {"t": 1, "gnss": {"lat":95,"lon":0,"h":0}}]"#,
-            5,
-        )
-        .unwrap_err();
-        assert_eq!(e.index, Some(1));
-    }
-
-    #[test]
-    fn tagged_messages_carry_their_type() {
-        let change = StateChange {
-            session: "s".into(),
-            monitor: "m".into(),
-            test: "residual".into(),
-            t: 1.0,
-            from: Health::Healthy,
-            to: Health::Suspect,
-        };
-        let v: serde_json::Value = serde_json::from_str(&tagged("state", &change)).unwrap();
-        assert_eq!(v["type"], "state");
-        assert_eq!(v["to"], "suspect");
     }
 }
