@@ -1,4 +1,4 @@
-//! Criterion bench: one epoch of the federated INS/GNSS/DVL/CNS filter (DESIGN §5 target:
+//! Criterion bench: one epoch of the federated INS/GNSS/DVL/CNS filter (docs/performance.md target:
 //! ≥ 200,000 epochs/s on one core) — INS plus all three aids on every epoch (GNSS with
 //! velocity: 6 + 3 + 2 measurements), the counters policy, 15 error states. A ship at 30° N
 //! sails north-east at 5 m/s; the INS runs at 10 Hz. Epochs are built in memory as the bench

@@ -1,4 +1,4 @@
-//! Criterion bench of the LS-SVM family (DESIGN §5): batch training (kernel matrix,
+//! Criterion bench of the LS-SVM family (docs/performance.md): batch training (kernel matrix,
 //! blocked Cholesky, two-solve trick) at n = 250, 500, 1000, 2000 and the Cholesky
 //! alone; one sliding-window update of the online LS-SVM at N = 50, 100, 200 against a
 //! batch re-solve of the same window (target ≥ 20× at N = 200).

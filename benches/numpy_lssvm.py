@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""NumPy reference for `benches/lssvm.rs` (DESIGN §5: batch LS-SVM training at n = 1000
+"""NumPy reference for `benches/lssvm.rs` (docs/performance.md: batch LS-SVM training at n = 1000
 must take no longer than NumPy/LAPACK solving the same system).
 
 Builds exactly the bench's system -- 5-D inputs x[i][j] = 2 sin(0.7 i + 1.3 j), targets

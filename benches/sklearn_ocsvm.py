@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""scikit-learn reference for benches/svm.rs (DESIGN §5: one-class SVM training on
+"""scikit-learn reference for benches/svm.rs (docs/performance.md: one-class SVM training on
 30,000 x 3 features must take no longer than scikit-learn's OneClassSVM, with the
 same decisions on >= 99.5 % of points).
 

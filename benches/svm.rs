@@ -1,4 +1,4 @@
-//! SVM training benches (DESIGN §5): one-class SVM on 30,000 × 3 features against
+//! SVM training benches (docs/performance.md): one-class SVM on 30,000 × 3 features against
 //! scikit-learn's `OneClassSVM` (reference script `benches/sklearn_ocsvm.py`, same
 //! data from the same SplitMix64 generator, same parameters), and C-SVC on 688 × 8
 //! (the size of seed 002's training set).

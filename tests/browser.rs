@@ -199,7 +199,7 @@ fn ship_session() -> Value {
     })
 }
 
-/// A constant-velocity track (DESIGN §3.2's linear monitor) observed in noise.
+/// A constant-velocity track (docs/methods.md §M2's linear monitor) observed in noise.
 fn load_session() -> Value {
     let monitors: Vec<Value> = (0..LOAD_MONITORS)
         .map(|i| {

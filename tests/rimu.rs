@@ -1,4 +1,4 @@
-//! The `rimu` monitor end to end through `monitor::build` (DESIGN §3.7, seed 002): a small
+//! The `rimu` monitor end to end through `monitor::build` (docs/methods.md §M15, seed 002): a small
 //! C-SVC trained in-test on simulated wavelet-packet windows isolates each gyro's bias
 //! fault in steady flight; 5- and 6-gyro sets work; manoeuvres do not trip the parity
 //! test; a model of the wrong kind or dimension is refused naming `model`.

@@ -1,5 +1,5 @@
 //! Integration tests against the real server on port 0, a temporary SQLite
-//! file and a real WebSocket client (DESIGN §4).
+//! file and a real WebSocket client (docs/architecture.md §A2).
 
 mod common;
 

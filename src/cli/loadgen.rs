@@ -1,4 +1,4 @@
-//! `navguard loadgen`: a load generator for a running server (DESIGN §5). It
+//! `navguard loadgen`: a load generator for a running server (docs/performance.md). It
 //! creates N sessions (`echo: true`) over REST, streams simulated epochs into
 //! each one's ingest socket at a set rate or as fast as the server takes them,
 //! and reports throughput, frame-to-result and alarm-to-event latency, errors,
@@ -8,7 +8,7 @@
 //! The workload is generated once and shared by every session: the `ship`
 //! scenario of [`navguard::sim`] for `federated`, a constant-velocity track for
 //! `linear`. A session streams it in passes; each pass is a fresh socket (the
-//! server restarts filter state and time on a new stream, DESIGN §4.1), so a
+//! server restarts filter state and time on a new stream, docs/architecture.md §A3), so a
 //! long run never needs an unbounded scenario in memory. The tool talks only
 //! to `--url`, stops after `--duration`, and waits at most a bounded time for
 //! the last answers.

@@ -1,4 +1,4 @@
-//! Horizontal protection level (DESIGN §3.6, seed 000 §2.3): sits beside the χ² tests
+//! Horizontal protection level (docs/methods.md §M7, seed 000 §2.3): sits beside the χ² tests
 //! in the detector layer. The federated monitor hands it the fused covariance and, per
 //! aid, the horizontal rows of the gain and the innovation covariance its test used; the
 //! HPL is then compared with the alert limit (HAL) as a test of its own.
@@ -16,7 +16,7 @@
 //!   and the test statistic's non-centrality by `b² (S⁻¹)_ii`, so the largest horizontal
 //!   error that still escapes detection with probability `P_MD` is
 //!   `slope_i sqrt(λ_det)`, where `λ_det` is the non-centrality at which
-//!   `F_{χ²(dof, λ)}(T_D) = P_MD` (DESIGN §3.1). `λ_det` depends only on `(dof, T_D, P_MD)`;
+//!   `F_{χ²(dof, λ)}(T_D) = P_MD` (docs/methods.md §M1). `λ_det` depends only on `(dof, T_D, P_MD)`;
 //!   [`DetectionNoncentrality`] caches it.
 
 use nalgebra::{Matrix2, SMatrix, SVector};
@@ -27,7 +27,7 @@ use super::chi2::{self, Chi2Error};
 /// Most `(dof, T_D)` pairs a [`DetectionNoncentrality`] keeps.
 const MAX_CACHED: usize = 32;
 
-/// Default missed-detection requirement (DESIGN §3.6).
+/// Default missed-detection requirement (docs/methods.md §M7).
 pub const DEFAULT_P_MD: f64 = 1e-3;
 
 /// Why a protection level could not be computed.

@@ -1,4 +1,4 @@
-//! Parity space of a redundant gyro set (DESIGN §3.7, seed 002 §2.1): the parity
+//! Parity space of a redundant gyro set (docs/methods.md §M15, seed 002 §2.1): the parity
 //! matrix `V` whose rows span the left null space of the mounting matrix `H`
 //! (`VH = 0`, `VVᵀ = I`), the parity residual `r = V v`, the windowed χ² of the
 //! fixed-sample-size (FSS/GLT) test over the last `l'` residuals, and ω by weighted

@@ -1,4 +1,4 @@
-//! Decision policies (DESIGN §3.3): turn each epoch's exceedance of a test into
+//! Decision policies (docs/methods.md §M3): turn each epoch's exceedance of a test into
 //! a health state and into what the filter may do this epoch (update, take part
 //! in fusion, be reset). `classic` is the traditional residual χ² test; `counters`
 //! is seed 004 §2's improved test with the three counters t1, t2, t3.

@@ -19,7 +19,7 @@ pub struct Statistic {
 
 impl Statistic {
     /// `value / threshold`: above 1 the test fails. The one number an operator
-    /// can read across detectors (DESIGN §4.2).
+    /// can read across detectors (docs/architecture.md §A6).
     pub fn test_ratio(&self) -> f64 {
         self.value / self.threshold
     }
@@ -46,7 +46,7 @@ pub enum ThresholdError {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ThresholdSpec {
-    /// `T_D = F⁻¹_{χ²(dof)}(1 − p_fa)` per test (DESIGN §3.1).
+    /// `T_D = F⁻¹_{χ²(dof)}(1 − p_fa)` per test (docs/methods.md §M1).
     PFa(f64),
     /// A fixed threshold, whatever the dof (seed 004 uses 13 and 20).
     Threshold(f64),

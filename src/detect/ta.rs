@@ -1,4 +1,4 @@
-//! The T_a statistic of seed 000 eqs. 14–16, made precise in DESIGN §3.5: a
+//! The T_a statistic of seed 000 eqs. 14–16, made precise in docs/methods.md §M14: a
 //! variance-weighted mean of the last `n` prediction residuals of a channel, tested
 //! against χ²(dim). Sits between a predictor (the `channel` monitor's LS-SVM, which
 //! yields the residuals `r_k = y_k − ŷ_k`) and the decision policy.

@@ -1,5 +1,5 @@
-//! Features: wavelet-packet energies (redundant gyros, DESIGN §3.7) and the TACAN
-//! window features (DESIGN §3.8), computed from raw series before the learned
+//! Features: wavelet-packet energies (redundant gyros, docs/methods.md §M16) and the TACAN
+//! window features (docs/methods.md §M18), computed from raw series before the learned
 //! detectors. Sits between the epochs and `learn/` in the flow; the monitors and
 //! `POST /api/v1/features` compute the same vectors. Pure: no I/O.
 

@@ -1,4 +1,4 @@
-//! TACAN window features (DESIGN §3.8, seed 003 §1): per window of `K` samples,
+//! TACAN window features (docs/methods.md §M18, seed 003 §1): per window of `K` samples,
 //! mean, variance, shape factor and crest factor of the centred window for the
 //! INS-derived and the measured range; `X = |X_ins − X_tacan|` (seed 003 eq. 6).
 //! Computed here for the `tacan` monitor, the seed 003 experiment and
@@ -21,7 +21,7 @@
 //!
 //! # Standardisation
 //! The vectors returned here are raw (metres, m², unitless). Standardisation
-//! with the training set's mean and standard deviation (DESIGN §3.8) is done by
+//! with the training set's mean and standard deviation (docs/methods.md §M18) is done by
 //! the model: `learn`'s [`Standardizer`](crate::learn::Standardizer) is fitted
 //! when the one-class model is trained (`"standardize": true`, the default) and
 //! stored with it, so the monitor feeds these raw vectors to the model.

@@ -1,4 +1,4 @@
-//! Wavelet packet energies (DESIGN §3.7, seed 002 §2.2): Daubechies db1–db4,
+//! Wavelet packet energies (docs/methods.md §M16, seed 002 §2.2): Daubechies db1–db4,
 //! periodization boundary mode, full packet decomposition to `level`, energies of
 //! the `2^level` terminal nodes in natural order (PyWavelets' `order='natural'`:
 //! `aaa, aad, ada, add, daa, …`), normalised to sum 1 or absolute. Sits between a
@@ -85,7 +85,7 @@ impl Wavelet {
 
 /// Parameters of the packet energies. Defaults: `db4`, level 3, normalised — seed 002
 /// names neither the wavelet nor the level; db4 at level 3 (8 bands of 6.25 Hz at
-/// 100 Hz) is the common choice for gyro fault features and what DESIGN §3.7 suggests.
+/// 100 Hz) is the common choice for gyro fault features and what docs/methods.md §M16 suggests.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct WaveletPacketParams {

@@ -1,4 +1,4 @@
-//! Aiding measurement models (DESIGN §3.4, seed 004 §1.2): each turns one aid's fix and
+//! Aiding measurement models (docs/methods.md §M5, seed 004 §1.2): each turns one aid's fix and
 //! the INS solution of the same epoch into a fixed-size INS-minus-aid measurement
 //! `(z, H, R)` over the 15 error states of [`crate::filter::ins`], which the federated
 //! filter hands to the generic Kalman filter.

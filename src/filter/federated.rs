@@ -1,4 +1,4 @@
-//! Federated fusion (DESIGN §3.3–3.4, seed 004 §1): one local 15-state filter per aid over
+//! Federated fusion (docs/methods.md §M3, §M6, seed 004 §1): one local 15-state filter per aid over
 //! the common INS error state of [`crate::filter::ins`], measurements from
 //! [`crate::filter::aiding`], the Kalman filter of [`crate::filter::kalman`], and between
 //! them the per-aid decisions of the detector layer's policies. The federated monitor
@@ -10,7 +10,7 @@
 //! `P_i⁻ = Φ (P_g/β_i) Φᵀ + Q/β_i = P_g⁻/β_i`: the process-noise information is split like
 //! the state information, and `Σ_i P_i⁻¹ = P_g⁻¹` before the updates. Each epoch:
 //! 1. predict; 2. for each aid with data, the local innovation and `λ_i = rᵀ S⁻¹ r`;
-//! 3. the aid's decision (DESIGN §3.3): *healthy* → update and fuse; *suspect* → predict only,
+//! 3. the aid's decision (docs/methods.md §M3): *healthy* → update and fuse; *suspect* → predict only,
 //!    still fused; *isolated* → left out of fusion; returning from isolated (`reset`) → the
 //!    local prior is replaced by the master's `(x_g⁻, P_g⁻/β_i)` before the update;
 //! 4. fusion over the filters that take part: `P_g = (Σ P_i⁻¹)⁻¹`, `x_g = P_g Σ P_i⁻¹ x_i`;
@@ -42,7 +42,7 @@
 //! `P_a + P_b` in diagonally scaled coordinates, which unlike `P⁻¹` keeps its accuracy at the
 //! INS state's scales (variances from 1e-17 to 1e2).
 //!
-//! # Speed (DESIGN §5: ≥ 200,000 epochs/s with three aids)
+//! # Speed (docs/performance.md: ≥ 200,000 epochs/s with three aids)
 //! The hot path uses the same algebra as [`kalman::predict`], [`kalman::innovation`] and
 //! [`kalman::update`] in kernels that exploit the INS structure (tested equal to them to
 //! rounding): the prediction uses `Φ`'s constant bias rows, every aid's `H` has zero bias
@@ -200,7 +200,7 @@ pub struct AidStep {
     /// The filter took part in fusion.
     pub fused: bool,
     /// For an aid that updated and was fused: `max_j ‖K_h e_j‖ / sqrt((S⁻¹)_jj)` (metres per
-    /// unit of `sqrt(λ)`, DESIGN §3.6), with `K_h` the horizontal rows of the aid's gain onto
+    /// unit of `sqrt(λ)`, docs/methods.md §M7), with `K_h` the horizontal rows of the aid's gain onto
     /// the *fused* solution, `P_g H_iᵀ R_i⁻¹` (the local gain `P_i⁺ H_iᵀ R_i⁻¹` carried through
     /// the fusion weight `P_g P_i⁺⁻¹`), and `S` the local innovation covariance the test used.
     pub slope: Option<f64>,

@@ -1,4 +1,4 @@
-//! The 15-state INS error model (DESIGN §3.4, seed 004 §1.1): sits between
+//! The 15-state INS error model (docs/methods.md §M4, seed 004 §1.1): sits between
 //! `geo` (radii, Earth and transport rates) and the federated filter, which
 //! predicts every local filter with the Φ and Q_d built here; the simulator
 //! propagates its true INS errors with the same model.
@@ -13,7 +13,7 @@
 //! - `δṗ = δv`; `ε̇ = 0`, `∇̇ = 0` (random constants).
 //!
 //! `fⁿ × φ` follows from `f̃ⁿ = C̃_bⁿ f_b = fⁿ − φ × fⁿ`. The terms of `δω_in` and of
-//! gravity in `δp` are left out, as DESIGN §3.4 states the model (over the
+//! gravity in `δp` are left out, as docs/methods.md §M4 states the model (over the
 //! seed's 3,000 s they are below the aid noise).
 
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
@@ -83,7 +83,7 @@ impl NavSolution {
     }
 }
 
-/// IMU error parameters (DESIGN §3.4 and §3.9, seed 004 §3).
+/// IMU error parameters (docs/methods.md §M4 and §M19, seed 004 §3).
 ///
 /// Defaults: gyro bias 0.002 °/h and accelerometer bias 10 µg (seed 004), and — the seed gives
 /// no white-noise figures — angle random walk 0.001 °/√h and velocity random walk
@@ -137,7 +137,7 @@ impl ImuErrors {
     }
 }
 
-/// The continuous error dynamics F of DESIGN §3.4 (see the module doc), linearised about `nav`.
+/// The continuous error dynamics F of docs/methods.md §M4 (see the module doc), linearised about `nav`.
 pub fn error_dynamics(nav: &NavSolution) -> ErrorMatrix {
     let w_ie = geo::earth_rate_enu(nav.lla.lat);
     let w_en = geo::transport_rate_enu(nav.lla.lat, nav.lla.h, &nav.vel);
@@ -168,7 +168,7 @@ pub fn noise_input(nav: &NavSolution) -> NoiseInput {
 }
 
 /// Discretises over `dt` seconds: `Φ = I + FΔt + (FΔt)²/2` and `Q_d = G Q Gᵀ Δt` with
-/// `Q = diag(gyro PSD ×3, accelerometer PSD ×3)` (DESIGN §3.4). `Q_d` is exactly symmetric.
+/// `Q = diag(gyro PSD ×3, accelerometer PSD ×3)` (docs/methods.md §M4). `Q_d` is exactly symmetric.
 pub fn discretize(
     f: &ErrorMatrix,
     g: &NoiseInput,

@@ -1,4 +1,4 @@
-//! Hyper-parameter tuning as LS-SVMlab's `tunelssvm` does it (DESIGN §3.5): k-fold
+//! Hyper-parameter tuning as LS-SVMlab's `tunelssvm` does it (docs/methods.md §M13): k-fold
 //! cross-validation over a log-spaced grid of `gamma` and `sigma2`, optionally refined
 //! around the best pair, deterministic for a seed. Called by `lssvm::train` and
 //! `local::train` before the final fit; the model supplies the fold error.

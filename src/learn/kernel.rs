@@ -1,4 +1,4 @@
-//! Kernels, with LS-SVMlab's convention (DESIGN §3.5): RBF
+//! Kernels, with LS-SVMlab's convention (docs/methods.md §M8): RBF
 //! `K(x, y) = exp(−‖x − y‖² / σ²)` with parameter `sigma2` (scikit-learn's
 //! `gamma` is `1 / sigma2`), and the linear kernel `K(x, y) = xᵀy`.
 

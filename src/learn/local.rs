@@ -1,4 +1,4 @@
-//! Locally weighted LS-SVM (seed 000 §1.2, made precise in DESIGN §3.5), the channel
+//! Locally weighted LS-SVM (seed 000 §1.2, made precise in docs/methods.md §M10), the channel
 //! monitor's alternative to the global batch model: each query is answered by an
 //! LS-SVM trained on its `k` nearest training samples, with a kernel width scaled to
 //! how spread those neighbours are.
@@ -219,7 +219,7 @@ impl Local<'_> {
         }
     }
 
-    /// The local LS-SVM's prediction at `z` (training units), DESIGN §3.5.
+    /// The local LS-SVM's prediction at `z` (training units), docs/methods.md §M10.
     fn predict(
         &self,
         nb: &Neighbours,

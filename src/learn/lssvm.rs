@@ -1,4 +1,4 @@
-//! Batch LS-SVM regression (seed 000 eq. 6, DESIGN §3.5): Cholesky of `Ω + I/γ` and
+//! Batch LS-SVM regression (seed 000 eq. 6, docs/methods.md §M9): Cholesky of `Ω + I/γ` and
 //! the two-solve trick. The channel monitor predicts with [`LsSvmModel`]; the service
 //! trains it through [`train`] (cross-validation first when asked).
 //!

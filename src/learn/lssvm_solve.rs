@@ -1,4 +1,4 @@
-//! The numerical core of the LS-SVM family (DESIGN §3.5), below `lssvm`, `local`,
+//! The numerical core of the LS-SVM family (docs/methods.md §M9), below `lssvm`, `local`,
 //! `online` and `cv`: kernel matrices, a blocked Cholesky factorisation on contiguous
 //! column-major memory, triangular solves, and the two-solve trick of seed 000 eq. 6.
 //!

@@ -4,7 +4,7 @@
 //! the service trains them on its blocking pool ([`model::train`]). Pure: no I/O,
 //! no async.
 //!
-//! Every algorithm has linfa's shape (STYLE.md 10): `XParams` (what a REST body
+//! Every algorithm has linfa's shape (docs/architecture.md §A11): `XParams` (what a REST body
 //! deserialises into) → `check()` → `ValidXParams` → `fit(&Dataset)` → `XModel`
 //! (serde, with a format version) → `predict`. `XParams::fit` is the shortcut
 //! `check()?.fit(..)`. Only [`model`] wraps an algorithm's own model into the stored

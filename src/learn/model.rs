@@ -28,7 +28,7 @@ pub fn parse_at<T: serde::de::DeserializeOwned>(value: &Value) -> Result<T, (Str
 /// Version of the stored model format; bumped when a model struct changes shape.
 pub const FORMAT_VERSION: u32 = 1;
 
-/// The model kinds (DESIGN §4.4).
+/// The model kinds (docs/architecture.md §A5).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub enum ModelKind {
     /// Batch LS-SVM regression (seed 000 eq. 6).

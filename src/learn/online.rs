@@ -1,4 +1,4 @@
-//! Online sliding-window LS-SVM (seed 001 §2.2, DESIGN §3.5), the channel monitor's
+//! Online sliding-window LS-SVM (seed 001 §2.2, docs/methods.md §M11), the channel monitor's
 //! adaptive predictor: when a sample enters and the oldest leaves, `P = H⁻¹ =
 //! (Ω + I/γ)⁻¹` is updated in O(N²) by block (Schur-complement) remove and add steps
 //! instead of re-solved in O(N³); every `refresh` updates it is re-factorised from

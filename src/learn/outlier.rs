@@ -1,4 +1,4 @@
-//! Outlier pre-filter (seed 001 §2.2.1, made precise in DESIGN §3.5), in front of the
+//! Outlier pre-filter (seed 001 §2.2.1, made precise in docs/methods.md §M12), in front of the
 //! online LS-SVM window: a new value whose third difference is too large for the
 //! recent scatter is replaced by the cubic Newton extrapolation of the last four
 //! accepted values before it enters the window.
@@ -9,7 +9,7 @@
 //! a third difference of white noise: 1 + 9 + 9 + 1 = 20); it is then replaced by
 //! `4x₋₁ − 6x₋₂ + 4x₋₃ − x₋₄` and counted. The first 4 values pass unchecked.
 //!
-//! As the DESIGN specifies it, a genuine step much larger than the scatter is replaced
+//! As docs/methods.md §M12 specifies it, a genuine step much larger than the scatter is replaced
 //! for as long as it lasts (the replacements become the history). Callers that must
 //! follow real steps can bound that with [`OutlierFilter::with_max_run`].
 
@@ -24,7 +24,7 @@ pub struct OutlierFilter {
     /// Consecutive replacements so far.
     run: usize,
     /// After this many consecutive replacements the next value is accepted as is
-    /// (`None`: never, the DESIGN's rule).
+    /// (`None`: never, the rule of docs/methods.md §M12).
     max_run: Option<usize>,
 }
 

@@ -1,4 +1,4 @@
-//! Standardisation (DESIGN §3.5): every model kind standardises its inputs (and
+//! Standardisation (docs/methods.md §M8): every model kind standardises its inputs (and
 //! regression targets) with the training set's mean and standard deviation unless
 //! `"standardize": false`; the statistics are stored with the model so predictions
 //! come back in the original units.

@@ -1,4 +1,4 @@
-//! The `channel` monitor (DESIGN §3.5, seeds 000 and 001): each named channel of the
+//! The `channel` monitor (docs/methods.md §M14, seeds 000 and 001): each named channel of the
 //! epoch (`channels {name: value}`, a filter innovation or a measurement difference such
 //! as GNSS minus barometric height) is predicted by an LS-SVM from its own past, and the
 //! prediction residual is tested with T_a ([`crate::detect::ta`]). One test per channel,
@@ -55,10 +55,10 @@ use crate::learn::online::{OnlineLsSvm, OnlineParams};
 use crate::learn::outlier::OutlierFilter;
 use crate::learn::{AnyModel, LearnError, ModelKind};
 
-/// Default embedding length m (DESIGN §3.5).
+/// Default embedding length m (docs/methods.md §M14).
 pub const DEFAULT_EMBEDDING: usize = 5;
 
-/// Default outlier-filter factor c (DESIGN §3.5).
+/// Default outlier-filter factor c (docs/methods.md §M14).
 pub const DEFAULT_OUTLIER_C: f64 = 3.0;
 
 /// Longest accepted channel name.

@@ -1,4 +1,4 @@
-//! The `federated` monitor (DESIGN §3.4, §3.6, §4.2; seed 004): an INS aided by GNSS, DVL
+//! The `federated` monitor (docs/methods.md §M6, §M7; docs/architecture.md §A6; seed 004): an INS aided by GNSS, DVL
 //! and CNS through the federated filter of [`crate::filter::federated`], one χ² test per
 //! configured aid (`gnss`, `dvl`, `cns`) under the session's policy, and the `hpl` test of
 //! the horizontal protection level against the alert limit. The session actor steps it once
@@ -26,7 +26,7 @@
 //! solution unavailable for that epoch, without counters: a protection level is not a noisy
 //! detection to be debounced), reported with dof 2 (the horizontal plane).
 //!
-//! # HPL (DESIGN §3.6, see [`crate::detect::hpl`])
+//! # HPL (docs/methods.md §M7, see [`crate::detect::hpl`])
 //! `HPL₁ = k_md σ_h` from the fused `P_g`; `HPL₂ = max_i slope_i sqrt(λ_det,i)` over the aids
 //! that take part in fusion, `λ_det,i` for the aid's dof and threshold at `p_md`. An aid's slope
 //! is computed when it updates (gain onto the fused solution, its local `S`) and kept until its

@@ -1,4 +1,4 @@
-//! The `linear` monitor (DESIGN §3.2): a user-supplied linear Gaussian model,
+//! The `linear` monitor (docs/methods.md §M2): a user-supplied linear Gaussian model,
 //! one Kalman filter, and the residual χ² test λ = rᵀS⁻¹r ~ χ²(m) (seed 004 §1.3)
 //! under the session's decision policy. It is also how navguard is checked
 //! against other Kalman filter libraries.

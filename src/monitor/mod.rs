@@ -22,19 +22,19 @@ use crate::epoch::Epoch;
 use crate::filter::kalman::FilterError;
 use crate::learn::AnyModel;
 
-/// The kinds of monitor a session can run (DESIGN §4.1).
+/// The kinds of monitor a session can run (docs/architecture.md §A3).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum MonitorKind {
-    /// A user-supplied linear Gaussian model streaming `z` (DESIGN §3.2).
+    /// A user-supplied linear Gaussian model streaming `z` (docs/methods.md §M2).
     Linear,
-    /// Federated INS/GNSS/DVL/CNS filter (DESIGN §3.4).
+    /// Federated INS/GNSS/DVL/CNS filter (docs/methods.md §M6).
     Federated,
-    /// LS-SVM channel prediction with T_a (DESIGN §3.5).
+    /// LS-SVM channel prediction with T_a (docs/methods.md §M14).
     Channel,
-    /// Redundant gyros, parity and SVM isolation (DESIGN §3.7).
+    /// Redundant gyros, parity and SVM isolation (docs/methods.md §M15).
     Rimu,
-    /// TACAN range one-class SVM (DESIGN §3.8).
+    /// TACAN range one-class SVM (docs/methods.md §M18).
     Tacan,
 }
 
@@ -102,7 +102,7 @@ pub enum StepError {
     Threshold(#[from] ThresholdError),
 }
 
-/// Outputs a monitor adds beside its tests in the `result` frame (DESIGN §4.2).
+/// Outputs a monitor adds beside its tests in the `result` frame (docs/architecture.md §A6).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 #[serde(untagged)]
 pub enum Outputs {
@@ -118,7 +118,7 @@ pub enum Outputs {
     Federated {
         /// INS minus the fused error: lat, lon in degrees, h in m, vel ENU in m/s.
         solution: Option<federated::FederatedSolution>,
-        /// Horizontal protection level, m (DESIGN §3.6).
+        /// Horizontal protection level, m (docs/methods.md §M7).
         hpl: Option<f64>,
         /// Names of the aids currently isolated.
         isolated: Vec<&'static str>,

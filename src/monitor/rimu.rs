@@ -1,4 +1,4 @@
-//! The `rimu` monitor (DESIGN §3.7, seed 002): redundant gyros `v = Hω + ε`. Each epoch's
+//! The `rimu` monitor (docs/methods.md §M15, seed 002): redundant gyros `v = Hω + ε`. Each epoch's
 //! gyro vector gives a parity residual `r = V v`; the FSS window of the last `l'`
 //! residuals gives the `parity` test `λ ~ χ²(l'·p)` under the session's threshold and
 //! policy. On a detection, each not-yet-isolated gyro's last `l` samples are turned

@@ -1,4 +1,4 @@
-//! The `tacan` monitor (DESIGN §3.8, seed 003): TACAN slant-range anomalies, found by
+//! The `tacan` monitor (docs/methods.md §M18, seed 003): TACAN slant-range anomalies, found by
 //! comparing the measured range with the range the INS position implies, through the
 //! window features of [`crate::features::tacan`] and a stored one-class SVM. The
 //! session actor steps it once per epoch.

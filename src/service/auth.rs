@@ -1,4 +1,4 @@
-//! Bearer-token authentication for `/api` (DESIGN §4.5). REST takes
+//! Bearer-token authentication for `/api` (docs/architecture.md §A5). REST takes
 //! `Authorization: Bearer TOKEN`; sockets may instead offer the subprotocol
 //! `bearer.TOKEN` (beside `navguard`) or a `token` query parameter, since
 //! browsers cannot set headers on a WebSocket.

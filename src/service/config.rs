@@ -3,7 +3,7 @@
 use std::net::SocketAddr;
 use std::path::PathBuf;
 
-/// Limits on what a client may send (DESIGN §4.5). Over a limit: 413 or an `error` event.
+/// Limits on what a client may send (docs/architecture.md §A5). Over a limit: 413 or an `error` event.
 #[derive(Debug, Clone)]
 pub struct Limits {
     /// Largest ingest frame, bytes (default 1 MiB).

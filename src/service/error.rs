@@ -1,5 +1,5 @@
 //! One error type for every handler, mapped to an HTTP status and the JSON body
-//! `{"error": {"code", "message", "field"?}}` (DESIGN §4.4). 5xx bodies carry no
+//! `{"error": {"code", "message", "field"?}}` (docs/architecture.md §A5). 5xx bodies carry no
 //! internal detail; the detail goes to the log.
 
 use axum::Json;

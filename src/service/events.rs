@@ -1,4 +1,4 @@
-//! The events socket (DESIGN §4.3): `state` and `alarm` messages as they
+//! The events socket (docs/architecture.md §A6): `state` and `alarm` messages as they
 //! happen (never dropped: a subscriber too slow to take them is disconnected),
 //! and `stats` at most 20 times a second (a slow subscriber just skips some).
 

@@ -1,4 +1,4 @@
-//! The ingest socket (DESIGN §4.2): a thin task that parses frames at the edge,
+//! The ingest socket (docs/architecture.md §A6): a thin task that parses frames at the edge,
 //! hands epochs to the session actor through its bounded channel, and writes
 //! back what the actor sends (results, state changes, alarms, errors).
 

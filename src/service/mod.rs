@@ -41,7 +41,7 @@ pub fn now_ms() -> i64 {
 /// Why the server could not start.
 #[derive(Debug, thiserror::Error)]
 pub enum StartError {
-    /// DESIGN §4.5: a non-loopback address needs a token.
+    /// docs/architecture.md §A5: a non-loopback address needs a token.
     #[error(
         "refusing to bind {0} without a token: set --token or NAVGUARD_TOKEN, or bind a loopback address"
     )]

@@ -1,6 +1,6 @@
 //! Training jobs and the model cache. `POST /api/v1/models` hands a validated
 //! job to [`Models::start`]; the job waits for a training slot (stage `queued`),
-//! trains on the blocking pool (STYLE.md 12) publishing its progress to its
+//! trains on the blocking pool (docs/architecture.md §A11) publishing its progress to its
 //! [`Job`], and when done stores the model, then puts it in the cache, then
 //! marks it ready. The cache is the [`ModelSource`] the session monitors build
 //! from, so ingest never waits on training: actors only read an `Arc<AnyModel>`.

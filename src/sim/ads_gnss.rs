@@ -1,4 +1,4 @@
-//! The `ads-gnss` scenario (seed 000 §4, DESIGN §3.9): an aircraft flying home straight
+//! The `ads-gnss` scenario (seed 000 §4, docs/methods.md §M19): an aircraft flying home straight
 //! and level on air data after an INS failure, 800 s at 1 Hz, heading 135°, from 34° N
 //! 109° E (the paper's "longitude 34°, latitude 109°" is read as swapped: 109° cannot be
 //! a latitude) at 1200 m. It yields the monitored channel `dh` = GNSS height minus

@@ -1,4 +1,4 @@
-//! Fault injection on the aid channels (DESIGN §3.9): step and ramp (seed 000
+//! Fault injection on the aid channels (docs/methods.md §M19): step and ramp (seed 000
 //! eq. 25), stuck, constant gain, constant bias and complete failure (seed 001
 //! §1), plus a missing block, each on one component of one aid channel over a
 //! time interval. Sits between `sensors` (which produce the healthy, noisy

@@ -1,4 +1,4 @@
-//! The `imu-channel` scenario (seed 001 §4, DESIGN §3.9): the pitch-rate gyro of an
+//! The `imu-channel` scenario (seed 001 §4, docs/methods.md §M19): the pitch-rate gyro of an
 //! aircraft in longitudinal flight, 135 samples at 1 Hz (the paper's 135 points, with its
 //! 5 s input/output delay read as a 5-sample embedding), with one of seed 001's four
 //! sensor fault modes from k = 80 on, and optionally injected spikes for the outlier

@@ -3,7 +3,7 @@
 //! consistent errors), and the INS output = truth corrupted by those errors. Sits
 //! between the truth path (`trajectory`, `track`) and the epochs of `scenario`.
 //!
-//! Per INS step of Δt (DESIGN §3.4): `x_{k+1} = Φ_k x_k + w_k` with `Φ_k` the
+//! Per INS step of Δt (docs/methods.md §M4): `x_{k+1} = Φ_k x_k + w_k` with `Φ_k` the
 //! series `I + FΔt + (FΔt)²/2` of [`discretize`] over [`error_dynamics`] linearised
 //! about the truth — applied to `x` as `x + FΔt x + ½ FΔt (FΔt x)`, the same product
 //! without forming the 15 × 15 `Φ` (two matrix–vector products instead of a
@@ -21,7 +21,7 @@
 //! accelerometer white-noise draw that drives δv over the step, as a rate
 //! (`√(PSD/Δt) n`).
 //!
-//! Fidelity: the truth follows DESIGN §3.4's model exactly as the filters use it,
+//! Fidelity: the truth follows docs/methods.md §M4's model exactly as the filters use it,
 //! without the `δω_in(δv, δp)` and gravity terms — so without the Schuler loop.
 //! Unaided, a tilt φ then drives `δv ≈ g φ t`, `δp ≈ g φ t²/2` instead of an
 //! 84-minute oscillation bounded near `R φ`: `ship(1)`'s pure INS drifts ≈ 2.9 km in

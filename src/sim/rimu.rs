@@ -1,4 +1,4 @@
-//! The `rimu` scenario (DESIGN §3.9, seed 002 §3): a redundant gyro set sampled at
+//! The `rimu` scenario (docs/methods.md §M19, seed 002 §3): a redundant gyro set sampled at
 //! 100 Hz with white rate noise from the angle random walk, steady and manoeuvring
 //! (climb) flight, and one bias or drift fault on one gyro. Upstream of
 //! `monitor::rimu` and the seed 002 experiment; also makes the classifier's

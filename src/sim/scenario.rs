@@ -3,7 +3,7 @@
 //! simulator: the CLI writes these epochs as ingest frames, the experiments and
 //! tests feed them to the monitors and score the result against the truth.
 //!
-//! [`ship`] is DESIGN §3.9's seed 004 scenario (module doc of [`ship_trajectory`]
+//! [`ship`] is docs/methods.md §M19's seed 004 scenario (module doc of [`ship_trajectory`]
 //! for the route); [`ship_with`] varies its faults and duration (the ramp
 //! experiment), [`ship_fault_free`] drops the faults, [`track_scenario`] rides
 //! the same sensors on a real RTK track. Every scenario is reproducible from its
@@ -22,7 +22,7 @@ use crate::epoch::Aid;
 use crate::epoch::Epoch;
 use crate::geo::Lla;
 
-/// The ship's start latitude, degrees (DESIGN §3.9; the seed gives none — a
+/// The ship's start latitude, degrees (docs/methods.md §M19; the seed gives none — a
 /// mid-latitude sea area, 30°N 114°E).
 pub const SHIP_START_LAT_DEG: f64 = 30.0;
 /// The ship's start longitude, degrees.
@@ -88,7 +88,7 @@ impl Scenario {
         self.sensors.aids()
     }
 
-    /// A `federated` monitor config (DESIGN §3.4) matching the simulation:
+    /// A `federated` monitor config (docs/methods.md §M6) matching the simulation:
     /// `aids`, one noise block per aid present, `imu`, and `init` (the magnitudes
     /// of the true initial errors as 1σ; left out if any is 0, which the monitor
     /// refuses). The DVL's scale-factor error (1e-3 × ≤ 12 m/s ≈ 0.01 m/s) is left
@@ -191,7 +191,7 @@ pub fn ship_trajectory() -> Result<Trajectory, SimError> {
         .build()
 }
 
-/// Seed 004's faults (DESIGN §3.9): a GNSS position jump of 0.02′ in latitude
+/// Seed 004's faults (docs/methods.md §M19): a GNSS position jump of 0.02′ in latitude
 /// and longitude (converted at 30°N: ≈ 36.95 m north, 32.16 m east — the ship
 /// stays within 0.2° of 30°N, so the metres differ from 0.02′ at its true
 /// latitude by < 0.2 %) on [1080, 1200) s, and a GNSS velocity jump of +0.4 m/s
@@ -236,7 +236,7 @@ pub fn ship_with(seed: u64, faults: Vec<Fault>, duration_s: f64) -> Result<Scena
     simulate(ship_params(seed, faults), truth)
 }
 
-/// Seed 004's ship scenario (DESIGN §3.9): 3600 s at 10 Hz, the faults of [`ship_faults`].
+/// Seed 004's ship scenario (docs/methods.md §M19): 3600 s at 10 Hz, the faults of [`ship_faults`].
 pub fn ship(seed: u64) -> Scenario {
     // The route, sensors and faults are constants (checked by this module's tests).
     ship_with(seed, ship_faults(), SHIP_DURATION_S)

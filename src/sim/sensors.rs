@@ -4,7 +4,7 @@
 //! [`FaultInjector`]. Reads the truth (`trajectory`, `track`), writes the aid
 //! blocks of the domain [`Epoch`] that `scenario` emits.
 //!
-//! Defaults (DESIGN §3.9, seed 004 §3): GNSS σ 10 m per ENU axis (height too)
+//! Defaults (docs/methods.md §M19, seed 004 §3): GNSS σ 10 m per ENU axis (height too)
 //! and 0.1 m/s per axis at 1 Hz; DVL σ 0.1 m/s per body axis with a scale-factor
 //! error of +1e-3 (`v_b = (1 + k) C_nᵇ vⁿ + w`: over the ground, no current) at
 //! 1 Hz; CNS σ 450 m on latitude and on longitude (north and east metres) at

@@ -1,4 +1,4 @@
-//! The `tacan` scenario (DESIGN §3.9, seed 003 §4): an aircraft flying around a
+//! The `tacan` scenario (docs/methods.md §M19, seed 003 §4): an aircraft flying around a
 //! TACAN station at 25 Hz, with an INS-derived slant range carrying a small slowly
 //! varying INS error and a measured range with white noise N(0, σ²) and random
 //! jumps. Feeds the `tacan` monitor ([`crate::monitor::tacan`]) and the seed 003

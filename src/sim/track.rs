@@ -1,7 +1,7 @@
 //! Real tracks as truth: parses 1 Hz RTK fixes in the format of
-//! `../shared/data/kf-gins-gnss-rtk.txt` and turns them into [`Truth`] at the INS
+//! the KF-GINS sample data (`kf-gins-gnss-rtk.txt`) and turns them into [`Truth`] at the INS
 //! rate, so simulated INS and aid errors ride on real vehicle dynamics
-//! (DESIGN §3.9, `navguard simulate --track FILE`). Pure: the CLI reads the file
+//! (docs/methods.md §M19, `navguard simulate --track FILE`). Pure: the CLI reads the file
 //! and hands the text to [`Track::parse`].
 //!
 //! Format: one fix per line, whitespace separated: GNSS time (s of week),

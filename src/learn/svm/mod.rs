@@ -1,5 +1,5 @@
 //! C-SVC and one-class SVM (SVDD / ν-OCSVM) trained by SMO (seeds 002 and 003,
-//! DESIGN §3.7–3.8). The rimu monitor isolates a faulty gyro with a [`SvcModel`];
+//! docs/methods.md §M17). The rimu monitor isolates a faulty gyro with a [`SvcModel`];
 //! the tacan monitor flags range anomalies with an [`OcSvmModel`]; the service
 //! trains both through `learn::model::train`, which refuses a `cv` block with
 //! [`refuse_cv`].
@@ -10,7 +10,7 @@
 //! [`cache`] the LRU kernel-row cache.
 //!
 //! Kernel width, both conventions: the RBF kernel is `exp(−‖x − y‖² / sigma2)`
-//! (LS-SVMlab, DESIGN §3.5); scikit-learn / libsvm write `exp(−gamma‖x − y‖²)`, so
+//! (LS-SVMlab, docs/methods.md §M8); scikit-learn / libsvm write `exp(−gamma‖x − y‖²)`, so
 //! `gamma = 1 / sigma2`, given as `kernel_gamma` (`gamma` is accepted as its alias:
 //! for these kinds it always means this width, never a regularisation). Give either
 //! `sigma2` or `kernel_gamma`, not both. Given neither,

@@ -1,4 +1,4 @@
-//! One-class SVM for the tacan monitor (seed 003, DESIGN §3.8), two equivalent
+//! One-class SVM for the tacan monitor (seed 003, docs/methods.md §M17), two equivalent
 //! parameterisations of one RBF model:
 //! - ν-OCSVM (Schölkopf et al. 2001, libsvm's form): `min ½ αᵀKα`,
 //!   `0 ≤ α_i ≤ 1`, `Σα_i = νl`; decision `d(x) = Σ α_i K(x_i, x) − ρ`, ≥ 0
@@ -52,8 +52,8 @@ pub struct OcSvmParams {
         skip_serializing_if = "Option::is_none"
     )]
     pub gamma: Option<f64>,
-    /// Standardise inputs with the training mean and std (default true, DESIGN
-    /// §3.5); `false` trains on raw values as libsvm and scikit-learn do.
+    /// Standardise inputs with the training mean and std (default true, docs/methods.md
+    /// §M8); `false` trains on raw values as libsvm and scikit-learn do.
     #[serde(default = "default_true")]
     pub standardize: bool,
     /// SMO stopping tolerance (default 1e-3, libsvm's).

@@ -42,8 +42,8 @@ pub struct SvcParams {
         skip_serializing_if = "Option::is_none"
     )]
     pub gamma: Option<f64>,
-    /// Standardise inputs with the training mean and std (default true, DESIGN
-    /// §3.5); `false` trains on raw values as libsvm and scikit-learn do.
+    /// Standardise inputs with the training mean and std (default true, docs/methods.md
+    /// §M8); `false` trains on raw values as libsvm and scikit-learn do.
     #[serde(default = "default_true")]
     pub standardize: bool,
     /// SMO stopping tolerance on the maximal violating pair (default 1e-3, libsvm's).

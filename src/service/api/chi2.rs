@@ -1,4 +1,4 @@
-//! `/api/v1/chi2/*`: χ² thresholds and missed-detection probabilities (DESIGN §3.1).
+//! `/api/v1/chi2/*`: χ² thresholds and missed-detection probabilities (docs/methods.md §M1).
 
 use axum::Json;
 use serde::{Deserialize, Serialize};

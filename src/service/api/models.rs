@@ -1,5 +1,5 @@
 //! `/api/v1/models`: start a training job, list, get, delete (cancelling a
-//! running job) and predict (DESIGN §4.4). Everything checkable is checked here,
+//! running job) and predict (docs/architecture.md §A5). Everything checkable is checked here,
 //! before the 202, so a bad training set or parameter is a 422 naming its field
 //! (`kind`, `params.<f>`, `cv.<f>`, `data.x[3]`, `data.y`) and never a failed job.
 

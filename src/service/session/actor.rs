@@ -215,7 +215,7 @@ impl Actor {
         if self.ingest.as_ref().is_some_and(|tx| !tx.is_closed()) {
             return Err(SessionError::AlreadyAttached(self.id.to_string()));
         }
-        // DESIGN §4.1: filter state starts afresh when a session's stream
+        // docs/architecture.md §A3: filter state starts afresh when a session's stream
         // reconnects. Tests left suspect or isolated by the previous stream
         // return to healthy: say so, and clear their open alarms.
         let mut returned = Vec::new();
@@ -597,7 +597,7 @@ impl Actor {
                 raised_at_ms: now_ms(),
                 cleared_t: None,
             };
-            // DESIGN §4.5: committed before it is broadcast. If the store fails
+            // docs/architecture.md §A2: committed before it is broadcast. If the store fails
             // the alarm is still announced (id -1): an operator must not miss an
             // alarm because the disk did.
             let alarm = match self.deps.store.insert_alarm(alarm.clone()).await {

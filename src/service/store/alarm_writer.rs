@@ -1,5 +1,5 @@
 //! Group commit for alarms. Every alarm is committed before it is announced
-//! (DESIGN §4.5), but when many sessions raise alarms at once (1,000 federated
+//! (docs/architecture.md §A4), but when many sessions raise alarms at once (1,000 federated
 //! sessions all fail the same epoch), one transaction per alarm serialises them
 //! on SQLite's single writer. One writer task takes every alarm queued at the
 //! moment, inserts them in one transaction, and answers each caller with its id

@@ -1,4 +1,4 @@
-//! Persistence (DESIGN §4.5): sessions with their monitors and thresholds,
+//! Persistence (docs/architecture.md §A4): sessions with their monitors and thresholds,
 //! the alarm log and trained models ([`models`]), in SQLite through sqlx (WAL).
 //! An alarm is committed here before anyone is told about it.
 

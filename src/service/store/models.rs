@@ -1,4 +1,4 @@
-//! Persistence of trained models (DESIGN §4.5): one row per model with its
+//! Persistence of trained models (docs/architecture.md §A4): one row per model with its
 //! status, parameters, training metrics or failure reason, and the model itself
 //! as versioned JSON (`AnyModel::to_stored_json`). Rows are written when a job
 //! starts and again when it ends; a row left `training` by a stopped server is

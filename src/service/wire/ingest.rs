@@ -460,7 +460,7 @@ enum OutChannel<'a> {
     Vector(&'a [f64]),
 }
 
-/// One epoch in the ingest wire format, fields in the order DESIGN §4.2 lists them.
+/// One epoch in the ingest wire format, fields in the order docs/architecture.md §A6 lists them.
 #[derive(Debug, Serialize)]
 struct OutEpoch<'a> {
     t: f64,

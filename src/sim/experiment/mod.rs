@@ -14,7 +14,7 @@
 //!   missed-detection rates (its Fig. 3 and Table 2) on the `ads-gnss` scenario.
 //! - [`seed001`]: seed 001's online vs batch vs global LS-SVM, IMU fault modes and
 //!   outlier filter on the `imu-channel` scenario.
-//! - [`ramp`]: DESIGN §3.9's slow GNSS drift benchmark.
+//! - [`ramp`]: docs/methods.md §M19's slow GNSS drift benchmark.
 //! - [`scorecard`]: the per-detector figures every experiment ends with.
 //! - [`plot`]: the SVG line charts.
 
@@ -139,7 +139,7 @@ impl MonitorRun {
 }
 
 /// Reads `solution {lat, lon, h (°, °, m), vel [e, n, u]}` and `hpl` from a
-/// monitor's outputs in their wire form (DESIGN §4.2), so the experiments rely
+/// monitor's outputs in their wire form (docs/architecture.md §A6), so the experiments rely
 /// on the documented output shape only.
 fn solution(outputs: &Value) -> Option<(Lla, [f64; 3], Option<f64>)> {
     let s = &outputs["solution"];

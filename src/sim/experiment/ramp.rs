@@ -1,4 +1,4 @@
-//! The ramp benchmark (DESIGN §3.9): a slow GNSS position drift — the
+//! The ramp benchmark (docs/methods.md §M19): a slow GNSS position drift — the
 //! spoofing-like fault integrity users most often report missed — of 0.5, 1, 2
 //! and 5 m/s from a fixed onset, through the `federated` monitor under each
 //! policy and threshold. Scored on

@@ -1,4 +1,4 @@
-//! The scorecard every experiment ends with (DESIGN §3.9): per detector (test)
+//! The scorecard every experiment ends with (docs/methods.md §M19): per detector (test)
 //! and policy, the true-positive, false-alarm and missed-detection rates, mean
 //! and max detection delay, time to recover after the fault ends, and time per
 //! epoch. Computed from the per-epoch health trace of one test and the known

@@ -19,7 +19,7 @@
 //!   max over runs; a run with no flag inside the fault is *missed*);
 //! - **false alarm after the fault** = from 600 s to the first healthy epoch (mean and max
 //!   over runs; the paper: its plain method stays in false alarm ≈ 20 s);
-//! - the DESIGN §3.9 scorecard of the pooled trace (runs laid end to end).
+//! - the docs/methods.md §M19 scorecard of the pooled trace (runs laid end to end).
 
 use std::collections::HashMap;
 use std::fmt::Write as _;
@@ -450,7 +450,7 @@ pub fn render(r: &Seed000Result) -> String {
     );
     let _ = writeln!(
         s,
-        "Scorecard (DESIGN §3.9), pooled over runs (recover s: the longest run; min_differences 30):"
+        "Scorecard (docs/methods.md §M19), pooled over runs (recover s: the longest run; min_differences 30):"
     );
     for (f, _) in ads_gnss::table2_faults() {
         let cards: Vec<Scorecard> = r

@@ -351,7 +351,7 @@ pub fn render(r: &Seed001Result) -> String {
         r.outlier_rmse.1,
         r.replaced
     );
-    let _ = writeln!(s, "Scorecard (DESIGN §3.9), t = sample index:");
+    let _ = writeln!(s, "Scorecard (docs/methods.md §M19), t = sample index:");
     let cards: Vec<Scorecard> = r.faults.iter().map(|f| f.card.clone()).collect();
     s.push_str(&scorecard::render(&cards));
     s

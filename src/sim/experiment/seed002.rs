@@ -4,7 +4,7 @@
 //! faults from 25 s, manoeuvring 28–34 s with a climb from 30 s and faults from 31 s —
 //! for every gyro × fault (5σ, 6σ bias; 3σ/s, 4σ/s drift), with and without the
 //! classifier: detected?, isolated correctly?, detection and isolation delays, error of
-//! the reconstructed ω; the DESIGN §3.9 scorecards; the parity λ against T_D as SVG.
+//! the reconstructed ω; the docs/methods.md §M19 scorecards; the parity λ against T_D as SVG.
 
 use std::collections::HashMap;
 use std::fmt::Write as _;

@@ -14,7 +14,7 @@
 //! - jumps detected = jumps with at least one flagged window that holds them.
 //!
 //! `P = mean(p_i)` is set beside the paper's (100 %, 99.99 %, lowest flight
-//! 97.97 % and mean > 99 % at 20 m²). The scorecard (DESIGN §3.9) scores the
+//! 97.97 % and mean > 99 % at 20 m²). The scorecard (docs/methods.md §M19) scores the
 //! `range` test's health trace under the classic and the counters policy, with
 //! each jump's fault window running from its first sample to the last window that
 //! holds it, flights laid end to end; its recovery column shows the longest
@@ -23,7 +23,7 @@
 //! # Training size
 //! Ten 20-minute flights at 25 Hz give 299,910 windows; training is on every
 //! `stride`-th window (`stride = ⌈total / train_samples⌉`, default 30,000 samples,
-//! DESIGN §5's 30,000 × 3 benchmark size): consecutive windows share 9 of 10
+//! docs/performance.md's 30,000 × 3 benchmark size): consecutive windows share 9 of 10
 //! samples, so the subsample loses little.
 
 use std::collections::HashMap;
