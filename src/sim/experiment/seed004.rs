@@ -469,7 +469,7 @@ mod tests {
             figures
                 .iter()
                 .any(|(name, svg)| name == "lambda_counters_T_20.svg"
-                    && svg.contains("class=\"threshold\""))
+                    && svg.contains(">T_D = 20<"))
         );
     }
 }
