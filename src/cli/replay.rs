@@ -21,7 +21,9 @@ use futures_util::stream::{SplitSink, SplitStream};
 use futures_util::{SinkExt, StreamExt};
 use indicatif::ProgressBar;
 use navguard::detect::PolicyConfig;
+use navguard::epoch::Aid;
 use navguard::monitor::MonitorKind;
+use navguard::monitor::federated::FederatedConfigWire;
 use navguard::service::session::SessionStats;
 use navguard::service::session::spec::valid_name;
 use navguard::service::wire::{CreateSession, MonitorSpecWire};
@@ -254,16 +256,20 @@ pub(crate) fn session_body(args: &ReplayArgs, scan: &FileScan) -> anyhow::Result
         let config = match &args.monitor_config {
             Some(text) => json_arg(text, "--monitor-config")?,
             None => {
-                let aids: Vec<&str> = [("gnss", scan.gnss), ("dvl", scan.dvl), ("cns", scan.cns)]
-                    .into_iter()
-                    .filter_map(|(name, present)| present.then_some(name))
-                    .collect();
+                let aids: Vec<Aid> = [
+                    (Aid::Gnss, scan.gnss),
+                    (Aid::Dvl, scan.dvl),
+                    (Aid::Cns, scan.cns),
+                ]
+                .into_iter()
+                .filter_map(|(name, present)| present.then_some(name))
+                .collect();
                 if aids.is_empty() {
                     bail!(
                         "the file has `ins` blocks but no gnss, dvl or cns: nothing to aid the INS with"
                     );
                 }
-                federated_config(&aids)
+                federated_config(aids)?
             }
         };
         (MonitorKind::Federated, config)
@@ -299,9 +305,10 @@ pub(crate) fn session_body(args: &ReplayArgs, scan: &FileScan) -> anyhow::Result
     })
 }
 
-/// The `federated` config with these aids and every other field at its default.
-fn federated_config(aids: &[&str]) -> Value {
-    serde_json::json!({ "aids": aids })
+/// The `federated` config with these aids and every other field at its default
+/// (written out, so the body says which values the monitor runs with).
+fn federated_config(aids: Vec<Aid>) -> anyhow::Result<Value> {
+    serde_json::to_value(FederatedConfigWire::new(aids)).context("serialising the federated config")
 }
 
 /// Alarms of one monitor, test and state.
@@ -858,7 +865,14 @@ mod tests {
             (m.name.as_str(), m.kind),
             ("federated", MonitorKind::Federated)
         );
-        assert_eq!(m.config, serde_json::json!({"aids": ["gnss", "cns"]}));
+        let config: FederatedConfigWire = serde_json::from_value(m.config.clone()).unwrap();
+        assert_eq!(config, FederatedConfigWire::new(vec![Aid::Gnss, Aid::Cns]));
+        // The monitor runs exactly as it would on the bare aids list.
+        let parse = navguard::monitor::federated::FederatedConfig::from_json;
+        assert_eq!(
+            parse(&m.config).unwrap(),
+            parse(&serde_json::json!({"aids": ["gnss", "cns"]})).unwrap()
+        );
         assert_eq!(m.policy, PolicyConfig::Counters { n1: 10, n2: 5 });
         assert_eq!((m.threshold, m.p_fa), (Some(20.0), None));
         let body = session_body(&args(&["--policy", "classic"]), &scan).unwrap();
