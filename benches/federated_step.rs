@@ -19,15 +19,14 @@ use std::hint::black_box;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use nalgebra::Vector3;
 use navguard::detect::{Decision, Health, PolicyConfig, ThresholdSpec};
-use navguard::epoch::Epoch;
+use navguard::epoch::{Aid, Epoch};
 use navguard::epoch::{CnsBlock, GnssBlock, InsBlock};
 use navguard::filter::aiding;
 use navguard::filter::federated::{FederatedFilter, Observation, equal_betas, ins_transition};
 use navguard::filter::ins::{ImuErrors, NavSolution};
 use navguard::geo::{self, Lla};
 use navguard::monitor::Monitor;
-use navguard::monitor::federated::{FederatedConfig, FederatedMonitor};
-use serde_json::json;
+use navguard::monitor::federated::{FederatedConfig, FederatedConfigWire, FederatedMonitor};
 
 const DT: f64 = 0.1;
 
@@ -71,8 +70,12 @@ fn bench(c: &mut Criterion) {
         lon: 120f64.to_radians(),
         h: 0.0,
     };
-    let config =
-        FederatedConfig::from_json(&json!({"aids": ["gnss", "dvl", "cns"]})).expect("config");
+    let config = FederatedConfig::try_from(FederatedConfigWire::new(vec![
+        Aid::Gnss,
+        Aid::Dvl,
+        Aid::Cns,
+    ]))
+    .expect("config");
 
     let mut monitor = FederatedMonitor::new(
         config.clone(),

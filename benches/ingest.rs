@@ -12,11 +12,46 @@ use std::time::{Duration, Instant};
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use futures_util::{SinkExt, StreamExt};
+use navguard::detect::PolicyConfig;
+use navguard::monitor::MonitorKind;
+use navguard::monitor::linear::LinearConfigWire;
+use navguard::service::wire::{CreateSession, MonitorSpecWire};
 use navguard::service::{self, ServiceConfig};
 use serde_json::json;
 use tokio_tungstenite::tungstenite::Message;
 
 const BATCH: usize = 100;
+
+/// The benched model: 2-D constant velocity, 1 s steps, seeing x and y with
+/// correlated noise; typed, so a renamed config field fails to compile.
+fn model() -> LinearConfigWire {
+    let q = 0.05;
+    let (a, b) = (q / 3.0, q / 2.0);
+    LinearConfigWire {
+        f: vec![
+            vec![1.0, 1.0, 0.0, 0.0],
+            vec![0.0, 1.0, 0.0, 0.0],
+            vec![0.0, 0.0, 1.0, 1.0],
+            vec![0.0, 0.0, 0.0, 1.0],
+        ],
+        h: vec![vec![1.0, 0.0, 0.0, 0.0], vec![0.0, 0.0, 1.0, 0.0]],
+        q: vec![
+            vec![a, b, 0.0, 0.0],
+            vec![b, q, 0.0, 0.0],
+            vec![0.0, 0.0, a, b],
+            vec![0.0, 0.0, b, q],
+        ],
+        r: vec![vec![1.0, 0.3], vec![0.3, 2.0]],
+        x0: vec![0.0, 1.0, 0.0, -1.0],
+        p0: vec![
+            vec![5.0, 0.0, 0.0, 0.0],
+            vec![0.0, 5.0, 0.0, 0.0],
+            vec![0.0, 0.0, 5.0, 0.0],
+            vec![0.0, 0.0, 0.0, 5.0],
+        ],
+        b: None,
+    }
+}
 
 fn bench(c: &mut Criterion) {
     let runtime = tokio::runtime::Builder::new_multi_thread()
@@ -32,16 +67,18 @@ fn bench(c: &mut Criterion) {
         )))
         .expect("server");
     let addr = server.addr;
-    let q = 0.05;
-    let (a, b) = (q / 3.0, q / 2.0);
-    let body = json!({"id": "bench", "echo": true, "monitors": [{"name": "track", "type": "linear", "config": {
-        "f": [[1, 1, 0, 0], [0, 1, 0, 0], [0, 0, 1, 1], [0, 0, 0, 1]],
-        "h": [[1, 0, 0, 0], [0, 0, 1, 0]],
-        "q": [[a, b, 0, 0], [b, q, 0, 0], [0, 0, a, b], [0, 0, b, q]],
-        "r": [[1.0, 0.3], [0.3, 2.0]],
-        "x0": [0, 1, 0, -1],
-        "p0": [[5, 0, 0, 0], [0, 5, 0, 0], [0, 0, 5, 0], [0, 0, 0, 5]]
-    }}]});
+    let body = CreateSession {
+        id: Some("bench".to_owned()),
+        monitors: vec![MonitorSpecWire {
+            name: "track".to_owned(),
+            kind: MonitorKind::Linear,
+            config: serde_json::to_value(model()).expect("config"),
+            policy: PolicyConfig::Classic,
+            p_fa: None,
+            threshold: None,
+        }],
+        echo: true,
+    };
     runtime.block_on(async {
         let resp = reqwest::Client::new()
             .post(format!("http://{addr}/api/v1/sessions"))

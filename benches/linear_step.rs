@@ -12,21 +12,41 @@ use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use navguard::detect::{PolicyConfig, ThresholdSpec};
 use navguard::epoch::Epoch;
 use navguard::monitor::Monitor;
-use navguard::monitor::linear::{LinearConfig, LinearMonitor};
-use serde_json::json;
+use navguard::monitor::linear::{LinearConfig, LinearConfigWire, LinearMonitor};
 
-fn bench(c: &mut Criterion) {
+/// The benched model: 2-D constant velocity, 1 s steps, seeing x and y with
+/// correlated noise; typed, so a renamed config field fails to compile.
+fn model() -> LinearConfigWire {
     let q = 0.05;
     let (a, b) = (q / 3.0, q / 2.0);
-    let config = LinearConfig::from_json(&json!({
-        "f": [[1, 1, 0, 0], [0, 1, 0, 0], [0, 0, 1, 1], [0, 0, 0, 1]],
-        "h": [[1, 0, 0, 0], [0, 0, 1, 0]],
-        "q": [[a, b, 0, 0], [b, q, 0, 0], [0, 0, a, b], [0, 0, b, q]],
-        "r": [[1.0, 0.3], [0.3, 2.0]],
-        "x0": [0, 1, 0, -1],
-        "p0": [[5, 0, 0, 0], [0, 5, 0, 0], [0, 0, 5, 0], [0, 0, 0, 5]]
-    }))
-    .expect("valid model");
+    LinearConfigWire {
+        f: vec![
+            vec![1.0, 1.0, 0.0, 0.0],
+            vec![0.0, 1.0, 0.0, 0.0],
+            vec![0.0, 0.0, 1.0, 1.0],
+            vec![0.0, 0.0, 0.0, 1.0],
+        ],
+        h: vec![vec![1.0, 0.0, 0.0, 0.0], vec![0.0, 0.0, 1.0, 0.0]],
+        q: vec![
+            vec![a, b, 0.0, 0.0],
+            vec![b, q, 0.0, 0.0],
+            vec![0.0, 0.0, a, b],
+            vec![0.0, 0.0, b, q],
+        ],
+        r: vec![vec![1.0, 0.3], vec![0.3, 2.0]],
+        x0: vec![0.0, 1.0, 0.0, -1.0],
+        p0: vec![
+            vec![5.0, 0.0, 0.0, 0.0],
+            vec![0.0, 5.0, 0.0, 0.0],
+            vec![0.0, 0.0, 5.0, 0.0],
+            vec![0.0, 0.0, 0.0, 5.0],
+        ],
+        b: None,
+    }
+}
+
+fn bench(c: &mut Criterion) {
+    let config = LinearConfig::try_from(model()).expect("valid model");
     let mut monitor = LinearMonitor::new(config, PolicyConfig::Classic, ThresholdSpec::PFa(0.002))
         .expect("monitor");
     let mut k = 0.0;

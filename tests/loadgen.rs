@@ -16,9 +16,10 @@ use std::time::Duration;
 use futures_util::{SinkExt, StreamExt};
 use navguard::detect::PolicyConfig;
 use navguard::monitor::MonitorKind;
+use navguard::monitor::linear::LinearConfigWire;
 use navguard::service::wire::{CreateSession, MonitorSpecWire};
 use navguard::service::{self, ServiceConfig};
-use serde_json::{Value, json};
+use serde_json::Value;
 use tokio::net::{TcpSocket, TcpStream};
 use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};
@@ -50,18 +51,37 @@ fn linear_session(id: &str) -> CreateSession {
     }
 }
 
-/// A 2-D constant-velocity model at 10 Hz seeing x and y.
+/// A 2-D constant-velocity model at 10 Hz seeing x and y, built through the
+/// monitor's own config type so that a renamed field fails to compile.
 fn linear_config() -> Value {
     let q = 0.005;
     let (a, b) = (q * 0.01 / 3.0, q * 0.1 / 2.0);
-    json!({
-        "f": [[1, 0.1, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0.1], [0, 0, 0, 1]],
-        "h": [[1, 0, 0, 0], [0, 0, 1, 0]],
-        "q": [[a, b, 0, 0], [b, q, 0, 0], [0, 0, a, b], [0, 0, b, q]],
-        "r": [[1.0, 0.0], [0.0, 1.0]],
-        "x0": [0, 1, 0, -1],
-        "p0": [[5, 0, 0, 0], [0, 5, 0, 0], [0, 0, 5, 0], [0, 0, 0, 5]]
-    })
+    let p0 = 5.0;
+    let config = LinearConfigWire {
+        f: vec![
+            vec![1.0, 0.1, 0.0, 0.0],
+            vec![0.0, 1.0, 0.0, 0.0],
+            vec![0.0, 0.0, 1.0, 0.1],
+            vec![0.0, 0.0, 0.0, 1.0],
+        ],
+        h: vec![vec![1.0, 0.0, 0.0, 0.0], vec![0.0, 0.0, 1.0, 0.0]],
+        q: vec![
+            vec![a, b, 0.0, 0.0],
+            vec![b, q, 0.0, 0.0],
+            vec![0.0, 0.0, a, b],
+            vec![0.0, 0.0, b, q],
+        ],
+        r: vec![vec![1.0, 0.0], vec![0.0, 1.0]],
+        x0: vec![0.0, 1.0, 0.0, -1.0],
+        p0: vec![
+            vec![p0, 0.0, 0.0, 0.0],
+            vec![0.0, p0, 0.0, 0.0],
+            vec![0.0, 0.0, p0, 0.0],
+            vec![0.0, 0.0, 0.0, p0],
+        ],
+        b: None,
+    };
+    serde_json::to_value(config).unwrap()
 }
 
 /// Epoch `k` of a target moving at (1, −1) m/s, seen without noise at 10 Hz.

@@ -244,39 +244,3 @@ pub(crate) struct RefusedFrame {
     /// Reason.
     pub message: String,
 }
-
-/// The session's `/stats`, read through the service's own per-test type.
-/// `MonitorStats` keys its tests by `&'static str`, which cannot be read back
-/// from an owned body, so the session and monitor levels are spelt here with
-/// the fields the tools use.
-#[derive(Debug, Clone, Default, serde::Deserialize)]
-pub(crate) struct StatsView {
-    /// Frames accepted since the session started.
-    pub frames: u64,
-    /// Epochs processed.
-    pub epochs: u64,
-    /// Frames refused.
-    pub frame_errors: u64,
-    /// Time of the last epoch.
-    pub last_t: Option<f64>,
-    /// Per monitor.
-    pub monitors: std::collections::BTreeMap<String, MonitorStatsView>,
-}
-
-/// One monitor of a [`StatsView`].
-#[derive(Debug, Clone, Default, serde::Deserialize)]
-pub(crate) struct MonitorStatsView {
-    /// Per test, as the service's `TestStats`.
-    pub tests: std::collections::BTreeMap<String, navguard::service::session::stats::TestStats>,
-}
-
-impl StatsView {
-    /// Alarms counted, summed over every monitor and test.
-    pub(crate) fn alarms(&self) -> u64 {
-        self.monitors
-            .values()
-            .flat_map(|m| m.tests.values())
-            .map(|t| t.alarms)
-            .sum()
-    }
-}

@@ -23,12 +23,13 @@ use futures_util::StreamExt;
 use navguard::detect::PolicyConfig;
 use navguard::epoch::Aid;
 use navguard::monitor::MonitorKind;
+use navguard::monitor::linear::LinearConfigWire;
 use navguard::service::wire::{CreateSession, MonitorSpecWire, epoch_to_wire};
 use navguard::sim::{self, Channel, Fault, FaultKind};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, Normal};
-use serde_json::{Value, json};
+use serde_json::Value;
 use tokio::time::Instant;
 use tokio_tungstenite::tungstenite::Utf8Bytes;
 
@@ -223,13 +224,13 @@ fn federated_lines(
                 .map_err(|e| anyhow::anyhow!("serialising a simulated epoch: {}", e.message))
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
-    let config = federated_config(&scenario);
+    let config = federated_config(&scenario)?;
     Ok((lines, echo_session(MonitorKind::Federated, config)))
 }
 
 /// The `federated` config for the simulated ship: its aids, IMU and initial errors.
-fn federated_config(scenario: &sim::Scenario) -> Value {
-    scenario.default_monitor_config()
+fn federated_config(scenario: &sim::Scenario) -> anyhow::Result<Value> {
+    serde_json::to_value(scenario.monitor_config()).context("serialising the federated config")
 }
 
 /// A session body (no id) with one monitor of `kind`, named after it, under
@@ -271,22 +272,45 @@ fn linear_lines(
             (t, format!(r#"{{"t":{t},"z":[{x},{y}]}}"#))
         })
         .collect();
-    (lines, echo_session(MonitorKind::Linear, linear_config(dt)))
+    let config = serde_json::to_value(linear_config(dt)).expect("finite matrices serialise");
+    (lines, echo_session(MonitorKind::Linear, config))
 }
 
 /// The `linear` config: a 2-D constant-velocity model sampled every `dt` s,
 /// seeing x and y with variances 1 and 1.96.
-fn linear_config(dt: f64) -> Value {
+fn linear_config(dt: f64) -> LinearConfigWire {
     let q = 0.05 * dt;
     let (a, b) = (q * dt * dt / 3.0, q * dt / 2.0);
-    json!({
-        "f": [[1, dt, 0, 0], [0, 1, 0, 0], [0, 0, 1, dt], [0, 0, 0, 1]],
-        "h": [[1, 0, 0, 0], [0, 0, 1, 0]],
-        "q": [[a, b, 0, 0], [b, q, 0, 0], [0, 0, a, b], [0, 0, b, q]],
-        "r": [[1.0, 0.0], [0.0, 1.96]],
-        "x0": [0, 1, 0, -1],
-        "p0": [[5, 0, 0, 0], [0, 5, 0, 0], [0, 0, 5, 0], [0, 0, 0, 5]],
-    })
+    LinearConfigWire {
+        f: vec![
+            vec![1.0, dt, 0.0, 0.0],
+            vec![0.0, 1.0, 0.0, 0.0],
+            vec![0.0, 0.0, 1.0, dt],
+            vec![0.0, 0.0, 0.0, 1.0],
+        ],
+        h: vec![vec![1.0, 0.0, 0.0, 0.0], vec![0.0, 0.0, 1.0, 0.0]],
+        q: vec![
+            vec![a, b, 0.0, 0.0],
+            vec![b, q, 0.0, 0.0],
+            vec![0.0, 0.0, a, b],
+            vec![0.0, 0.0, b, q],
+        ],
+        r: vec![vec![1.0, 0.0], vec![0.0, 1.96]],
+        x0: vec![0.0, 1.0, 0.0, -1.0],
+        p0: diagonal(&[5.0; 4]),
+        b: None,
+    }
+}
+
+/// A square matrix with `d` on its diagonal, as nested rows.
+fn diagonal(d: &[f64]) -> Vec<Vec<f64>> {
+    (0..d.len())
+        .map(|i| {
+            (0..d.len())
+                .map(|j| if i == j { d[i] } else { 0.0 })
+                .collect()
+        })
+        .collect()
 }
 
 /// Reads `process_resident_memory_bytes` from the server's `/metrics`.
@@ -497,6 +521,7 @@ mod tests {
     use super::stream::result_t;
     use super::*;
     use clap::Parser;
+    use serde_json::json;
 
     #[derive(Parser)]
     struct Wrap {

@@ -21,7 +21,10 @@ use futures_util::stream::{SplitSink, SplitStream};
 use futures_util::{SinkExt, StreamExt};
 use indicatif::ProgressBar;
 use navguard::detect::PolicyConfig;
+use navguard::epoch::Aid;
 use navguard::monitor::MonitorKind;
+use navguard::monitor::federated::FederatedConfigWire;
+use navguard::service::session::SessionStats;
 use navguard::service::session::spec::valid_name;
 use navguard::service::wire::{CreateSession, MonitorSpecWire};
 use serde::de::IgnoredAny;
@@ -32,7 +35,7 @@ use tokio::time::Instant;
 use tokio_tungstenite::tungstenite::protocol::CloseFrame;
 use tokio_tungstenite::tungstenite::{self, Message};
 
-use super::http::{Endpoint, ServerEvent, Socket, StatsView};
+use super::http::{Endpoint, ServerEvent, Socket};
 use super::{progress_bar, thousands};
 
 /// Longest the server may go without processing a frame while we wait for
@@ -253,16 +256,20 @@ pub(crate) fn session_body(args: &ReplayArgs, scan: &FileScan) -> anyhow::Result
         let config = match &args.monitor_config {
             Some(text) => json_arg(text, "--monitor-config")?,
             None => {
-                let aids: Vec<&str> = [("gnss", scan.gnss), ("dvl", scan.dvl), ("cns", scan.cns)]
-                    .into_iter()
-                    .filter_map(|(name, present)| present.then_some(name))
-                    .collect();
+                let aids: Vec<Aid> = [
+                    (Aid::Gnss, scan.gnss),
+                    (Aid::Dvl, scan.dvl),
+                    (Aid::Cns, scan.cns),
+                ]
+                .into_iter()
+                .filter_map(|(name, present)| present.then_some(name))
+                .collect();
                 if aids.is_empty() {
                     bail!(
                         "the file has `ins` blocks but no gnss, dvl or cns: nothing to aid the INS with"
                     );
                 }
-                federated_config(&aids)
+                federated_config(aids)?
             }
         };
         (MonitorKind::Federated, config)
@@ -298,9 +305,10 @@ pub(crate) fn session_body(args: &ReplayArgs, scan: &FileScan) -> anyhow::Result
     })
 }
 
-/// The `federated` config with these aids and every other field at its default.
-fn federated_config(aids: &[&str]) -> Value {
-    serde_json::json!({ "aids": aids })
+/// The `federated` config with these aids and every other field at its default
+/// (written out, so the body says which values the monitor runs with).
+fn federated_config(aids: Vec<Aid>) -> anyhow::Result<Value> {
+    serde_json::to_value(FederatedConfigWire::new(aids)).context("serialising the federated config")
 }
 
 /// Alarms of one monitor, test and state.
@@ -418,11 +426,8 @@ pub(crate) struct ReplaySummary {
     pub alarms: Vec<AlarmEvent>,
     /// State-change events received.
     pub state_changes: u64,
-    /// The session's `/stats` at the end, as the server wrote it.
-    pub stats: Value,
-    /// The same, read through the service's types.
-    #[serde(skip)]
-    pub view: StatsView,
+    /// The session's `/stats` at the end, read through the service's own type.
+    pub stats: SessionStats,
 }
 
 /// Runs the command.
@@ -434,7 +439,7 @@ pub(crate) async fn run(args: ReplayArgs) -> anyhow::Result<()> {
     let endpoint = Endpoint::parse(&args.url, args.token.clone())?;
     let path = format!("/api/v1/sessions/{}", args.session);
     let created = ensure_session(&endpoint, &args, &scan, &path).await?;
-    let baseline = stats_view(&stats(&endpoint, &path).await?)?;
+    let baseline = stats(&endpoint, &path).await?;
     let socket = endpoint.connect(&format!("{path}/ingest")).await?;
     let (sink, stream) = socket.split();
     let tally = Arc::new(Mutex::new(Tally::default()));
@@ -480,7 +485,6 @@ pub(crate) async fn run(args: ReplayArgs) -> anyhow::Result<()> {
         },
         alarms: tally.alarm_events,
         state_changes: tally.states,
-        view: stats_view(&final_stats)?,
         stats: final_stats,
     };
     print!("{}", render(&summary));
@@ -525,16 +529,16 @@ async fn ensure_session(
     }
 }
 
-async fn stats(endpoint: &Endpoint, path: &str) -> anyhow::Result<Value> {
+async fn stats(endpoint: &Endpoint, path: &str) -> anyhow::Result<SessionStats> {
     let (status, body) = endpoint.call("GET", &format!("{path}/stats")).await?;
     if status != 200 {
         bail!("GET {path}/stats: HTTP {status}: {body}");
     }
-    serde_json::from_str(&body).context("the stats are not JSON")
+    parse_stats(&body)
 }
 
-fn stats_view(stats: &Value) -> anyhow::Result<StatsView> {
-    StatsView::deserialize(stats).context("the stats do not have the session stats' shape")
+fn parse_stats(body: &str) -> anyhow::Result<SessionStats> {
+    serde_json::from_str(body).context("the stats do not have the session stats' shape")
 }
 
 async fn read_events(mut stream: SplitStream<Socket>, tally: Arc<Mutex<Tally>>) {
@@ -662,15 +666,15 @@ async fn next_epoch(
 async fn drain(
     endpoint: &Endpoint,
     path: &str,
-    baseline: &StatsView,
+    baseline: &SessionStats,
     sent: &Sent,
     tally: &Arc<Mutex<Tally>>,
-) -> anyhow::Result<Value> {
+) -> anyhow::Result<SessionStats> {
     let base_frames = baseline.frames;
     let base_alarms = baseline.alarms();
     let mut last_progress = (Instant::now(), u64::MAX);
     loop {
-        let current = stats_view(&stats(endpoint, path).await?)?;
+        let current = stats(endpoint, path).await?;
         let (errors, numerical, closed) = {
             let t = tally.lock().unwrap_or_else(|p| p.into_inner());
             (t.error_total, t.numerical, t.closed.clone())
@@ -700,7 +704,7 @@ async fn drain(
     let deadline = Instant::now() + ALARM_GRACE;
     loop {
         let current = stats(endpoint, path).await?;
-        let want = stats_view(&current)?.alarms().saturating_sub(base_alarms);
+        let want = current.alarms().saturating_sub(base_alarms);
         let got = tally.lock().unwrap_or_else(|p| p.into_inner()).alarm_total;
         if got >= want {
             return Ok(current);
@@ -760,12 +764,12 @@ pub(crate) fn render(s: &ReplaySummary) -> String {
             );
         }
     }
-    render_stats(&mut out, &s.view);
+    render_stats(&mut out, &s.stats);
     out
 }
 
 /// The stats part of the summary: session counts, then one row per test.
-fn render_stats(out: &mut String, view: &StatsView) {
+fn render_stats(out: &mut String, view: &SessionStats) {
     let _ = writeln!(
         out,
         "stats: {} epochs processed, {} frames, {} refused, last t {}",
@@ -861,7 +865,14 @@ mod tests {
             (m.name.as_str(), m.kind),
             ("federated", MonitorKind::Federated)
         );
-        assert_eq!(m.config, serde_json::json!({"aids": ["gnss", "cns"]}));
+        let config: FederatedConfigWire = serde_json::from_value(m.config.clone()).unwrap();
+        assert_eq!(config, FederatedConfigWire::new(vec![Aid::Gnss, Aid::Cns]));
+        // The monitor runs exactly as it would on the bare aids list.
+        let parse = navguard::monitor::federated::FederatedConfig::from_json;
+        assert_eq!(
+            parse(&m.config).unwrap(),
+            parse(&serde_json::json!({"aids": ["gnss", "cns"]})).unwrap()
+        );
         assert_eq!(m.policy, PolicyConfig::Counters { n1: 10, n2: 5 });
         assert_eq!((m.threshold, m.p_fa), (Some(20.0), None));
         let body = session_body(&args(&["--policy", "classic"]), &scan).unwrap();
@@ -953,17 +964,22 @@ mod tests {
     }
 
     #[test]
-    fn stats_alarms_sum_over_monitors_and_tests() {
+    fn stats_are_read_as_the_services_session_stats() {
         let test = |alarms: u64| {
             let mut t = TestStats::new(1, 10.0);
             t.alarms = alarms;
             t
         };
-        let v = serde_json::json!({"frames": 4, "epochs": 8, "frame_errors": 0, "last_t": 0.8,
-            "monitors": {"a": {"type": "linear", "tests": {"x": test(2), "y": test(1)}},
-                         "b": {"type": "linear", "tests": {"z": test(4)}}}});
-        let view = stats_view(&v).unwrap();
-        assert_eq!((view.frames, view.alarms()), (4, 7));
-        assert!(stats_view(&serde_json::json!({})).is_err());
+        let body = serde_json::json!({"session": "s", "connected": true, "frames": 4,
+            "epochs": 8, "frame_errors": 0, "last_t": 0.8, "last_frame_at_ms": null,
+            "published_at_ms": 0, "epochs_per_s": 0.0,
+            "monitors": {"a": {"type": "linear", "epochs": 8, "worst_test_ratio": null,
+                               "tests": {"x": test(2), "y": test(1)}},
+                         "b": {"type": "federated", "epochs": 8, "worst_test_ratio": 0.5,
+                               "tests": {"z": test(4)}}}});
+        let stats = parse_stats(&body.to_string()).unwrap();
+        assert_eq!((stats.frames, stats.alarms()), (4, 7));
+        assert_eq!(stats.monitors["b"].kind, MonitorKind::Federated);
+        assert!(parse_stats("{}").is_err());
     }
 }

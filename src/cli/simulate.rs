@@ -7,9 +7,10 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
-use navguard::service::wire::epoch_to_wire;
+use navguard::detect::PolicyConfig;
+use navguard::monitor::MonitorKind;
+use navguard::service::wire::{CreateSession, MonitorSpecWire, epoch_to_wire};
 use navguard::sim::{self, Fault, Scenario, Track};
-use serde_json::json;
 
 use super::thousands;
 
@@ -158,14 +159,18 @@ pub(crate) fn run(args: SimulateArgs) -> anyhow::Result<()> {
             .with_context(|| format!("writing {}", path.display()))?;
     }
     if let Some(path) = &args.session_spec {
-        let spec = json!({
-            "monitors": [{
-                "name": "federated",
-                "type": "federated",
-                "config": scenario.default_monitor_config(),
-                "policy": {"kind": "counters", "n1": 10, "n2": 5},
-            }]
-        });
+        let spec = CreateSession {
+            id: None,
+            monitors: vec![MonitorSpecWire {
+                name: MonitorKind::Federated.as_str().to_owned(),
+                kind: MonitorKind::Federated,
+                config: serde_json::to_value(scenario.monitor_config())?,
+                policy: PolicyConfig::Counters { n1: 10, n2: 5 },
+                p_fa: None,
+                threshold: None,
+            }],
+            echo: false,
+        };
         std::fs::write(path, serde_json::to_string_pretty(&spec)?)
             .with_context(|| format!("writing {}", path.display()))?;
     }

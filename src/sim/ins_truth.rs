@@ -45,6 +45,7 @@ use crate::filter::ins::{
     ACC, ATT, ErrorVector, GYRO, ImuErrors, NavSolution, POS, VEL, error_dynamics, noise_input,
 };
 use crate::geo;
+use crate::monitor::federated::InitSigma;
 
 /// Arc-seconds → radians.
 const ARCSEC: f64 = std::f64::consts::PI / 180.0 / 3600.0;
@@ -66,12 +67,16 @@ pub struct InsErrorConfig {
 
 impl Default for InsErrorConfig {
     /// Seed 004 §3's INS.
+    /// The magnitudes are the `federated` monitor's default initial σs; only the
+    /// sign of the east misalignment is the seed's own.
     fn default() -> Self {
+        let init = InitSigma::default();
+        let [east, north, up] = init.att_sigma_arcsec;
         InsErrorConfig {
             imu: ImuErrors::default(),
-            init_att_arcsec: [-5.0, 5.0, 30.0],
-            init_vel_mps: 0.1,
-            init_pos_m: 10.0,
+            init_att_arcsec: [-east, north, up],
+            init_vel_mps: init.vel_sigma_mps,
+            init_pos_m: init.pos_sigma_m,
             white_noise: true,
         }
     }

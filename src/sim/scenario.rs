@@ -9,8 +9,6 @@
 //! the same sensors on a real RTK track. Every scenario is reproducible from its
 //! seed (same seed and build → identical epochs; see `sim::rng`).
 
-use serde_json::json;
-
 use super::faults::{Channel, Fault, FaultInjector, FaultKind, arcmin_to_metres};
 use super::ins_truth::{InsErrorConfig, InsErrorSim};
 use super::sensors::{AidSensors, SensorConfig};
@@ -21,6 +19,9 @@ use super::{SimError, check_non_negative};
 use crate::epoch::Aid;
 use crate::epoch::Epoch;
 use crate::geo::Lla;
+use crate::monitor::federated::{
+    CnsNoise, DvlNoise, FederatedConfigWire, GnssNoise, ImuSection, InitSigma,
+};
 
 /// The ship's start latitude, degrees (docs/methods.md §M19; the seed gives none — a
 /// mid-latitude sea area, 30°N 114°E).
@@ -90,34 +91,46 @@ impl Scenario {
 
     /// A `federated` monitor config (docs/methods.md §M6) matching the simulation:
     /// `aids`, one noise block per aid present, `imu`, and `init` (the magnitudes
-    /// of the true initial errors as 1σ; left out if any is 0, which the monitor
-    /// refuses). The DVL's scale-factor error (1e-3 × ≤ 12 m/s ≈ 0.01 m/s) is left
-    /// inside its 0.1 m/s σ. β and HAL are left to the monitor's defaults.
-    pub fn default_monitor_config(&self) -> serde_json::Value {
-        let aids: Vec<&str> = self.aids().iter().map(|a| a.as_str()).collect();
-        let mut cfg = json!({ "aids": aids, "imu": self.ins.imu });
+    /// of the true initial errors as 1σ; the monitor's default if any is 0, which
+    /// the monitor refuses). The DVL's scale-factor error (1e-3 × ≤ 12 m/s ≈
+    /// 0.01 m/s) is left inside its 0.1 m/s σ. β, HAL and P_md are the monitor's
+    /// defaults.
+    pub fn monitor_config(&self) -> FederatedConfigWire {
         let att = self.ins.init_att_arcsec.map(f64::abs);
-        if att
+        let init = if att
             .iter()
             .chain([&self.ins.init_pos_m, &self.ins.init_vel_mps])
             .all(|&x| x > 0.0)
         {
-            cfg["init"] = json!({
-                "att_sigma_arcsec": att,
-                "pos_sigma_m": self.ins.init_pos_m,
-                "vel_sigma_mps": self.ins.init_vel_mps,
-            });
+            InitSigma {
+                att_sigma_arcsec: att,
+                pos_sigma_m: self.ins.init_pos_m,
+                vel_sigma_mps: self.ins.init_vel_mps,
+            }
+        } else {
+            InitSigma::default()
+        };
+        FederatedConfigWire {
+            gnss: self.sensors.gnss.map(|g| GnssNoise {
+                pos_sigma_m: g.pos_sigma_m,
+                vel_sigma_mps: g.vel_sigma_mps,
+            }),
+            dvl: self.sensors.dvl.map(|d| DvlNoise {
+                vel_sigma_mps: d.vel_sigma_mps,
+            }),
+            cns: self.sensors.cns.map(|c| CnsNoise {
+                pos_sigma_m: c.pos_sigma_m,
+            }),
+            imu: ImuSection::from(self.ins.imu),
+            init,
+            ..FederatedConfigWire::new(self.aids())
         }
-        if let Some(g) = &self.sensors.gnss {
-            cfg["gnss"] = json!({ "pos_sigma_m": g.pos_sigma_m, "vel_sigma_mps": g.vel_sigma_mps });
-        }
-        if let Some(d) = &self.sensors.dvl {
-            cfg["dvl"] = json!({ "vel_sigma_mps": d.vel_sigma_mps });
-        }
-        if let Some(c) = &self.sensors.cns {
-            cfg["cns"] = json!({ "pos_sigma_m": c.pos_sigma_m });
-        }
-        cfg
+    }
+
+    /// [`Scenario::monitor_config`] as the JSON a session body carries.
+    pub fn default_monitor_config(&self) -> serde_json::Value {
+        serde_json::to_value(self.monitor_config())
+            .expect("a federated config of finite numbers serialises")
     }
 }
 
@@ -270,6 +283,7 @@ mod tests {
     use super::*;
     use crate::geo;
     use approx::assert_relative_eq;
+    use serde_json::json;
 
     fn gnss_lla(e: &SimEpoch) -> Option<Lla> {
         e.epoch.gnss.as_ref().map(|g| Lla {
@@ -414,6 +428,13 @@ mod tests {
         assert_eq!(cfg["imu"]["gyro_bias_dph"], json!(0.002));
         assert_eq!(cfg["imu"]["accel_bias_ug"], json!(10.0));
         assert_eq!(cfg["init"]["att_sigma_arcsec"], json!([5.0, 5.0, 30.0]));
+        // The typed config and its JSON agree, and the defaults are the monitor's.
+        assert_eq!(
+            serde_json::from_value::<FederatedConfigWire>(cfg.clone()).unwrap(),
+            s.monitor_config()
+        );
+        assert_eq!(s.monitor_config().gnss, Some(GnssNoise::default()));
+        assert_eq!(s.monitor_config().cns, Some(CnsNoise::default()));
         // The federated monitor accepts it as is.
         let parsed = crate::monitor::federated::FederatedConfig::from_json(&cfg).unwrap();
         assert_eq!(parsed.cns_pos_sigma_m, 450.0);

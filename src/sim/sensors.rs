@@ -4,7 +4,8 @@
 //! [`FaultInjector`]. Reads the truth (`trajectory`, `track`), writes the aid
 //! blocks of the domain [`Epoch`] that `scenario` emits.
 //!
-//! Defaults (docs/methods.md §M19, seed 004 §3): GNSS σ 10 m per ENU axis (height too)
+//! Defaults (docs/methods.md §M19, seed 004 §3; the σs are the `federated`
+//! monitor's config defaults, so the monitor's model matches them): GNSS σ 10 m per ENU axis (height too)
 //! and 0.1 m/s per axis at 1 Hz; DVL σ 0.1 m/s per body axis with a scale-factor
 //! error of +1e-3 (`v_b = (1 + k) C_nᵇ vⁿ + w`: over the ground, no current) at
 //! 1 Hz; CNS σ 450 m on latitude and on longitude (north and east metres) at
@@ -29,6 +30,7 @@ use super::{SimError, check_non_negative, check_positive};
 use crate::epoch::Aid;
 use crate::epoch::{CnsBlock, Epoch, GnssBlock};
 use crate::geo::{self, Lla};
+use crate::monitor::federated::{CnsNoise, DvlNoise, GnssNoise};
 
 /// GNSS receiver.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -71,10 +73,11 @@ pub struct CnsSpec {
 
 impl Default for GnssSpec {
     fn default() -> Self {
+        let noise = GnssNoise::default();
         GnssSpec {
             rate_hz: 1.0,
-            pos_sigma_m: 10.0,
-            vel_sigma_mps: 0.1,
+            pos_sigma_m: noise.pos_sigma_m,
+            vel_sigma_mps: noise.vel_sigma_mps,
             velocity: true,
             dropout_prob: 0.0,
         }
@@ -85,7 +88,7 @@ impl Default for DvlSpec {
     fn default() -> Self {
         DvlSpec {
             rate_hz: 1.0,
-            vel_sigma_mps: 0.1,
+            vel_sigma_mps: DvlNoise::default().vel_sigma_mps,
             scale_error: 1e-3,
             dropout_prob: 0.0,
         }
@@ -96,7 +99,7 @@ impl Default for CnsSpec {
     fn default() -> Self {
         CnsSpec {
             rate_hz: 0.1,
-            pos_sigma_m: 450.0,
+            pos_sigma_m: CnsNoise::default().pos_sigma_m,
             dropout_prob: 0.0,
         }
     }

@@ -129,7 +129,7 @@ fn initial_stats(id: &str, monitors: &NamedMonitors) -> SessionStats {
                 (
                     name.clone(),
                     MonitorStats {
-                        kind: m.kind().as_str(),
+                        kind: m.kind(),
                         epochs: 0,
                         worst_test_ratio: None,
                         tests,

@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 
 use crate::detect::Health;
-use crate::monitor::TestOutcome;
+use crate::monitor::{MonitorKind, TestName, TestOutcome};
 
 /// Seconds spent in each state, by epoch time.
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
@@ -127,7 +127,7 @@ impl TestStats {
 }
 
 /// A geodetic position: latitude and longitude in degrees, height in m.
-#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
 pub struct Position {
     /// Latitude, degrees.
     pub lat: f64,
@@ -141,7 +141,7 @@ pub struct Position {
 /// raw INS position it corrected, at the last INS epoch. Plain `Copy` data, so
 /// the actor updates it per epoch without allocating; observers sample it at the
 /// stats rate to draw the tracks.
-#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
 pub struct Track {
     /// Time of the INS epoch, s.
     pub t: f64,
@@ -152,25 +152,25 @@ pub struct Track {
 }
 
 /// Statistics of one monitor.
-#[derive(Debug, Clone, Serialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct MonitorStats {
     /// Monitor kind.
     #[serde(rename = "type")]
-    pub kind: &'static str,
+    pub kind: MonitorKind,
     /// Epochs consumed.
     pub epochs: u64,
     /// Worst (largest) last test ratio over its tests.
     pub worst_test_ratio: Option<f64>,
     /// Per test.
-    pub tests: BTreeMap<crate::monitor::TestName, TestStats>,
+    pub tests: BTreeMap<TestName, TestStats>,
     /// `federated` only: the latest corrected and raw INS positions; absent
     /// before the first INS epoch and for other kinds.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub track: Option<Track>,
 }
 
 /// Statistics of one session.
-#[derive(Debug, Clone, Serialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct SessionStats {
     /// Session id.
     pub session: String,
@@ -193,6 +193,17 @@ pub struct SessionStats {
     pub epochs_per_s: f64,
     /// Per monitor.
     pub monitors: BTreeMap<String, MonitorStats>,
+}
+
+impl SessionStats {
+    /// Alarms counted, summed over every monitor and test.
+    pub fn alarms(&self) -> u64 {
+        self.monitors
+            .values()
+            .flat_map(|m| m.tests.values())
+            .map(|t| t.alarms)
+            .sum()
+    }
 }
 
 #[cfg(test)]
@@ -230,5 +241,75 @@ mod tests {
             }
         );
         assert_eq!(stats.last_alarm_delay_s, Some(1.0));
+    }
+
+    fn sample() -> SessionStats {
+        let mut test = TestStats::new(2, 5.99);
+        test.alarms = 3;
+        test.last = Some(1.25);
+        let position = Position {
+            lat: 30.0,
+            lon: -114.5,
+            h: 3.0,
+        };
+        let mut monitors = BTreeMap::new();
+        monitors.insert(
+            "nav".to_owned(),
+            MonitorStats {
+                kind: MonitorKind::Federated,
+                epochs: 7,
+                worst_test_ratio: Some(0.2),
+                tests: BTreeMap::from([(TestName::from("gnss"), test.clone())]),
+                track: Some(Track {
+                    t: 1.5,
+                    solution: position,
+                    ins: position,
+                }),
+            },
+        );
+        monitors.insert(
+            "track".to_owned(),
+            MonitorStats {
+                kind: MonitorKind::Linear,
+                epochs: 7,
+                worst_test_ratio: None,
+                tests: BTreeMap::from([(TestName::from("r"), test)]),
+                track: None,
+            },
+        );
+        SessionStats {
+            session: "s1".to_owned(),
+            connected: true,
+            frames: 9,
+            epochs: 7,
+            frame_errors: 1,
+            last_t: Some(1.5),
+            last_frame_at_ms: Some(1_700_000_000_000),
+            published_at_ms: 1_700_000_000_050,
+            epochs_per_s: 20.0,
+            monitors,
+        }
+    }
+
+    #[test]
+    fn session_stats_read_back_what_the_server_writes_byte_for_byte() {
+        let written = serde_json::to_string(&sample()).unwrap();
+        let read: SessionStats = serde_json::from_str(&written).unwrap();
+        assert_eq!(serde_json::to_string(&read).unwrap(), written);
+        assert_eq!(read.monitors["nav"].kind, MonitorKind::Federated);
+        assert!(read.monitors["track"].track.is_none());
+    }
+
+    #[test]
+    fn monitor_kind_is_written_as_its_wire_name() {
+        let v = serde_json::to_value(sample()).unwrap();
+        assert_eq!(v["monitors"]["nav"]["type"], "federated");
+        assert_eq!(v["monitors"]["track"]["type"], "linear");
+        assert!(v["monitors"]["track"].get("track").is_none());
+    }
+
+    #[test]
+    fn session_alarms_sum_over_monitors_and_tests() {
+        assert_eq!(sample().alarms(), 6);
     }
 }

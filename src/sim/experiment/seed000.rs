@@ -35,6 +35,7 @@ use crate::detect::{Health, PolicyConfig, ThresholdSpec, chi2};
 use crate::epoch::Epoch;
 use crate::learn::{AnyModel, Dataset, LearnError, ModelKind, ModelParams, NoProgress, train};
 use crate::monitor::channel::embed_series;
+use crate::monitor::channel::{ChannelConfigWire, ChannelWire, ModelIds, PredictorWire};
 use crate::monitor::{self, MonitorKind, MonitorSpec, Outputs};
 use crate::sim::ads_gnss::{self, AdsGnssParams, FAULT_END_S, FAULT_START_S};
 use crate::sim::faults::FaultKind;
@@ -189,17 +190,35 @@ pub struct ChannelTrace {
     pub epochs: usize,
 }
 
+/// One scalar channel `name` with T_a over `n` differences, no outlier filter
+/// and the monitor's default warm-up.
+pub fn scalar_channel(
+    name: &str,
+    embedding: usize,
+    n: usize,
+    predictor: PredictorWire,
+) -> ChannelWire {
+    ChannelWire {
+        name: name.to_owned(),
+        dim: 1,
+        embedding,
+        predictor,
+        outlier_filter: None,
+        n: Some(n),
+        min_differences: None,
+    }
+}
+
 /// Runs `epochs` through a `channel` monitor built from `config` (models from `models`).
 pub fn run_channel(
-    config: serde_json::Value,
+    config: ChannelConfigWire,
     models: &HashMap<String, Arc<AnyModel>>,
     p_fa: f64,
     epochs: &[Epoch],
 ) -> Result<ChannelTrace, ExperimentError> {
     let spec = MonitorSpec {
         kind: MonitorKind::Channel,
-        config: monitor::MonitorConfig::parse(MonitorKind::Channel, &config)
-            .map_err(monitor::BuildError::from)?,
+        config: monitor::MonitorConfig::Channel(config),
         policy: PolicyConfig::Classic,
         threshold: ThresholdSpec::PFa(p_fa),
     };
@@ -253,8 +272,18 @@ fn one_run(p: &Seed000Params, r: usize) -> Result<Vec<[ChannelTrace; 2]>, Experi
         })?;
         let epochs = flight.epochs();
         let trace = |id: &str| {
-            let config = json!({"channels": [{"name": ads_gnss::CHANNEL, "embedding": p.embedding,
-                "n": p.n, "min_differences": 30, "predictor": {"model": id}}]});
+            let channel = ChannelWire {
+                min_differences: Some(30),
+                ..scalar_channel(
+                    ads_gnss::CHANNEL,
+                    p.embedding,
+                    p.n,
+                    PredictorWire::Model(ModelIds::One(id.to_owned())),
+                )
+            };
+            let config = ChannelConfigWire {
+                channels: vec![channel],
+            };
             run_channel(config, &models, p.p_fa, &epochs)
         };
         out.push([trace("lw")?, trace("plain")?]);

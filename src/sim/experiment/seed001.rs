@@ -21,12 +21,13 @@ use serde_json::json;
 
 use super::ExperimentError;
 use super::scorecard::{self, FaultWindow, Scorecard};
-use super::seed000::run_channel;
+use super::seed000::{run_channel, scalar_channel};
 use crate::detect::Health;
 use crate::learn::lssvm::LsSvmModel;
 use crate::learn::online::{OnlineLsSvm, OnlineParams};
 use crate::learn::outlier::OutlierFilter;
 use crate::learn::{Dataset, LearnError, ModelKind, ModelParams};
+use crate::monitor::channel::{ChannelConfigWire, PredictorWire};
 use crate::sim::imu_channel::{self, FAULT_K, SAMPLES};
 
 /// What to run.
@@ -212,8 +213,14 @@ pub fn predictors(p: &Seed001Params) -> Result<Vec<PredictorRow>, ExperimentErro
 
 /// Part 2: every fault mode through the channel monitor with the online predictor.
 pub fn faults(p: &Seed001Params) -> Result<Vec<FaultRow>, ExperimentError> {
-    let config = json!({"channels": [{"name": imu_channel::CHANNEL, "embedding": p.embedding, "n": p.n,
-        "predictor": {"online": {"window": p.window, "gamma": p.gamma, "sigma2": p.sigma2}}}]});
+    let config = ChannelConfigWire {
+        channels: vec![scalar_channel(
+            imu_channel::CHANNEL,
+            p.embedding,
+            p.n,
+            PredictorWire::Online(online_params(p)?),
+        )],
+    };
     let mut rows = Vec::new();
     for (name, kind) in imu_channel::fault_modes() {
         let run = imu_channel::simulate(p.seed, p.samples, Some(kind), false)?;
