@@ -102,6 +102,7 @@ pub(super) fn mib(bytes: Option<u64>) -> String {
 }
 
 /// The report as a text table.
+// Over 80 lines: one table, a straight run of rows in the order it prints them.
 pub(super) fn render(r: &Report) -> String {
     let mut out = String::new();
     let rate = r.rate_hz.map_or("max".into(), |hz| format!("{hz} Hz"));

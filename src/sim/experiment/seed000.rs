@@ -410,6 +410,7 @@ fn opt(v: Option<f64>, digits: usize) -> String {
 }
 
 /// The text report: part (a), Table 2 beside the paper, delays and tails, scorecard.
+// Over 80 lines: a straight run of table rows, in the order the report prints them.
 pub fn render(r: &Seed000Result) -> String {
     let p = &r.params;
     let mut s = String::new();

@@ -522,6 +522,7 @@ fn pct(v: f64) -> String {
 
 /// Renders the tables: per-flight detection probabilities, the summary beside the
 /// paper's figures, and the scorecards.
+// Over 80 lines: a straight run of table rows, in the order the report prints them.
 pub fn render(r: &Seed003Result) -> String {
     let p = &r.params;
     let mut s = String::new();

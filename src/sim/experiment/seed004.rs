@@ -254,6 +254,8 @@ fn stats_cells(s: &ErrorStats, digits: usize) -> String {
 }
 
 /// The text report: the table, the ratios beside the paper's, the scorecards.
+// Over 80 lines: one report written top to bottom, a straight run of table rows;
+// split, the table would be scattered across functions that each print a few lines.
 pub fn render(r: &Seed004Result) -> String {
     let mut s = String::new();
     let _ = writeln!(
