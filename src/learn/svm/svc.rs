@@ -235,10 +235,10 @@ fn count_correct(y: &[f64], sol: &smo::Solution) -> usize {
 fn support_vectors(x: &[f64], dim: usize, y: &[f64], alpha: &[f64]) -> (Vec<f64>, Vec<f64>) {
     let mut sv = Vec::new();
     let mut coef = Vec::new();
-    for i in 0..y.len() {
-        if alpha[i] > 0.0 {
+    for (i, (&yi, &a)) in y.iter().zip(alpha).enumerate() {
+        if a > 0.0 {
             sv.extend_from_slice(&x[i * dim..(i + 1) * dim]);
-            coef.push(y[i] * alpha[i]);
+            coef.push(yi * a);
         }
     }
     (sv, coef)
