@@ -144,27 +144,7 @@ impl ValidOcSvmParams {
         let n = data.n();
         let dim = data.dim();
         let mut effective = params.clone();
-        // SVDD ⇔ ν-OCSVM with ν = 1/(N·C) (module docs); scale turns d(z) into R² − f(z).
-        let (nu, scale) = match (params.nu, params.c) {
-            (_, Some(c)) => {
-                let nu = 1.0 / (n as f64 * c);
-                if nu > 1.0 {
-                    return Err(LearnError::params(
-                        "C",
-                        format!(
-                            "must be at least 1/N = {} (Σβ = 1 with β ≤ C)",
-                            1.0 / n as f64
-                        ),
-                    ));
-                }
-                (nu, 2.0 * c)
-            }
-            (Some(nu), None) => (nu, 1.0),
-            (None, None) => {
-                effective.nu = Some(DEFAULT_NU);
-                (DEFAULT_NU, 1.0)
-            }
-        };
+        let (nu, scale) = nu_and_scale(params, &mut effective, n)?;
         let (x, standardizer) = prepare_inputs(data, params.standardize);
         let sigma2 = resolve_sigma2(params.sigma2, params.gamma, &x, dim);
         if params.sigma2.is_none() && params.gamma.is_none() {
@@ -172,14 +152,7 @@ impl ValidOcSvmParams {
         }
         let kernel = Kernel::Rbf { sigma2 };
 
-        // libsvm's feasible start: the first ⌊νl⌋ at 1, the next at the remainder.
-        let total = nu * n as f64;
-        let full = (total as usize).min(n);
-        let mut alpha = vec![0.0; n];
-        alpha[..full].fill(1.0);
-        if full < n {
-            alpha[full] = total - full as f64;
-        }
+        let alpha = feasible_start(nu, n);
         let problem = Problem {
             x: &x,
             dim,
@@ -200,14 +173,7 @@ impl ValidOcSvmParams {
 
         // Training decisions from the final gradient: G_i = Σ_j α_j K_ij.
         let outliers = sol.gradient.iter().filter(|&&g| g - sol.rho < 0.0).count();
-        let mut sv = Vec::new();
-        let mut coef = Vec::new();
-        for i in 0..n {
-            if sol.alpha[i] > 0.0 {
-                sv.extend_from_slice(&x[i * dim..(i + 1) * dim]);
-                coef.push(sol.alpha[i]);
-            }
-        }
+        let (sv, coef) = support_vectors(&x, dim, &sol.alpha);
         let metrics = TrainingMetrics {
             outlier_fraction: Some(outliers as f64 / n as f64),
             support_vectors: Some(coef.len()),
@@ -230,6 +196,60 @@ impl ValidOcSvmParams {
             metrics,
         })
     }
+}
+
+/// ν and the decision scale: SVDD ⇔ ν-OCSVM with ν = 1/(N·C) (module docs);
+/// scale turns d(z) into R² − f(z). A defaulted ν is recorded in `effective`.
+fn nu_and_scale(
+    params: &OcSvmParams,
+    effective: &mut OcSvmParams,
+    n: usize,
+) -> Result<(f64, f64), LearnError> {
+    Ok(match (params.nu, params.c) {
+        (_, Some(c)) => {
+            let nu = 1.0 / (n as f64 * c);
+            if nu > 1.0 {
+                return Err(LearnError::params(
+                    "C",
+                    format!(
+                        "must be at least 1/N = {} (Σβ = 1 with β ≤ C)",
+                        1.0 / n as f64
+                    ),
+                ));
+            }
+            (nu, 2.0 * c)
+        }
+        (Some(nu), None) => (nu, 1.0),
+        (None, None) => {
+            effective.nu = Some(DEFAULT_NU);
+            (DEFAULT_NU, 1.0)
+        }
+    })
+}
+
+/// libsvm's feasible start: the first ⌊νl⌋ at 1, the next at the remainder.
+fn feasible_start(nu: f64, n: usize) -> Vec<f64> {
+    let total = nu * n as f64;
+    let full = (total as usize).min(n);
+    let mut alpha = vec![0.0; n];
+    alpha[..full].fill(1.0);
+    if full < n {
+        alpha[full] = total - full as f64;
+    }
+    alpha
+}
+
+/// The support vectors (rows of `x` with α > 0, flattened) and their α.
+fn support_vectors(x: &[f64], dim: usize, alpha: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    let mut sv = Vec::new();
+    let mut coef = Vec::new();
+    for (i, &a) in alpha.iter().enumerate() {
+        if a > 0.0 {
+            sv.extend_from_slice(&x[i * dim..(i + 1) * dim]);
+            coef.push(a);
+        }
+    }
+    (sv, coef)
 }
 
 /// A trained one-class SVM: `decision(x) = scale · (Σ_k α_k K(sv_k, z) − ρ)` with

@@ -131,36 +131,11 @@ impl ValidSvcParams {
         progress: &dyn Progress,
     ) -> Result<Fitted<SvcModel, SvcParams>, LearnError> {
         let params = &self.0;
-        let labels = data.require_y()?;
-        let mut y = Vec::with_capacity(data.n());
-        for (i, &v) in labels.iter().enumerate() {
-            if v != 1.0 && v != -1.0 {
-                return Err(LearnError::data(
-                    format!("y[{i}]"),
-                    format!("C-SVC labels must be +1 or -1, got {v}"),
-                ));
-            }
-            y.push(v);
-        }
-        if y.iter().all(|&v| v == y[0]) {
-            return Err(LearnError::data(
-                "y",
-                "C-SVC needs both classes (+1 and -1) in the training set",
-            ));
-        }
+        let y = signed_labels(data)?;
         let dim = data.dim();
         let (x, standardizer) = prepare_inputs(data, params.standardize);
         let mut effective = params.clone();
-        let kernel = match params.kernel {
-            KernelKind::Linear => Kernel::Linear,
-            KernelKind::Rbf => {
-                let sigma2 = resolve_sigma2(params.sigma2, params.gamma, &x, dim);
-                if params.sigma2.is_none() && params.gamma.is_none() {
-                    effective.sigma2 = Some(sigma2);
-                }
-                Kernel::Rbf { sigma2 }
-            }
-        };
+        let kernel = resolve_kernel(params, &mut effective, &x, dim);
         let n = y.len();
         let problem = Problem {
             x: &x,
@@ -180,32 +155,9 @@ impl ValidSvcParams {
         };
         let sol = smo::solve(&problem, &options, progress)?;
 
-        // Training decisions from the final gradient: G_i = y_i Σ_j y_j α_j K_ij − 1.
-        let correct = (0..n)
-            .filter(|&i| {
-                let yi = problem.y[i];
-                let f = yi * (sol.gradient[i] + 1.0) - sol.rho;
-                (f >= 0.0) == (yi > 0.0)
-            })
-            .count();
-        let mut sv = Vec::new();
-        let mut coef = Vec::new();
-        for i in 0..n {
-            if sol.alpha[i] > 0.0 {
-                sv.extend_from_slice(&x[i * dim..(i + 1) * dim]);
-                coef.push(problem.y[i] * sol.alpha[i]);
-            }
-        }
-        // Linear kernel: w = Σ y_i α_i x_i, so a decision is one dot product.
-        let w = (kernel == Kernel::Linear).then(|| {
-            let mut w = vec![0.0; dim];
-            for (s, c) in sv.chunks_exact(dim).zip(&coef) {
-                for (wk, sk) in w.iter_mut().zip(s) {
-                    *wk += c * sk;
-                }
-            }
-            w
-        });
+        let correct = count_correct(&problem.y, &sol);
+        let (sv, coef) = support_vectors(&x, dim, &problem.y, &sol.alpha);
+        let w = (kernel == Kernel::Linear).then(|| linear_weights(&sv, &coef, dim));
         let metrics = TrainingMetrics {
             train_accuracy: Some(correct as f64 / n as f64),
             support_vectors: Some(coef.len()),
@@ -228,6 +180,79 @@ impl ValidSvcParams {
             metrics,
         })
     }
+}
+
+/// The training labels, each checked to be +1 or −1, with both classes present.
+fn signed_labels(data: &Dataset) -> Result<Vec<f64>, LearnError> {
+    let labels = data.require_y()?;
+    let mut y = Vec::with_capacity(data.n());
+    for (i, &v) in labels.iter().enumerate() {
+        if v != 1.0 && v != -1.0 {
+            return Err(LearnError::data(
+                format!("y[{i}]"),
+                format!("C-SVC labels must be +1 or -1, got {v}"),
+            ));
+        }
+        y.push(v);
+    }
+    if y.iter().all(|&v| v == y[0]) {
+        return Err(LearnError::data(
+            "y",
+            "C-SVC needs both classes (+1 and -1) in the training set",
+        ));
+    }
+    Ok(y)
+}
+
+/// The kernel to train with; a defaulted RBF width is recorded in `effective`.
+fn resolve_kernel(params: &SvcParams, effective: &mut SvcParams, x: &[f64], dim: usize) -> Kernel {
+    match params.kernel {
+        KernelKind::Linear => Kernel::Linear,
+        KernelKind::Rbf => {
+            let sigma2 = resolve_sigma2(params.sigma2, params.gamma, x, dim);
+            if params.sigma2.is_none() && params.gamma.is_none() {
+                effective.sigma2 = Some(sigma2);
+            }
+            Kernel::Rbf { sigma2 }
+        }
+    }
+}
+
+/// How many training points the solution classifies correctly, read from the
+/// final gradient: G_i = y_i Σ_j y_j α_j K_ij − 1.
+fn count_correct(y: &[f64], sol: &smo::Solution) -> usize {
+    (0..y.len())
+        .filter(|&i| {
+            let yi = y[i];
+            let f = yi * (sol.gradient[i] + 1.0) - sol.rho;
+            (f >= 0.0) == (yi > 0.0)
+        })
+        .count()
+}
+
+/// The support vectors (rows of `x` with α > 0, flattened) and their
+/// coefficients `y_i α_i`.
+fn support_vectors(x: &[f64], dim: usize, y: &[f64], alpha: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    let mut sv = Vec::new();
+    let mut coef = Vec::new();
+    for (i, (&yi, &a)) in y.iter().zip(alpha).enumerate() {
+        if a > 0.0 {
+            sv.extend_from_slice(&x[i * dim..(i + 1) * dim]);
+            coef.push(yi * a);
+        }
+    }
+    (sv, coef)
+}
+
+/// Linear kernel: w = Σ y_i α_i x_i, so a decision is one dot product.
+fn linear_weights(sv: &[f64], coef: &[f64], dim: usize) -> Vec<f64> {
+    let mut w = vec![0.0; dim];
+    for (s, c) in sv.chunks_exact(dim).zip(coef) {
+        for (wk, sk) in w.iter_mut().zip(s) {
+            *wk += c * sk;
+        }
+    }
+    w
 }
 
 /// A trained C-SVC: `f(x) = Σ_k coef_k K(sv_k, z) + b` with `z` the standardised
