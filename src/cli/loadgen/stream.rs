@@ -89,6 +89,24 @@ pub(super) struct Reader {
 }
 
 impl Reader {
+    /// Tallies every text message until the socket closes, then wakes the
+    /// drain wait and hands back the tally.
+    async fn read<S>(mut self, mut stream: S) -> Tally
+    where
+        S: futures_util::Stream<Item = Result<Message, tokio_tungstenite::tungstenite::Error>>
+            + Unpin,
+    {
+        while let Some(message) = stream.next().await {
+            match message {
+                Ok(Message::Text(text)) => self.take(&text),
+                Ok(Message::Close(_)) | Err(_) => break,
+                Ok(_) => {}
+            }
+        }
+        self.drained.notify_one();
+        self.tally
+    }
+
     fn answer_front(&mut self, flight: &mut Flight, now: Instant, timed: bool) {
         if let Some((frame, sent)) = flight.queue.pop_front() {
             if timed {
@@ -188,6 +206,9 @@ pub(super) async fn run_session(
     total
 }
 
+/// One pass over the workload on a fresh socket: a reader task tallies the
+/// answers while frames are sent at the rate, then the pass waits for the last
+/// answers (at most [`DRAIN_TIMEOUT`]) and closes.
 pub(super) async fn run_pass(
     endpoint: &Endpoint,
     path: &str,
@@ -198,61 +219,19 @@ pub(super) async fn run_pass(
     deadline: Instant,
 ) -> anyhow::Result<Tally> {
     let socket = endpoint.connect(path).await?;
-    let (mut sink, mut stream) = socket.split();
+    let (mut sink, stream) = socket.split();
     let flight = Arc::new(Mutex::new(Flight::default()));
     let drained = Arc::new(Notify::new());
-    let mut reader = Reader {
+    let reader = Reader {
         work: work.clone(),
         flight: flight.clone(),
         drained: drained.clone(),
         next: 0,
         tally: Tally::default(),
     };
-    let reading = tokio::spawn(async move {
-        while let Some(message) = stream.next().await {
-            match message {
-                Ok(Message::Text(text)) => reader.take(&text),
-                Ok(Message::Close(_)) | Err(_) => break,
-                Ok(_) => {}
-            }
-        }
-        reader.drained.notify_one();
-        reader.tally
-    });
-    let mut ticks = match rate {
-        Rate::Max => None,
-        Rate::Hz(hz) => {
-            let start = if first {
-                Instant::now() + phase
-            } else {
-                Instant::now()
-            };
-            let mut ticks = tokio::time::interval_at(start, Duration::from_secs_f64(1.0 / hz));
-            ticks.set_missed_tick_behavior(MissedTickBehavior::Delay);
-            Some(ticks)
-        }
-    };
-    let (mut frames_sent, mut epochs_sent) = (0u64, 0u64);
-    let mut send_error = None;
-    for (k, frame) in work.frames.iter().enumerate() {
-        if let Some(ticks) = &mut ticks {
-            ticks.tick().await;
-        }
-        if Instant::now() >= deadline {
-            break;
-        }
-        flight
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .queue
-            .push_back((k, Instant::now()));
-        if let Err(e) = sink.send(Message::Text(frame.clone())).await {
-            send_error = Some(e);
-            break;
-        }
-        frames_sent += 1;
-        epochs_sent += work.ranges[k].len() as u64;
-    }
+    let reading = tokio::spawn(reader.read(stream));
+    let ticks = pacing(rate, if first { phase } else { Duration::ZERO });
+    let sent = send_frames(&mut sink, work, &flight, ticks, deadline).await;
     // Wait for every frame's answer, or give up after DRAIN_TIMEOUT.
     let drain_deadline = Instant::now() + DRAIN_TIMEOUT;
     loop {
@@ -267,14 +246,74 @@ pub(super) async fn run_pass(
         Ok(Ok(tally)) => tally,
         _ => bail!("the socket reader did not finish"),
     };
-    tally.frames_sent = frames_sent;
-    tally.epochs_sent = epochs_sent;
+    tally.frames_sent = sent.frames;
+    tally.epochs_sent = sent.epochs;
     tally.passes = 1;
     tally.unanswered_frames = flight.lock().unwrap_or_else(|p| p.into_inner()).queue.len() as u64;
-    if let Some(e) = send_error {
+    if let Some(e) = sent.error {
         tally
             .failures
             .push(format!("the server dropped the socket: {e}"));
     }
     Ok(tally)
+}
+
+/// What one pass sent.
+struct Sent {
+    frames: u64,
+    epochs: u64,
+    /// The send that failed, ending the pass early.
+    error: Option<tokio_tungstenite::tungstenite::Error>,
+}
+
+/// The send clock: `None` sends as fast as the socket takes frames.
+fn pacing(rate: Rate, phase: Duration) -> Option<tokio::time::Interval> {
+    match rate {
+        Rate::Max => None,
+        Rate::Hz(hz) => {
+            let start = Instant::now() + phase;
+            let mut ticks = tokio::time::interval_at(start, Duration::from_secs_f64(1.0 / hz));
+            ticks.set_missed_tick_behavior(MissedTickBehavior::Delay);
+            Some(ticks)
+        }
+    }
+}
+
+/// Sends the workload's frames in order on the clock, stamping each in the
+/// flight queue just before it goes, until the deadline or a failed send.
+async fn send_frames<S>(
+    sink: &mut S,
+    work: &Workload,
+    flight: &Mutex<Flight>,
+    mut ticks: Option<tokio::time::Interval>,
+    deadline: Instant,
+) -> Sent
+where
+    S: futures_util::Sink<Message, Error = tokio_tungstenite::tungstenite::Error> + Unpin,
+{
+    let mut sent = Sent {
+        frames: 0,
+        epochs: 0,
+        error: None,
+    };
+    for (k, frame) in work.frames.iter().enumerate() {
+        if let Some(ticks) = &mut ticks {
+            ticks.tick().await;
+        }
+        if Instant::now() >= deadline {
+            break;
+        }
+        flight
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .queue
+            .push_back((k, Instant::now()));
+        if let Err(e) = sink.send(Message::Text(frame.clone())).await {
+            sent.error = Some(e);
+            break;
+        }
+        sent.frames += 1;
+        sent.epochs += work.ranges[k].len() as u64;
+    }
+    sent
 }

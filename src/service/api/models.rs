@@ -255,46 +255,70 @@ fn learn_error(e: LearnError, training: bool) -> ApiError {
 /// Parses and checks a training request up to the point where only training can fail.
 fn parse_train(body: Value, limits: &Limits) -> Result<TrainJob, ApiError> {
     let mut body = object(body, "", &["kind", "params", "data", "cv", "name"])?;
-    let kind = match body.remove("kind") {
-        Some(Value::String(k)) => serde_json::from_value::<ModelKind>(Value::String(k.clone()))
-            .map_err(|_| {
-                ApiError::invalid(
-                    "kind",
-                    format!("unknown model kind '{k}'; one of lssvm, lw-lssvm, svm, ocsvm"),
-                )
-            })?,
-        _ => {
-            return Err(ApiError::invalid(
-                "kind",
-                "required: one of lssvm, lw-lssvm, svm, ocsvm",
-            ));
-        }
-    };
-    let name = match body.remove("name") {
-        None | Some(Value::Null) => None,
-        Some(Value::String(s)) if s.chars().count() <= MAX_NAME_CHARS => Some(s),
-        Some(_) => {
-            return Err(ApiError::invalid(
-                "name",
-                format!("must be a string of at most {MAX_NAME_CHARS} characters"),
-            ));
-        }
-    };
+    let kind = parse_kind(body.remove("kind"))?;
+    let name = parse_name(body.remove("name"))?;
     let params = ModelParams::from_json(kind, &body.remove("params").unwrap_or(Value::Null))
         .map_err(|e| learn_error(e, true))?;
-    let cv = match body.remove("cv") {
-        None | Some(Value::Null) => None,
+    let cv = parse_cv(kind, body.remove("cv"))?;
+    let data = parse_data(kind, body.remove("data"), limits)?;
+    if kind.is_regression() && data.n() > limits.max_lssvm_samples {
+        return Err(ApiError::TooLarge(format!(
+            "{} samples; kind '{}' solves a dense n × n system and is limited to {}",
+            data.n(),
+            kind.as_str(),
+            limits.max_lssvm_samples
+        )));
+    }
+    check_folds(&params, cv.as_ref(), data.n())?;
+    Ok(TrainJob {
+        name,
+        params,
+        cv,
+        data,
+    })
+}
+
+/// `kind`: required, one of the four model kinds.
+fn parse_kind(kind: Option<Value>) -> Result<ModelKind, ApiError> {
+    let Some(Value::String(k)) = kind else {
+        return Err(ApiError::invalid(
+            "kind",
+            "required: one of lssvm, lw-lssvm, svm, ocsvm",
+        ));
+    };
+    serde_json::from_value::<ModelKind>(Value::String(k.clone())).map_err(|_| {
+        ApiError::invalid(
+            "kind",
+            format!("unknown model kind '{k}'; one of lssvm, lw-lssvm, svm, ocsvm"),
+        )
+    })
+}
+
+/// `name`: optional, a string of at most [`MAX_NAME_CHARS`] characters.
+fn parse_name(name: Option<Value>) -> Result<Option<String>, ApiError> {
+    match name {
+        None | Some(Value::Null) => Ok(None),
+        Some(Value::String(s)) if s.chars().count() <= MAX_NAME_CHARS => Ok(Some(s)),
+        Some(_) => Err(ApiError::invalid(
+            "name",
+            format!("must be a string of at most {MAX_NAME_CHARS} characters"),
+        )),
+    }
+}
+
+/// `cv`: optional, and only for the regression kinds.
+fn parse_cv(kind: ModelKind, cv: Option<Value>) -> Result<Option<CvParams>, ApiError> {
+    match cv {
+        None | Some(Value::Null) => Ok(None),
         // learn::svm refuses a cv block (no hyper-parameter search for SMO yet):
         // say so now rather than fail the job.
-        Some(_) if !kind.is_regression() => {
-            return Err(ApiError::invalid(
-                "cv",
-                format!(
-                    "kind '{}' has no cross-validation; give its parameters",
-                    kind.as_str()
-                ),
-            ));
-        }
+        Some(_) if !kind.is_regression() => Err(ApiError::invalid(
+            "cv",
+            format!(
+                "kind '{}' has no cross-validation; give its parameters",
+                kind.as_str()
+            ),
+        )),
         Some(v) => {
             let cv: CvParams = learn::model::parse_at(&v).map_err(|(path, message)| {
                 let field = if path.is_empty() {
@@ -305,12 +329,16 @@ fn parse_train(body: Value, limits: &Limits) -> Result<TrainJob, ApiError> {
                 ApiError::invalid(field, message)
             })?;
             cv.check().map_err(|e| learn_error(e, true))?;
-            Some(cv)
+            Ok(Some(cv))
         }
-    };
-    let data = body
-        .remove("data")
-        .ok_or_else(|| ApiError::invalid("data", "required: {\"x\": [[...]], \"y\": [...]}"))?;
+    }
+}
+
+/// `data`: `x` (one array per sample, within the limits) and `y` exactly when
+/// the kind trains on targets or labels (labels −1/+1 for `svm`).
+fn parse_data(kind: ModelKind, data: Option<Value>, limits: &Limits) -> Result<Dataset, ApiError> {
+    let data =
+        data.ok_or_else(|| ApiError::invalid("data", "required: {\"x\": [[...]], \"y\": [...]}"))?;
     let mut data = object(data, "data", &["x", "y"])?;
     let x = data
         .remove("x")
@@ -338,25 +366,11 @@ fn parse_train(body: Value, limits: &Limits) -> Result<TrainJob, ApiError> {
         }
         _ => {}
     }
-    let data = Dataset::new(&x, y.as_deref()).map_err(|e| learn_error(e, true))?;
-    if kind.is_regression() && data.n() > limits.max_lssvm_samples {
-        return Err(ApiError::TooLarge(format!(
-            "{} samples; kind '{}' solves a dense n × n system and is limited to {}",
-            data.n(),
-            kind.as_str(),
-            limits.max_lssvm_samples
-        )));
-    }
+    let dataset = Dataset::new(&x, y.as_deref()).map_err(|e| learn_error(e, true))?;
     if kind == ModelKind::Svm {
         check_labels(y.as_deref().unwrap_or_default())?;
     }
-    check_folds(&params, cv.as_ref(), data.n())?;
-    Ok(TrainJob {
-        name,
-        params,
-        cv,
-        data,
-    })
+    Ok(dataset)
 }
 
 /// Cross-validation (a `cv` block, or a hyper-parameter `"auto"`) needs at least

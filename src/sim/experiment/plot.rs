@@ -234,7 +234,8 @@ impl Chart {
         svg
     }
 
-    /// Draws the chart into `svg` with `plotters`.
+    /// Draws the chart into `svg` with `plotters`: title, axes, ticks, series,
+    /// threshold and legend, in that order.
     fn draw(&self, svg: &mut String) -> Result<(), String> {
         let f = self.frame();
         let (w, h) = (self.width.max(1.0) as u32, self.height.max(1.0) as u32);
@@ -247,16 +248,7 @@ impl Chart {
         root.draw_text(&self.title, &title, ((w / 2) as i32, 20))
             .map_err(|e| e.to_string())?;
 
-        // A log axis is drawn as a linear axis over log10(y), ticked at whole decades.
-        let ay = |y: f64| if self.log_y { y.log10() } else { y };
-        let (x_lo, x_hi) = f.x;
-        let (y_lo, y_hi) = (ay(f.y.0), ay(f.y.1));
-        let x_step = nice_step((x_hi - x_lo) / 8.0);
-        let y_step = if self.log_y {
-            1.0
-        } else {
-            nice_step((y_hi - y_lo) / 6.0)
-        };
+        let axes = self.axes(&f);
         let (left, right, top, bottom) = (
             f.left,
             self.width - f.left - f.w,
@@ -268,7 +260,7 @@ impl Chart {
             .margin_right(right.max(0.0) as u32)
             .x_label_area_size(bottom.max(0.0) as u32)
             .y_label_area_size(left as u32)
-            .build_cartesian_2d(x_lo..x_hi, y_lo..y_hi)
+            .build_cartesian_2d(axes.x.0..axes.x.1, axes.y.0..axes.y.1)
             .map_err(|e| e.to_string())?;
         // The mesh draws the axes and their descriptions; the ticks are ours (1–2–5
         // steps, decades on a log axis), as plotters' own key points cannot be
@@ -284,72 +276,9 @@ impl Chart {
             .y_desc(self.y_label.as_str())
             .draw()
             .map_err(|e| e.to_string())?;
-        let grid = |from: (f64, f64), to: (f64, f64)| PathElement::new([from, to], GRID_COLOUR);
-        let tick_font = ("sans-serif", 12).into_font().color(&BLACK);
-        let below = tick_font.pos(Pos::new(HPos::Center, VPos::Top));
-        for v in ticks(x_lo, x_hi, x_step) {
-            chart
-                .draw_series([grid((v, y_lo), (v, y_hi))])
-                .map_err(|e| e.to_string())?;
-            let at = (f.px(v) as i32, (f.top + f.h + 6.0) as i32);
-            root.draw_text(&tick_label(v, x_step), &below, at)
-                .map_err(|e| e.to_string())?;
-        }
-        let left_of = tick_font.pos(Pos::new(HPos::Right, VPos::Center));
-        for v in ticks(y_lo, y_hi, y_step) {
-            chart
-                .draw_series([grid((x_lo, v), (x_hi, v))])
-                .map_err(|e| e.to_string())?;
-            let (label, y) = if self.log_y {
-                (format!("1e{}", v.round() as i32), 10f64.powf(v))
-            } else {
-                (tick_label(v, y_step), v)
-            };
-            let at = ((f.left - 6.0) as i32, f.py(y) as i32);
-            root.draw_text(&label, &left_of, at)
-                .map_err(|e| e.to_string())?;
-        }
-
-        for (i, series) in self.series.iter().enumerate() {
-            let colour = PALETTE[i % PALETTE.len()];
-            let points: Vec<(f64, f64)> = series
-                .points
-                .iter()
-                .copied()
-                .filter(|(x, y)| x.is_finite() && y.is_finite())
-                .map(|(x, y)| (x, ay(if self.log_y { y.max(f.y.0) } else { y })))
-                .map(|(x, y)| (x, y.clamp(y_lo, y_hi)))
-                .collect();
-            chart
-                .draw_series(LineSeries::new(
-                    thin(&points, MAX_POINTS),
-                    colour.stroke_width(1),
-                ))
-                .map_err(|e| e.to_string())?
-                .label(series.label.as_str())
-                .legend(move |(x, y)| {
-                    PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(2))
-                });
-        }
-        if let Some(th) = &self.threshold
-            && th.y.is_finite()
-            && (!self.log_y || th.y > 0.0)
-        {
-            let y = ay(th.y).clamp(y_lo, y_hi);
-            chart
-                .draw_series(LineSeries::new(
-                    [(x_lo, y), (x_hi, y)],
-                    THRESHOLD_COLOUR.stroke_width(2),
-                ))
-                .map_err(|e| e.to_string())?;
-            let style = ("sans-serif", 12)
-                .into_font()
-                .color(&THRESHOLD_COLOUR)
-                .pos(Pos::new(HPos::Right, VPos::Bottom));
-            let (px, py) = (f.left + f.w - 4.0, f.py(th.y) - 4.0);
-            root.draw_text(&th.label, &style, (px as i32, py as i32))
-                .map_err(|e| e.to_string())?;
-        }
+        self.draw_ticks(&root, &mut chart, &f, &axes)?;
+        self.draw_series(&mut chart, &f, &axes)?;
+        self.draw_threshold(&root, &mut chart, &f, &axes)?;
         if self.series.len() >= 2 {
             chart
                 .configure_series_labels()
@@ -362,6 +291,139 @@ impl Chart {
         }
         root.present().map_err(|e| e.to_string())
     }
+
+    /// The plotted axes: a log axis is drawn as a linear axis over log10(y),
+    /// ticked at whole decades.
+    fn axes(&self, f: &Frame) -> Axes {
+        let (x_lo, x_hi) = f.x;
+        let (y_lo, y_hi) = (self.axis_y(f.y.0), self.axis_y(f.y.1));
+        let y_step = if self.log_y {
+            1.0
+        } else {
+            nice_step((y_hi - y_lo) / 6.0)
+        };
+        Axes {
+            x: (x_lo, x_hi),
+            y: (y_lo, y_hi),
+            x_step: nice_step((x_hi - x_lo) / 8.0),
+            y_step,
+        }
+    }
+
+    /// A data y value in the plotted (possibly log10) coordinate.
+    fn axis_y(&self, y: f64) -> f64 {
+        if self.log_y { y.log10() } else { y }
+    }
+
+    /// Grid lines and tick labels on both axes.
+    fn draw_ticks(
+        &self,
+        root: &Root<'_>,
+        chart: &mut Plot<'_, '_>,
+        f: &Frame,
+        a: &Axes,
+    ) -> Result<(), String> {
+        let grid = |from: (f64, f64), to: (f64, f64)| PathElement::new([from, to], GRID_COLOUR);
+        let tick_font = ("sans-serif", 12).into_font().color(&BLACK);
+        let below = tick_font.pos(Pos::new(HPos::Center, VPos::Top));
+        for v in ticks(a.x.0, a.x.1, a.x_step) {
+            chart
+                .draw_series([grid((v, a.y.0), (v, a.y.1))])
+                .map_err(|e| e.to_string())?;
+            let at = (f.px(v) as i32, (f.top + f.h + 6.0) as i32);
+            root.draw_text(&tick_label(v, a.x_step), &below, at)
+                .map_err(|e| e.to_string())?;
+        }
+        let left_of = tick_font.pos(Pos::new(HPos::Right, VPos::Center));
+        for v in ticks(a.y.0, a.y.1, a.y_step) {
+            chart
+                .draw_series([grid((a.x.0, v), (a.x.1, v))])
+                .map_err(|e| e.to_string())?;
+            let (label, y) = if self.log_y {
+                (format!("1e{}", v.round() as i32), 10f64.powf(v))
+            } else {
+                (tick_label(v, a.y_step), v)
+            };
+            let at = ((f.left - 6.0) as i32, f.py(y) as i32);
+            root.draw_text(&label, &left_of, at)
+                .map_err(|e| e.to_string())?;
+        }
+        Ok(())
+    }
+
+    /// Every series as a thinned line, clamped to the axis, with its legend entry.
+    fn draw_series(&self, chart: &mut Plot<'_, '_>, f: &Frame, a: &Axes) -> Result<(), String> {
+        for (i, series) in self.series.iter().enumerate() {
+            let colour = PALETTE[i % PALETTE.len()];
+            let points: Vec<(f64, f64)> = series
+                .points
+                .iter()
+                .copied()
+                .filter(|(x, y)| x.is_finite() && y.is_finite())
+                .map(|(x, y)| (x, self.axis_y(if self.log_y { y.max(f.y.0) } else { y })))
+                .map(|(x, y)| (x, y.clamp(a.y.0, a.y.1)))
+                .collect();
+            chart
+                .draw_series(LineSeries::new(
+                    thin(&points, MAX_POINTS),
+                    colour.stroke_width(1),
+                ))
+                .map_err(|e| e.to_string())?
+                .label(series.label.as_str())
+                .legend(move |(x, y)| {
+                    PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(2))
+                });
+        }
+        Ok(())
+    }
+
+    /// The threshold as a solid horizontal line with its label at the right end.
+    fn draw_threshold(
+        &self,
+        root: &Root<'_>,
+        chart: &mut Plot<'_, '_>,
+        f: &Frame,
+        a: &Axes,
+    ) -> Result<(), String> {
+        let Some(th) = &self.threshold else {
+            return Ok(());
+        };
+        if !th.y.is_finite() || (self.log_y && th.y <= 0.0) {
+            return Ok(());
+        }
+        let y = self.axis_y(th.y).clamp(a.y.0, a.y.1);
+        chart
+            .draw_series(LineSeries::new(
+                [(a.x.0, y), (a.x.1, y)],
+                THRESHOLD_COLOUR.stroke_width(2),
+            ))
+            .map_err(|e| e.to_string())?;
+        let style = ("sans-serif", 12)
+            .into_font()
+            .color(&THRESHOLD_COLOUR)
+            .pos(Pos::new(HPos::Right, VPos::Bottom));
+        let (px, py) = (f.left + f.w - 4.0, f.py(th.y) - 4.0);
+        root.draw_text(&th.label, &style, (px as i32, py as i32))
+            .map_err(|e| e.to_string())
+    }
+}
+
+/// The drawing area of one chart.
+type Root<'a> = DrawingArea<SVGBackend<'a>, plotters::coord::Shift>;
+/// The chart's plotting context over f64 data coordinates.
+type Plot<'a, 'b> = ChartContext<
+    'a,
+    SVGBackend<'b>,
+    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+>;
+
+/// The plotted ranges (y in log10 units on a log axis) and tick steps.
+#[derive(Debug, Clone, Copy)]
+struct Axes {
+    x: (f64, f64),
+    y: (f64, f64),
+    x_step: f64,
+    y_step: f64,
 }
 
 /// Where a chart's data lands on the page.
