@@ -665,6 +665,7 @@ impl Monitor for ChannelMonitor {
                 prediction: report.prediction,
                 residual: report.residual,
             },
+            integrity: None,
         })
     }
 

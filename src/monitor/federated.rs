@@ -756,6 +756,7 @@ impl Monitor for FederatedMonitor {
             return Ok(MonitorReport {
                 tests: Vec::new(),
                 outputs: self.outputs.clone(),
+                integrity: None,
             });
         };
         let nav = NavSolution::from_ins(ins);
@@ -782,6 +783,7 @@ impl Monitor for FederatedMonitor {
         Ok(MonitorReport {
             tests,
             outputs: self.outputs.clone(),
+            integrity: None,
         })
     }
 

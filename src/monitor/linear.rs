@@ -315,6 +315,7 @@ impl Monitor for LinearMonitor {
                     innovation: None,
                     x: self.estimate.x.as_slice().to_vec(),
                 },
+                integrity: None,
             });
         };
         let z = DVector::from_column_slice(z);
@@ -335,6 +336,7 @@ impl Monitor for LinearMonitor {
                 innovation: Some(innovation.r.as_slice().to_vec()),
                 x: self.estimate.x.as_slice().to_vec(),
             },
+            integrity: None,
         })
     }
 

@@ -153,6 +153,42 @@ pub enum Outputs {
     },
 }
 
+/// Whether a monitor's solution can be trusted to its protection level
+/// (docs/methods.md §M7): a state of the solution, not a fault of a sensor.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Availability {
+    /// The filter is still converging from its initial covariance: the protection level
+    /// is not yet below the alert limit for the first time. Nothing raises a fault alarm.
+    Converging,
+    /// Protection level within the alert limit.
+    Available,
+    /// Protection level above the alert limit: integrity is not available this epoch.
+    Unavailable,
+}
+
+impl Availability {
+    /// The wire name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Availability::Converging => "converging",
+            Availability::Available => "available",
+            Availability::Unavailable => "unavailable",
+        }
+    }
+}
+
+/// A monitor's integrity this epoch: its protection level against its alert limit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Integrity {
+    /// Available, unavailable or still converging.
+    pub state: Availability,
+    /// The protection level, m.
+    pub protection_level: f64,
+    /// The alert limit, m.
+    pub alert_limit: f64,
+}
+
 /// What one monitor yields for one epoch.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MonitorReport {
@@ -160,6 +196,8 @@ pub struct MonitorReport {
     pub tests: Vec<TestOutcome>,
     /// The monitor's outputs.
     pub outputs: Outputs,
+    /// Integrity availability, for monitors with a protection level (`federated`).
+    pub integrity: Option<Integrity>,
 }
 
 /// A monitor: a model and its tests, stepped once per epoch.

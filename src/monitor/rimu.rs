@@ -366,6 +366,7 @@ impl Monitor for RimuMonitor {
                     isolated: self.isolated.clone(),
                     omega: None,
                 },
+                integrity: None,
             });
         };
         let r = self.config.parity.residual(gyros);
@@ -404,6 +405,7 @@ impl Monitor for RimuMonitor {
                 isolated: self.isolated.clone(),
                 omega: self.omega(gyros),
             },
+            integrity: None,
         })
     }
 

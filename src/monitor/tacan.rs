@@ -356,6 +356,7 @@ impl Monitor for TacanMonitor {
             return Ok(MonitorReport {
                 tests: Vec::new(),
                 outputs: self.outputs.clone(),
+                integrity: None,
             });
         };
         let p = Lla {
@@ -416,6 +417,7 @@ impl Monitor for TacanMonitor {
         Ok(MonitorReport {
             tests,
             outputs: self.outputs.clone(),
+            integrity: None,
         })
     }
 

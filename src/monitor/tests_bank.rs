@@ -11,6 +11,7 @@
 
 use std::sync::Arc;
 
+use crate::detect::consistency::Consistency;
 use crate::detect::{
     Decision, Health, PolicyConfig, PolicyState, Statistic, ThresholdError, ThresholdSpec,
 };
@@ -32,15 +33,22 @@ pub struct TestSlot {
     pub policy: PolicyState,
     /// Other dofs the statistic may have on some epochs, each with its resolved threshold.
     pub alt_dofs: Vec<(u32, f64)>,
-    /// The threshold and policy are the test's own (e.g. the HAL of the `hpl` test):
-    /// monitor-wide spec and policy changes leave them alone.
-    pub fixed: bool,
+    /// The test's own threshold spec (a per-test setting, or a kind's own default such as
+    /// the stuck test's `p_fa`); `None` follows the monitor's. Monitor-wide spec changes
+    /// leave a test with its own spec alone.
+    pub own_spec: Option<ThresholdSpec>,
+    /// The policy is the test's own: monitor-wide policy changes leave it alone.
+    pub own_policy: bool,
+    /// NIS mean and autocorrelation of the normalised innovation the monitor feeds
+    /// ([`TestBank::observe`]); empty for tests fed none.
+    pub consistency: Consistency,
 }
 
 impl TestSlot {
-    /// The cached threshold for `dof`: the primary one or one of [`TestSlot::alt_dofs`].
+    /// The cached threshold for `dof`: the primary one or one of [`TestSlot::alt_dofs`]
+    /// (a raw threshold of the test's own is the same for every dof).
     pub fn threshold_for(&self, dof: u32) -> Option<f64> {
-        if dof == self.dof || self.fixed {
+        if dof == self.dof || matches!(self.own_spec, Some(ThresholdSpec::Threshold(_))) {
             return Some(self.threshold);
         }
         self.alt_dofs
@@ -90,7 +98,9 @@ impl TestBank {
                     threshold: spec.resolve(dof)?,
                     policy: PolicyState::new(policy),
                     alt_dofs: Vec::new(),
-                    fixed: false,
+                    own_spec: None,
+                    own_policy: false,
+                    consistency: Consistency::default(),
                 })
             })
             .collect::<Result<Vec<_>, ThresholdError>>()?;
@@ -105,9 +115,10 @@ impl TestBank {
     /// now under the spec in force (and again on every [`TestBank::set_spec`]).
     pub fn add_dofs(&mut self, index: usize, dofs: &[u32]) -> Result<(), ThresholdError> {
         let slot = &mut self.slots[index];
+        let spec = slot.own_spec.unwrap_or(self.spec);
         for &dof in dofs {
             if dof != slot.dof && slot.alt_dofs.iter().all(|&(d, _)| d != dof) {
-                let threshold = self.spec.resolve(dof)?;
+                let threshold = spec.resolve(dof)?;
                 slot.alt_dofs.push((dof, threshold));
             }
         }
@@ -129,9 +140,73 @@ impl TestBank {
             threshold,
             policy: PolicyState::new(policy),
             alt_dofs: Vec::new(),
-            fixed: true,
+            own_spec: Some(ThresholdSpec::Threshold(threshold)),
+            own_policy: true,
+            consistency: Consistency::default(),
         });
         self.slots.len() - 1
+    }
+
+    /// Adds a test under the monitor's policy and, with `own_spec`, a threshold spec of
+    /// its own (kept through monitor-wide spec changes); `None` follows the monitor's
+    /// spec. Returns its index.
+    pub fn add_test(
+        &mut self,
+        name: &str,
+        dof: u32,
+        own_spec: Option<ThresholdSpec>,
+    ) -> Result<usize, ThresholdError> {
+        let threshold = own_spec.unwrap_or(self.spec).resolve(dof)?;
+        self.slots.push(TestSlot {
+            name: TestName::from(name),
+            dof,
+            threshold,
+            policy: PolicyState::new(self.policy),
+            alt_dofs: Vec::new(),
+            own_spec,
+            own_policy: false,
+            consistency: Consistency::default(),
+        });
+        Ok(self.slots.len() - 1)
+    }
+
+    /// Gives test `index` a threshold spec of its own, or with `None` returns it to the
+    /// monitor's spec (thresholds of every dof resolved now); on error nothing changes.
+    pub fn set_test_spec(
+        &mut self,
+        index: usize,
+        own_spec: Option<ThresholdSpec>,
+    ) -> Result<(), ThresholdError> {
+        let spec = own_spec.unwrap_or(self.spec);
+        let slot = &self.slots[index];
+        let threshold = spec.resolve(slot.dof)?;
+        let alt = slot
+            .alt_dofs
+            .iter()
+            .map(|&(d, _)| Ok((d, spec.resolve(d)?)))
+            .collect::<Result<Vec<_>, ThresholdError>>()?;
+        let slot = &mut self.slots[index];
+        slot.threshold = threshold;
+        slot.alt_dofs = alt;
+        slot.own_spec = own_spec;
+        Ok(())
+    }
+
+    /// The index of the test named `name`.
+    pub fn index_of(&self, name: &str) -> Option<usize> {
+        self.slots.iter().position(|s| &*s.name == name)
+    }
+
+    /// Feeds test `index`'s consistency diagnostics with this epoch's normalised
+    /// innovation `nu` when the epoch's decision is healthy; otherwise the lag chain
+    /// breaks (docs/methods.md §M22).
+    pub fn observe(&mut self, index: usize, nu: &[f64], health: Health) {
+        let c = &mut self.slots[index].consistency;
+        if health == Health::Healthy {
+            c.observe(nu);
+        } else {
+            c.interrupt();
+        }
     }
 
     /// The tests.
@@ -149,14 +224,14 @@ impl TestBank {
         self.policy
     }
 
-    /// Applies a new threshold spec to every test but the fixed ones (primary and
+    /// Applies a new threshold spec to every test but those with their own (primary and
     /// alternative dofs); on error nothing changes.
     pub fn set_spec(&mut self, spec: ThresholdSpec) -> Result<(), ThresholdError> {
         let resolved = self
             .slots
             .iter()
             .map(|s| {
-                if s.fixed {
+                if s.own_spec.is_some() {
                     return Ok((s.threshold, s.alt_dofs.clone()));
                 }
                 let alt = s
@@ -175,19 +250,21 @@ impl TestBank {
         Ok(())
     }
 
-    /// Applies a new policy to every test but the fixed ones (counters restart, health kept).
+    /// Applies a new policy to every test but those with their own (counters restart,
+    /// health kept).
     pub fn set_policy(&mut self, policy: PolicyConfig) {
-        for slot in self.slots.iter_mut().filter(|s| !s.fixed) {
+        for slot in self.slots.iter_mut().filter(|s| !s.own_policy) {
             slot.policy.set_config(policy);
         }
         self.policy = policy;
     }
 
     /// Restarts every policy (each under its own configuration) from its initial
-    /// counters, healthy.
+    /// counters, healthy, and forgets the consistency diagnostics.
     pub fn reset(&mut self) {
         for slot in &mut self.slots {
             slot.policy = PolicyState::new(slot.policy.config());
+            slot.consistency.reset();
         }
     }
 
@@ -223,7 +300,7 @@ impl TestBank {
         let slot = &self.slots[index];
         let threshold = match slot.threshold_for(dof) {
             Some(t) => t,
-            None => self.spec.resolve(dof)?,
+            None => slot.own_spec.unwrap_or(self.spec).resolve(dof)?,
         };
         let statistic = Statistic {
             value,
@@ -352,6 +429,62 @@ mod tests {
         bank.reset();
         assert_eq!(bank.slots()[1].policy.health(), Health::Healthy);
         assert_eq!(bank.slots()[1].policy.config(), PolicyConfig::Classic);
+    }
+
+    #[test]
+    fn a_test_with_its_own_spec_keeps_it_and_follows_the_monitor_policy() {
+        let mut bank = TestBank::new(
+            &[("gnss", 3)],
+            ThresholdSpec::PFa(0.002),
+            PolicyConfig::Classic,
+        )
+        .unwrap();
+        let stuck = bank
+            .add_test("gnss.stuck", 1, Some(ThresholdSpec::PFa(1e-5)))
+            .unwrap();
+        let drift = bank.add_test("gnss.drift", 3, None).unwrap();
+        assert!((bank.slots()[stuck].threshold - 19.5114).abs() < 1e-4);
+        assert!((bank.slots()[drift].threshold - 14.7955).abs() < 1e-4);
+        bank.set_spec(ThresholdSpec::PFa(1e-5)).unwrap();
+        bank.set_policy(PolicyConfig::counters_default());
+        assert!((bank.slots()[drift].threshold - 25.9017).abs() < 1e-4);
+        assert!((bank.slots()[stuck].threshold - 19.5114).abs() < 1e-4);
+        assert_eq!(
+            bank.slots()[stuck].policy.config(),
+            PolicyConfig::counters_default()
+        );
+        // A per-test setting, then back to the monitor's.
+        bank.set_test_spec(0, Some(ThresholdSpec::Threshold(30.0)))
+            .unwrap();
+        assert_eq!(bank.slots()[0].threshold, 30.0);
+        assert!(
+            bank.set_test_spec(0, Some(ThresholdSpec::PFa(3.0)))
+                .is_err()
+        );
+        assert_eq!(bank.slots()[0].threshold, 30.0);
+        bank.set_test_spec(0, None).unwrap();
+        assert!((bank.slots()[0].threshold - 25.9017).abs() < 1e-4);
+        assert_eq!(bank.index_of("gnss.drift"), Some(drift));
+    }
+
+    #[test]
+    fn observe_feeds_consistency_only_on_healthy_epochs() {
+        let mut bank = TestBank::new(
+            &[("a", 1)],
+            ThresholdSpec::PFa(0.002),
+            PolicyConfig::Classic,
+        )
+        .unwrap();
+        bank.observe(0, &[1.0], Health::Healthy);
+        bank.observe(0, &[9.0], Health::Isolated);
+        bank.observe(0, &[1.0], Health::Healthy);
+        let mut c = bank.slots()[0].consistency.clone();
+        let s = c.summary().unwrap();
+        assert_eq!(s.samples, 2);
+        assert_eq!(s.nis_mean, 1.0);
+        assert_eq!(s.autocorr, None, "the isolated epoch broke the lag chain");
+        bank.reset();
+        assert!(bank.slots()[0].consistency.clone().summary().is_none());
     }
 
     #[test]

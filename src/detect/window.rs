@@ -1,0 +1,625 @@
+//! A windowed-mean test whose variance is estimated from the signal's own healthy
+//! history by batch means (docs/methods.md §M20). It is the calibrated form of seed
+//! 000's T_a (the `channel` monitor) and the drift test on Kalman innovations (`linear`
+//! and `federated`): both sum the last `n` inputs and ask whether their mean is zero.
+//!
+//! - **Window**: the mean `m` of the last `n` inputs (the newest included).
+//! - **Variance of `m`**: the healthy history is cut into consecutive, non-overlapping
+//!   blocks of `n` inputs; the last `max_blocks` block means `m_b` give
+//!   `Σ̂ = (1/B) Σ_b m_b m_bᵀ` (about zero, so a standing bias counts as variance and
+//!   does not fail the test). Each block mean is a window mean, so `Σ̂` estimates the
+//!   variance of exactly the statistic tested, whatever the autocorrelation of the
+//!   inputs within a window (slow wander, a predictor's coloured error, correlated
+//!   innovations): this is what the successive-difference V of seed 000 eq. 16 misses.
+//!   A block is only formed from inputs whose epoch was healthy; an unhealthy epoch
+//!   discards the block in progress, so a fault never enters `Σ̂` (frozen while not
+//!   healthy).
+//! - **Distribution**: with Gaussian inputs and independent blocks, `B Σ̂` is Wishart
+//!   with `B` degrees of freedom and `T² = mᵀ Σ̂⁻¹ m` is Hotelling's:
+//!   `T² (B − d + 1)/(B d) ~ F(d, B − d + 1)`. As `B` grows the F law tends to the χ².
+//! - **Several window lengths** ("scales", e.g. 1 and 10: a step is seen by the short
+//!   one at once, a slow drift by the long one): each scale has its own blocks and tail
+//!   probability `p_i`; the test's tail is the Bonferroni bound `min(1, S · min_i p_i)`
+//!   over its `S` scales, so the false-alarm probability stays at or below the nominal.
+//! - **Reported value**: the χ²(d) value with that tail probability
+//!   ([`chi2_equivalent`]), so a monitor's χ² threshold (from `p_fa`) gives the test's
+//!   own false-alarm probability, and a raw threshold keeps its χ² meaning.
+//! - **Warm-up**: a scale reports nothing until `min_blocks` healthy blocks exist,
+//!   unless a *known* covariance `C` of one input is given (whitened Kalman
+//!   innovations: `C = I`); then `n mᵀ C⁻¹ m ~ χ²(d)` is used until the blocks take over.
+
+use std::collections::VecDeque;
+
+use nalgebra::{DMatrix, DVector};
+
+use super::chi2;
+
+/// Default number of block means kept per scale (its variance's memory is
+/// `max_blocks · n` epochs).
+pub const DEFAULT_MAX_BLOCKS: usize = 50;
+/// Default number of healthy blocks before a scale's estimated variance is used.
+pub const DEFAULT_MIN_BLOCKS: usize = 10;
+
+/// Smallest tail probability mapped to a χ² value (below it the value saturates).
+const MIN_TAIL: f64 = 1e-300;
+
+/// Why an input could not be used.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum WindowError {
+    /// The input does not have the test's dimension.
+    #[error("input has {got} components, the test expects {want}")]
+    Dimension {
+        /// Components received.
+        got: usize,
+        /// Components expected.
+        want: usize,
+    },
+    /// A component is NaN or infinite.
+    #[error("input has a non-finite component")]
+    NonFinite,
+    /// The known covariance has no Cholesky factor.
+    #[error("the known covariance is not positive definite")]
+    Singular,
+}
+
+/// Parameters of a [`WindowTest`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct WindowParams {
+    /// Input dimension d (≥ 1).
+    pub dim: usize,
+    /// Window lengths, each also its block length (each ≥ 1; at least one).
+    pub scales: Vec<usize>,
+    /// Block means kept per scale (≥ `min_blocks`).
+    pub max_blocks: usize,
+    /// Healthy blocks before a scale's estimated variance is used (≥ d + 1, so the F law
+    /// has a positive second dof).
+    pub min_blocks: usize,
+}
+
+impl WindowParams {
+    /// Windows of the given lengths over inputs of dimension `dim`, default block counts.
+    pub fn new(dim: usize, scales: &[usize]) -> Self {
+        WindowParams {
+            dim,
+            scales: scales.to_vec(),
+            max_blocks: DEFAULT_MAX_BLOCKS,
+            min_blocks: DEFAULT_MIN_BLOCKS,
+        }
+        .normalised()
+    }
+
+    /// Raises out-of-range values to their minimum (callers validate user input first).
+    fn normalised(mut self) -> Self {
+        self.dim = self.dim.max(1);
+        self.min_blocks = self.min_blocks.max(self.dim + 1);
+        self.max_blocks = self.max_blocks.max(self.min_blocks);
+        for n in &mut self.scales {
+            *n = (*n).max(1);
+        }
+        if self.scales.is_empty() {
+            self.scales.push(1);
+        }
+        self
+    }
+
+    /// The longest window.
+    pub fn longest(&self) -> usize {
+        self.scales.iter().copied().max().unwrap_or(1)
+    }
+}
+
+/// One evaluation of the test.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WindowValue {
+    /// The χ²(d) value with the test's tail probability: what is compared with the
+    /// threshold.
+    pub value: f64,
+    /// The combined upper-tail probability under no fault (Bonferroni over the scales).
+    pub tail: f64,
+    /// The window length whose tail was smallest.
+    pub scale: usize,
+    /// That scale's `mᵀ Σ̂⁻¹ m` (Hotelling's T², or `n mᵀ C⁻¹ m` under the known
+    /// covariance).
+    pub raw: f64,
+    /// Healthy blocks behind that scale's Σ̂ (0 while the known covariance is used).
+    pub blocks: usize,
+}
+
+/// The χ²(dof) value whose upper-tail probability is `tail` (clamped to
+/// `[1e-300, 1)`; a tail of 1 gives 0). Maps a test with another null law onto the χ²
+/// scale of its dof, so thresholds from `p_fa` keep their meaning.
+pub fn chi2_equivalent(dof: u32, tail: f64) -> f64 {
+    if tail.is_nan() || tail >= 1.0 {
+        return 0.0;
+    }
+    chi2::threshold(dof.max(1), tail.max(MIN_TAIL)).unwrap_or(0.0)
+}
+
+/// Upper-tail probability of `F(d1, d2)` at `x`, computed as `I_{d2/(d1 x + d2)}(d2/2,
+/// d1/2)` directly (no `1 − cdf` cancellation in the far tail).
+pub fn f_upper_tail(x: f64, d1: f64, d2: f64) -> f64 {
+    if x <= 0.0 {
+        return 1.0;
+    }
+    if !x.is_finite() {
+        return 0.0;
+    }
+    statrs::function::beta::beta_reg(d2 / 2.0, d1 / 2.0, d2 / (d1 * x + d2))
+}
+
+/// Lower-tail probability of `F(d1, d2)` at `x`: `I_{d1 x/(d1 x + d2)}(d1/2, d2/2)`.
+pub fn f_lower_tail(x: f64, d1: f64, d2: f64) -> f64 {
+    if x <= 0.0 {
+        return 0.0;
+    }
+    if !x.is_finite() {
+        return 1.0;
+    }
+    statrs::function::beta::beta_reg(d1 / 2.0, d2 / 2.0, d1 * x / (d1 * x + d2))
+}
+
+/// A completed healthy block: its mean and the sum of `r rᵀ` over its inputs.
+#[derive(Debug, Clone)]
+struct Block {
+    mean: DVector<f64>,
+    sum_sq: DMatrix<f64>,
+}
+
+/// One window length: its block in progress, its kept blocks and their estimate.
+#[derive(Debug, Clone)]
+struct Scale {
+    n: usize,
+    /// The block being filled: sum of inputs, sum of `r rᵀ`, inputs so far.
+    partial: (DVector<f64>, DMatrix<f64>, usize),
+    blocks: VecDeque<Block>,
+    /// `(Σ̂⁻¹, per-input covariance)` from the kept blocks, once there are enough and Σ̂
+    /// is positive definite.
+    estimate: Option<(DMatrix<f64>, DMatrix<f64>)>,
+}
+
+impl Scale {
+    fn new(n: usize, d: usize, max_blocks: usize) -> Self {
+        Scale {
+            n,
+            partial: (DVector::zeros(d), DMatrix::zeros(d, d), 0),
+            blocks: VecDeque::with_capacity(max_blocks + 1),
+            estimate: None,
+        }
+    }
+
+    fn discard_partial(&mut self) {
+        let d = self.partial.0.nrows();
+        self.partial = (DVector::zeros(d), DMatrix::zeros(d, d), 0);
+    }
+
+    fn add(&mut self, r: &DVector<f64>, params: &WindowParams) {
+        self.partial.1 += r * r.transpose();
+        self.partial.0 += r;
+        self.partial.2 += 1;
+        if self.partial.2 < self.n {
+            return;
+        }
+        let d = params.dim;
+        let (sum, sum_sq, count) = std::mem::replace(
+            &mut self.partial,
+            (DVector::zeros(d), DMatrix::zeros(d, d), 0),
+        );
+        self.blocks.push_back(Block {
+            mean: sum / count as f64,
+            sum_sq,
+        });
+        if self.blocks.len() > params.max_blocks {
+            self.blocks.pop_front();
+        }
+        self.renew(params);
+    }
+
+    /// Recomputes Σ̂⁻¹ and the per-input covariance from the kept blocks (from scratch,
+    /// so no round-off accumulates as blocks come and go).
+    fn renew(&mut self, params: &WindowParams) {
+        let b = self.blocks.len();
+        if b < params.min_blocks {
+            self.estimate = None;
+            return;
+        }
+        let d = params.dim;
+        let mut second = DMatrix::<f64>::zeros(d, d);
+        let mut per_input = DMatrix::<f64>::zeros(d, d);
+        for block in &self.blocks {
+            second += &block.mean * block.mean.transpose();
+            per_input += &block.sum_sq;
+        }
+        second /= b as f64;
+        per_input /= (b * self.n) as f64;
+        // A singular Σ̂ (no spread in some direction) leaves the scale without a variance:
+        // it stays idle rather than divide by zero.
+        self.estimate = second.cholesky().map(|c| (c.inverse(), per_input));
+    }
+
+    /// `(tail, raw, blocks)` of this scale for the window mean `mean`, if it can judge.
+    fn judge(
+        &self,
+        mean: &DVector<f64>,
+        known_inv: Option<&DMatrix<f64>>,
+    ) -> Option<(f64, f64, usize)> {
+        let d = mean.nrows();
+        if let Some((sigma_inv, _)) = &self.estimate {
+            let b = self.blocks.len() as f64;
+            let raw = mean.dot(&(sigma_inv * mean)).max(0.0);
+            let d2 = b - d as f64 + 1.0;
+            let f = raw * d2 / (b * d as f64);
+            return Some((f_upper_tail(f, d as f64, d2), raw, self.blocks.len()));
+        }
+        let inv = known_inv?;
+        let raw = (self.n as f64 * mean.dot(&(inv * mean))).max(0.0);
+        let tail = if raw > 0.0 {
+            chi2::false_alarm_probability(d as u32, raw).unwrap_or(0.0)
+        } else {
+            1.0
+        };
+        Some((tail, raw, 0))
+    }
+}
+
+/// The running windowed-mean test of one signal.
+#[derive(Debug, Clone)]
+pub struct WindowTest {
+    params: WindowParams,
+    /// Covariance of one input under no fault, when known (whitened innovations: I).
+    known: Option<DMatrix<f64>>,
+    known_inv: Option<DMatrix<f64>>,
+    /// The last `longest` inputs, oldest first.
+    window: VecDeque<DVector<f64>>,
+    scales: Vec<Scale>,
+}
+
+impl WindowTest {
+    /// A fresh test whose scales report once `min_blocks` healthy blocks exist.
+    pub fn new(params: WindowParams) -> Self {
+        let params = params.normalised();
+        let scales = params
+            .scales
+            .iter()
+            .map(|&n| Scale::new(n, params.dim, params.max_blocks))
+            .collect();
+        WindowTest {
+            known: None,
+            known_inv: None,
+            window: VecDeque::with_capacity(params.longest() + 1),
+            scales,
+            params,
+        }
+    }
+
+    /// A test whose inputs have covariance `cov` under no fault (e.g. the identity for
+    /// whitened innovations); each scale reports from its first full window.
+    /// `Err(Singular)` if `cov` is not positive definite, `Err(Dimension)` if it is not
+    /// d × d.
+    pub fn with_known_covariance(
+        params: WindowParams,
+        cov: DMatrix<f64>,
+    ) -> Result<Self, WindowError> {
+        let mut test = WindowTest::new(params);
+        let d = test.params.dim;
+        if cov.nrows() != d || cov.ncols() != d {
+            return Err(WindowError::Dimension {
+                got: cov.nrows(),
+                want: d,
+            });
+        }
+        let inv = cov
+            .clone()
+            .cholesky()
+            .ok_or(WindowError::Singular)?
+            .inverse();
+        test.known = Some(cov);
+        test.known_inv = Some(inv);
+        Ok(test)
+    }
+
+    /// The parameters in force.
+    pub fn params(&self) -> &WindowParams {
+        &self.params
+    }
+
+    /// Healthy blocks behind the estimated variance of the shortest scale.
+    pub fn blocks(&self) -> usize {
+        self.scales
+            .iter()
+            .map(|s| s.blocks.len())
+            .min()
+            .unwrap_or(0)
+    }
+
+    /// The covariance of one input: estimated from the healthy blocks' inputs of the
+    /// first scale with an estimate (second moment about zero), else the known one, else
+    /// `None`. Used to normalise inputs for the consistency diagnostics.
+    pub fn input_covariance(&self) -> Option<&DMatrix<f64>> {
+        self.scales
+            .iter()
+            .find_map(|s| s.estimate.as_ref().map(|(_, c)| c))
+            .or(self.known.as_ref())
+    }
+
+    /// Back to the state of a fresh test (the known covariance is kept).
+    pub fn reset(&mut self) {
+        self.window.clear();
+        for s in &mut self.scales {
+            *s = Scale::new(s.n, self.params.dim, self.params.max_blocks);
+        }
+    }
+
+    fn check(&self, r: &[f64]) -> Result<DVector<f64>, WindowError> {
+        if r.len() != self.params.dim {
+            return Err(WindowError::Dimension {
+                got: r.len(),
+                want: self.params.dim,
+            });
+        }
+        if r.iter().any(|v| !v.is_finite()) {
+            return Err(WindowError::NonFinite);
+        }
+        Ok(DVector::from_column_slice(r))
+    }
+
+    /// The test over the windows with `r` appended as the newest input, changing nothing.
+    /// `Ok(None)` until some scale has a full window and a variance.
+    pub fn evaluate(&self, r: &[f64]) -> Result<Option<WindowValue>, WindowError> {
+        let r = self.check(r)?;
+        let held = self.window.len();
+        let mut best: Option<(f64, f64, usize, usize)> = None;
+        for scale in &self.scales {
+            if held + 1 < scale.n {
+                continue;
+            }
+            let mut sum = r.clone();
+            for x in self.window.iter().skip(held + 1 - scale.n) {
+                sum += x;
+            }
+            let mean = sum / scale.n as f64;
+            if let Some((tail, raw, blocks)) = scale.judge(&mean, self.known_inv.as_ref())
+                && best.is_none_or(|b| tail < b.0)
+            {
+                best = Some((tail, raw, scale.n, blocks));
+            }
+        }
+        let Some((tail, raw, scale, blocks)) = best else {
+            return Ok(None);
+        };
+        let tail = (tail * self.scales.len() as f64).min(1.0);
+        Ok(Some(WindowValue {
+            value: chi2_equivalent(self.params.dim as u32, tail),
+            tail,
+            scale,
+            raw,
+            blocks,
+        }))
+    }
+
+    /// Appends `r` to the windows and, when its epoch was healthy, to every scale's block
+    /// in progress (completing a block renews that scale's Σ̂); an unhealthy epoch
+    /// discards the blocks in progress, so Σ̂ stays frozen.
+    pub fn commit(&mut self, r: &[f64], healthy: bool) -> Result<(), WindowError> {
+        let r = self.check(r)?;
+        if self.window.len() >= self.params.longest() {
+            self.window.pop_front();
+        }
+        for scale in &mut self.scales {
+            if healthy {
+                scale.add(&r, &self.params);
+            } else {
+                scale.discard_partial();
+            }
+        }
+        self.window.push_back(r);
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand::rngs::StdRng;
+    use rand_distr::{Distribution, StandardNormal};
+
+    /// AR(1) inputs `x_k = φ x_{k−1} + √(1 − φ²) e_k` (unit variance), `dim` independent
+    /// components; returns the share of epochs (after warm-up) above the χ²(dim)
+    /// threshold for `p_fa`, all epochs healthy.
+    fn exceedance_rate(phi: f64, dim: usize, n: usize, p_fa: f64, epochs: usize, seed: u64) -> f64 {
+        let mut rng = StdRng::seed_from_u64(seed);
+        let mut test = WindowTest::new(WindowParams::new(dim, &[n]));
+        let t = chi2::threshold(dim as u32, p_fa).unwrap();
+        let mut x = vec![0.0; dim];
+        let (mut tested, mut over) = (0usize, 0usize);
+        let g = (1.0 - phi * phi).sqrt();
+        for _ in 0..epochs {
+            for v in x.iter_mut() {
+                let e: f64 = StandardNormal.sample(&mut rng);
+                *v = phi * *v + g * e;
+            }
+            if let Some(v) = test.evaluate(&x).unwrap() {
+                tested += 1;
+                over += usize::from(v.value > t);
+            }
+            test.commit(&x, true).unwrap();
+        }
+        over as f64 / tested as f64
+    }
+
+    #[test]
+    fn f_tails_match_scipy() {
+        // scipy.stats.f.sf(4.0, 1, 20) = 0.05926553544657044
+        assert!((f_upper_tail(4.0, 1.0, 20.0) / 0.059_265_535_446_570_44 - 1.0).abs() < 1e-12);
+        // scipy.stats.f.sf(40.0, 2, 9) = 3.325341578437592e-05
+        assert!((f_upper_tail(40.0, 2.0, 9.0) / 3.325_341_578_437_592e-5 - 1.0).abs() < 1e-12);
+        // scipy.stats.f.cdf(0.01, 5, 300) = 2.9566565798124943e-05
+        assert!((f_lower_tail(0.01, 5.0, 300.0) / 2.956_656_579_812_494_3e-5 - 1.0).abs() < 1e-12);
+        assert_eq!(f_upper_tail(0.0, 3.0, 4.0), 1.0);
+        assert_eq!(f_lower_tail(0.0, 3.0, 4.0), 0.0);
+    }
+
+    #[test]
+    fn chi2_equivalent_inverts_the_chi2_tail() {
+        // χ²(1) at 0.002 is 9.5495 (seed 000 Table 1); χ²(3) at 1e-5 is 25.9017.
+        assert!((chi2_equivalent(1, 0.002) - 9.5495).abs() < 1e-4);
+        assert!((chi2_equivalent(3, 1e-5) - 25.9017).abs() < 1e-4);
+        assert_eq!(chi2_equivalent(2, 1.0), 0.0);
+        assert!(
+            chi2_equivalent(1, 0.0) > 1300.0,
+            "saturates at the 1e-300 tail"
+        );
+    }
+
+    #[test]
+    fn with_white_inputs_it_is_the_f_test_by_hand() {
+        // n = 2, d = 1, min_blocks = max_blocks = 2: blocks [1, 3] → mean 2 and [−1, 0]
+        // → −0.5; Σ̂ = (4 + 0.25)/2 = 2.125. Window [0, 2] → m = 1, T² = 1/2.125.
+        let mut test = WindowTest::new(WindowParams {
+            dim: 1,
+            scales: vec![2],
+            max_blocks: 2,
+            min_blocks: 2,
+        });
+        for r in [1.0, 3.0, -1.0, 0.0] {
+            test.commit(&[r], true).unwrap();
+        }
+        let v = test.evaluate(&[2.0]).unwrap().unwrap();
+        let raw = 1.0 / 2.125;
+        assert!((v.raw - raw).abs() < 1e-15);
+        assert_eq!(v.scale, 2);
+        // F = T² (B − d + 1)/(B d) = raw · 2/2 with dof (1, 2).
+        let tail = f_upper_tail(raw, 1.0, 2.0);
+        assert!((v.tail - tail).abs() < 1e-15);
+        assert!((v.value - chi2::threshold(1, tail).unwrap()).abs() < 1e-12);
+        assert_eq!(v.blocks, 2);
+        // Per-input covariance: (1 + 9 + 1 + 0)/4.
+        assert!((test.input_covariance().unwrap()[(0, 0)] - 2.75).abs() < 1e-15);
+    }
+
+    #[test]
+    fn fault_free_rate_is_nominal_for_white_and_strongly_coloured_inputs() {
+        // 200,000 epochs at p_fa 0.01: binomial sd of the marginal rate is tiny, but the
+        // windows overlap (n = 10), so exceedances come in clusters; allow ±30 %.
+        for (phi, seed) in [(0.0, 1), (0.9, 2), (0.97, 3)] {
+            let rate = exceedance_rate(phi, 1, 10, 0.01, 200_000, seed);
+            assert!(
+                (0.007..0.014).contains(&rate),
+                "φ = {phi}: {rate} of epochs above the 1 % threshold"
+            );
+        }
+        let rate = exceedance_rate(0.9, 2, 10, 0.01, 200_000, 4);
+        assert!((0.007..0.014).contains(&rate), "d = 2: {rate}");
+    }
+
+    #[test]
+    fn two_scales_stay_at_or_below_the_nominal_rate() {
+        // Bonferroni over windows 1 and 10 of AR(1) φ = 0.9 inputs: the two tests are
+        // positively dependent, so the rate is at most p_fa and above p_fa / 2.
+        let mut rng = StdRng::seed_from_u64(7);
+        let mut test = WindowTest::new(WindowParams::new(1, &[1, 10]));
+        let t = chi2::threshold(1, 0.01).unwrap();
+        let (mut x, mut over, mut tested) = (0.0f64, 0usize, 0usize);
+        for _ in 0..200_000 {
+            let e: f64 = StandardNormal.sample(&mut rng);
+            x = 0.9 * x + (1.0f64 - 0.81).sqrt() * e;
+            if let Some(v) = test.evaluate(&[x]).unwrap() {
+                tested += 1;
+                over += usize::from(v.value > t);
+            }
+            test.commit(&[x], true).unwrap();
+        }
+        let rate = over as f64 / tested as f64;
+        assert!((0.005..0.0115).contains(&rate), "{rate}");
+    }
+
+    #[test]
+    fn an_uncalibrated_window_would_be_far_off_on_coloured_inputs() {
+        // The same AR(1) φ = 0.9 inputs judged with the per-input variance (what a
+        // white-noise assumption does): Var(mean of 10) is ≈ 6.4× σ²/10 here.
+        let mut test = WindowTest::with_known_covariance(
+            WindowParams {
+                dim: 1,
+                scales: vec![10],
+                max_blocks: 50,
+                min_blocks: 1_000_000,
+            },
+            DMatrix::identity(1, 1),
+        )
+        .unwrap();
+        let mut rng = StdRng::seed_from_u64(5);
+        let t = chi2::threshold(1, 0.01).unwrap();
+        let (mut x, mut over, mut tested) = (0.0f64, 0, 0);
+        for _ in 0..100_000 {
+            let e: f64 = StandardNormal.sample(&mut rng);
+            x = 0.9 * x + (1.0f64 - 0.81).sqrt() * e;
+            if let Some(v) = test.evaluate(&[x]).unwrap() {
+                tested += 1;
+                over += usize::from(v.value > t);
+            }
+            test.commit(&[x], true).unwrap();
+        }
+        let rate = over as f64 / tested as f64;
+        assert!(rate > 0.15, "{rate}");
+    }
+
+    #[test]
+    fn a_mean_shift_of_four_sigma_over_root_n_is_flagged_and_freezes_the_variance() {
+        let mut test = WindowTest::new(WindowParams::new(1, &[1, 10]));
+        let mut rng = StdRng::seed_from_u64(6);
+        for _ in 0..1000 {
+            let e: f64 = StandardNormal.sample(&mut rng);
+            test.commit(&[e], true).unwrap();
+        }
+        let blocks = test.blocks();
+        let t = chi2::threshold(1, 0.002).unwrap();
+        // A 4σ step: the window mean moves 0.4σ per epoch against sd 1/√10 = 0.32σ.
+        let mut first = None;
+        for k in 0..10 {
+            let e: f64 = StandardNormal.sample(&mut rng);
+            let r = 4.0 + e;
+            let v = test.evaluate(&[r]).unwrap().unwrap();
+            if v.value > t && first.is_none() {
+                first = Some(k);
+            }
+            test.commit(&[r], v.value <= t).unwrap();
+        }
+        assert!(first.unwrap() <= 3, "{first:?}");
+        // Unhealthy epochs complete no block.
+        assert!(test.blocks() <= blocks + 1);
+    }
+
+    #[test]
+    fn known_covariance_reports_from_the_first_full_window() {
+        let mut test =
+            WindowTest::with_known_covariance(WindowParams::new(2, &[3]), DMatrix::identity(2, 2))
+                .unwrap();
+        assert_eq!(test.evaluate(&[1.0, 0.0]).unwrap(), None);
+        test.commit(&[1.0, 0.0], true).unwrap();
+        test.commit(&[1.0, 0.0], true).unwrap();
+        // m = (1, 0), n mᵀ m = 3.
+        let v = test.evaluate(&[1.0, 0.0]).unwrap().unwrap();
+        assert!((v.value - 3.0).abs() < 1e-15);
+        assert_eq!(v.blocks, 0);
+        assert!(matches!(
+            WindowTest::with_known_covariance(WindowParams::new(2, &[3]), DMatrix::zeros(2, 2)),
+            Err(WindowError::Singular)
+        ));
+    }
+
+    #[test]
+    fn bad_inputs_are_errors_not_panics() {
+        let test = WindowTest::new(WindowParams::new(2, &[3]));
+        assert!(matches!(
+            test.evaluate(&[1.0]),
+            Err(WindowError::Dimension { got: 1, want: 2 })
+        ));
+        assert_eq!(test.evaluate(&[f64::NAN, 0.0]), Err(WindowError::NonFinite));
+        let mut test = WindowTest::new(WindowParams::new(1, &[1]));
+        // A constant zero signal: Σ̂ = 0 is singular, the test stays idle.
+        for _ in 0..20 {
+            test.commit(&[0.0], true).unwrap();
+        }
+        assert_eq!(test.evaluate(&[0.0]).unwrap(), None);
+    }
+}
