@@ -19,6 +19,11 @@
 //! - A fault's recovery time is the time from its end to the first healthy epoch
 //!   at or after the end (before the next fault starts); `None` when the test
 //!   never recovers in the run (or the fault lasts past the run's end).
+//! - *Alarms* and *warnings per fault-free hour*: entries into `isolated` (the alarm
+//!   under the default alarm level, docs/architecture.md §A2) and into `suspect` (a
+//!   warning under counters) from a clear epoch, over the clear time (the sum of the
+//!   intervals that start at a clear epoch). `FAR / p_fa` compares the false-alarm rate
+//!   with the nominal rate the threshold was set for ([`Scorecard::with_p_fa`]).
 
 use std::fmt::Write as _;
 
@@ -71,9 +76,38 @@ pub struct Scorecard {
     pub recovery_s: Vec<Option<f64>>,
     /// Wall-clock time per epoch of the monitor that produced the trace, s.
     pub time_per_epoch_s: Option<f64>,
+    /// Clear (fault-free, outside recovery tails) time, h.
+    pub clear_hours: f64,
+    /// Entries into `isolated` from a clear epoch.
+    pub clear_alarms: usize,
+    /// Entries into `suspect` from a clear epoch.
+    pub clear_warnings: usize,
+    /// The nominal per-epoch false-alarm probability of the test, when it has one.
+    pub p_fa: Option<f64>,
 }
 
 impl Scorecard {
+    /// The card with the test's nominal false-alarm probability, for `FAR / p_fa`.
+    pub fn with_p_fa(mut self, p_fa: f64) -> Self {
+        self.p_fa = Some(p_fa);
+        self
+    }
+
+    /// The false-alarm rate as a multiple of the nominal `p_fa`.
+    pub fn far_over_p_fa(&self) -> Option<f64> {
+        Some(self.false_alarm_rate? / self.p_fa?)
+    }
+
+    /// Alarms (entries into `isolated`) per fault-free hour.
+    pub fn alarms_per_hour(&self) -> Option<f64> {
+        (self.clear_hours > 0.0).then(|| self.clear_alarms as f64 / self.clear_hours)
+    }
+
+    /// Warnings (entries into `suspect`) per fault-free hour.
+    pub fn warnings_per_hour(&self) -> Option<f64> {
+        (self.clear_hours > 0.0).then(|| self.clear_warnings as f64 / self.clear_hours)
+    }
+
     /// Largest recovery time, or `None` when no fault ended or one never recovered.
     pub fn max_recovery_s(&self) -> Option<f64> {
         if self.recovery_s.is_empty() || self.recovery_s.iter().any(Option::is_none) {
@@ -135,14 +169,24 @@ pub fn score(
     }
 
     let (mut fault_epochs, mut fault_alarms, mut clear_epochs, mut clear_alarms) = (0, 0, 0, 0);
-    for &(t, h) in trace {
+    let (mut clear_s, mut entries_isolated, mut entries_suspect) = (0.0, 0, 0);
+    let mut previous = Health::Healthy;
+    for (i, &(t, h)) in trace.iter().enumerate() {
         if faults.iter().any(|f| f.contains(t)) {
             fault_epochs += 1;
             fault_alarms += usize::from(alarms(h));
         } else if !tails.iter().any(|f| f.contains(t)) {
             clear_epochs += 1;
             clear_alarms += usize::from(alarms(h));
+            if let Some(&(next, _)) = trace.get(i + 1) {
+                clear_s += next - t;
+            }
+            if h != previous {
+                entries_isolated += usize::from(h == Health::Isolated);
+                entries_suspect += usize::from(h == Health::Suspect);
+            }
         }
+        previous = h;
     }
     let ratio = |a: usize, n: usize| (n > 0).then(|| a as f64 / n as f64);
     let true_positive_rate = ratio(fault_alarms, fault_epochs);
@@ -162,11 +206,19 @@ pub fn score(
         max_delay_s: delays.iter().copied().reduce(f64::max),
         recovery_s,
         time_per_epoch_s,
+        clear_hours: clear_s / 3600.0,
+        clear_alarms: entries_isolated,
+        clear_warnings: entries_suspect,
+        p_fa: None,
     }
 }
 
 fn pct(v: Option<f64>) -> String {
     v.map_or_else(|| "—".to_owned(), |v| format!("{:.2} %", 100.0 * v))
+}
+
+fn per_hour(v: Option<f64>) -> String {
+    v.map_or_else(|| "—".to_owned(), |v| format!("{v:.2}"))
 }
 
 fn secs(v: Option<f64>) -> String {
@@ -178,11 +230,14 @@ pub fn render(cards: &[Scorecard]) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "{:<8} {:<16} {:>9} {:>9} {:>9} {:>8} {:>10} {:>9} {:>12} {:>9}",
+        "{:<8} {:<16} {:>9} {:>9} {:>8} {:>8} {:>7} {:>9} {:>8} {:>10} {:>9} {:>12} {:>9}",
         "test",
         "policy",
         "TPR",
         "FAR",
+        "FAR/p_fa",
+        "alarms/h",
+        "warn/h",
         "MDR",
         "detected",
         "delay mean",
@@ -202,11 +257,15 @@ pub fn render(cards: &[Scorecard]) -> String {
         };
         let _ = writeln!(
             s,
-            "{:<8} {:<16} {:>9} {:>9} {:>9} {:>8} {:>10} {:>9} {:>12} {:>9}",
+            "{:<8} {:<16} {:>9} {:>9} {:>8} {:>8} {:>7} {:>9} {:>8} {:>10} {:>9} {:>12} {:>9}",
             c.detector,
             c.policy,
             pct(c.true_positive_rate),
             pct(c.false_alarm_rate),
+            c.far_over_p_fa()
+                .map_or_else(|| "—".to_owned(), |v| format!("{v:.2}×")),
+            per_hour(c.alarms_per_hour()),
+            per_hour(c.warnings_per_hour()),
             pct(c.missed_detection_rate),
             format!("{}/{}", c.detected, c.faults),
             secs(c.mean_delay_s),
@@ -266,6 +325,13 @@ mod tests {
         assert_eq!(c.mean_delay_s, Some(1.0));
         assert_eq!(c.max_delay_s, Some(1.0));
         assert_eq!(c.recovery_s, vec![Some(0.0)]);
+        // Clear entries: isolated at 2, suspect at 14; 17 clear epochs of 1 s, the last
+        // has no successor.
+        assert_eq!((c.clear_alarms, c.clear_warnings), (1, 1));
+        assert!((c.clear_hours - 16.0 / 3600.0).abs() < 1e-15);
+        assert!((c.alarms_per_hour().unwrap() - 3600.0 / 16.0).abs() < 1e-9);
+        let c = c.with_p_fa(0.01);
+        assert!((c.far_over_p_fa().unwrap() - 200.0 / 17.0).abs() < 1e-9);
     }
 
     #[test]
