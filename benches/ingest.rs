@@ -76,8 +76,11 @@ fn bench(c: &mut Criterion) {
             policy: PolicyConfig::Classic,
             p_fa: None,
             threshold: None,
+            alarm_level: None,
+            tests: Default::default(),
         }],
         echo: true,
+        alarm_level: None,
     };
     runtime.block_on(async {
         let resp = reqwest::Client::new()

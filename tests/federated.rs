@@ -411,7 +411,9 @@ fn in_process_alarms(
     let mut alarms = Vec::new();
     for e in epochs {
         for o in m.step(e).unwrap().tests {
-            if o.previous != o.decision.health && o.decision.health != Health::Healthy {
+            // Under the default alarm level only entering `isolated` is an alarm
+            // (entering `suspect` is a warning, announced as a `state` event).
+            if o.previous != o.decision.health && o.decision.health == Health::Isolated {
                 alarms.push((
                     o.name.to_string(),
                     o.decision.health.as_str().to_owned(),

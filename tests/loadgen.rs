@@ -46,8 +46,11 @@ fn linear_session(id: &str) -> CreateSession {
             policy: PolicyConfig::Classic,
             p_fa: None,
             threshold: None,
+            alarm_level: None,
+            tests: Default::default(),
         }],
         echo: true,
+        alarm_level: None,
     }
 }
 

@@ -741,8 +741,8 @@ fn schema_checker_rejects_what_the_spec_forbids() {
     let doc = spec();
     let c = Checker::new(&doc);
     let alarm = json!({
-        "type": "alarm", "id": 1, "session": "s", "monitor": "m", "test": "residual",
-        "state": "isolated", "t": 1.0, "statistic": 30.0, "threshold": 9.5, "dof": 1,
+        "type": "alarm", "id": 1, "severity": "alarm", "session": "s", "monitor": "m",
+        "test": "residual", "state": "isolated", "t": 1.0, "statistic": 30.0, "threshold": 9.5, "dof": 1,
         "test_ratio": 3.1, "delay_s": 0.0, "raised_at_ms": 1, "cleared_t": null
     });
     let mut alarm_plus = alarm.clone();
@@ -785,7 +785,24 @@ fn schema_checker_rejects_what_the_spec_forbids() {
         ("Epoch", json!({"t": 0, "ins": bad_ins}), false),
         ("AlarmMessage", alarm.clone(), true),
         ("AlarmMessage", alarm_plus, false),
-        ("AlarmRecord", alarm, false),
+        ("AlarmRecord", alarm.clone(), false),
+        // Entries carry their severity.
+        (
+            "AlarmMessage",
+            {
+                let mut a = alarm.clone();
+                a.as_object_mut().unwrap().remove("severity");
+                a
+            },
+            false,
+        ),
+        (
+            "TestThresholdSpec",
+            json!({"p_fa": 0.01, "threshold": 3.0}),
+            false,
+        ),
+        ("TestThresholdSpec", json!({}), false),
+        ("TestThresholdSpec", json!({"threshold": 3.0}), true),
         // `pattern` is enforced (the hand-written checker this replaced ignored it).
         ("Name", json!("ok_id-1.2"), true),
         ("Name", json!("has space"), false),

@@ -159,7 +159,7 @@ async fn counters_policy_goes_suspect_then_isolated_and_recovers_after_the_step(
     create_session(
         &client(),
         &server,
-        &cv_session("veh2", &MODEL, policy, json!({"p_fa": 1e-5}), false),
+        &cv_session("veh2", &MODEL, policy.clone(), json!({"p_fa": 1e-5}), false),
     )
     .await;
     let mut socket = ingest(&server, "veh2").await;
@@ -168,6 +168,7 @@ async fn counters_policy_goes_suspect_then_isolated_and_recovers_after_the_step(
     let z = MODEL.measurements(2000, 7, |k| 3.0 * step_fault(k));
     stream(&mut socket, &epochs(&z, 0), 250).await;
     let mut changes = Vec::new();
+    let mut severities = Vec::new();
     while changes.len() < 3 {
         let (v, _) = recv_until(&mut socket, |v| v["type"] == "state").await;
         changes.push((
@@ -175,7 +176,14 @@ async fn counters_policy_goes_suspect_then_isolated_and_recovers_after_the_step(
             v["to"].as_str().unwrap().to_owned(),
             v["t"].as_f64().unwrap(),
         ));
+        severities.push(v["severity"].clone());
     }
+    // The default alarm level: entering suspect is a warning, isolated the alarm, and
+    // the return to healthy has no severity.
+    assert_eq!(
+        severities,
+        vec![json!("warning"), json!("alarm"), Value::Null]
+    );
     assert_eq!(
         (changes[0].0.as_str(), changes[0].1.as_str(), changes[0].2),
         ("healthy", "suspect", 1000.0)
@@ -195,12 +203,51 @@ async fn counters_policy_goes_suspect_then_isolated_and_recovers_after_the_step(
     );
     let stats = wait_for_epochs(&server, "veh2", 2000).await;
     let residual = &stats["monitors"]["cv"]["tests"]["residual"];
-    assert_eq!(residual["alarms"], 2, "suspect and isolated: {residual}");
+    assert_eq!(
+        (&residual["alarms"], &residual["warnings"]),
+        (&json!(1), &json!(1)),
+        "isolated is the alarm, suspect a warning: {residual}"
+    );
     assert_eq!(
         residual["last_alarm_delay_s"], 3.0,
         "isolated 3 s after the first exceedance"
     );
     assert_eq!(residual["state"], "healthy");
+    // Both are in the log, told apart by severity and filterable.
+    let (_, log) = get_json(&format!("{}/api/v1/alarms?session=veh2", http(&server))).await;
+    let got: Vec<(&str, &str)> = log["alarms"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| {
+            (
+                a["state"].as_str().unwrap(),
+                a["severity"].as_str().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(got, vec![("isolated", "alarm"), ("suspect", "warning")]);
+    let (_, log) = get_json(&format!(
+        "{}/api/v1/alarms?session=veh2&severity=warning",
+        http(&server)
+    ))
+    .await;
+    assert_eq!(log["alarms"].as_array().unwrap().len(), 1);
+    let (status, _) = get_json(&format!("{}/api/v1/alarms?severity=loud", http(&server))).await;
+    assert_eq!(status, 400);
+
+    // A session that asks for alarms on suspect gets today's meaning.
+    let mut body = cv_session("veh3", &MODEL, policy, json!({"p_fa": 1e-5}), false);
+    body["alarm_level"] = json!("suspect");
+    create_session(&client(), &server, &body).await;
+    let mut socket = ingest(&server, "veh3").await;
+    stream(&mut socket, &epochs(&z, 0), 250).await;
+    let stats = wait_for_epochs(&server, "veh3", 2000).await;
+    let residual = &stats["monitors"]["cv"]["tests"]["residual"];
+    assert_eq!(
+        (&residual["alarms"], &residual["warnings"]),
+        (&json!(2), &json!(0))
+    );
     server.shutdown().await;
 }
 
@@ -1287,5 +1334,166 @@ async fn federated_stats_track_is_the_last_echoed_solution_and_ins_position() {
     let first = recv(&mut events).await;
     assert_eq!(first["type"], "stats");
     assert_eq!(&first["monitors"]["nav"]["track"], track);
+    server.shutdown().await;
+}
+
+/// Per-test thresholds and the alarm level, set at creation and by `PUT`, are in force
+/// at once, checked as a whole before anything changes, and survive a restart.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn per_test_thresholds_and_the_alarm_level_apply_live_and_persist() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("pt.db");
+    let server = start(&db, None, Limits::default()).await;
+    let base = http(&server);
+    let c = client();
+    let mut body = cv_session(
+        "pt",
+        &MODEL,
+        json!({"kind": "counters", "n1": 10, "n2": 5}),
+        json!({"p_fa": 0.002}),
+        true,
+    );
+    body["monitors"][0]["thresholds"] = json!({"residual": {"threshold": 30.0}});
+    create_session(&c, &server, &body).await;
+    let url = format!("{base}/api/v1/sessions/pt/monitors/cv/threshold");
+    let (_, view) = get_json(&url).await;
+    assert_eq!(view["tests"]["residual"]["threshold"], 30.0);
+    assert_eq!(view["tests"]["residual"]["own"], true);
+    assert_eq!(view["alarm_level"], "isolated");
+    // A monitor-wide change leaves the test's own threshold alone.
+    let resp = c
+        .put(&url)
+        .json(&json!({"p_fa": 1e-5}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), 200);
+    let view: Value = resp.json().await.unwrap();
+    assert_eq!(view["tests"]["residual"]["threshold"], 30.0);
+    // Back to the monitor's, and alarms on suspect.
+    let resp = c
+        .put(&url)
+        .json(&json!({"tests": {"residual": null}, "alarm_level": "suspect"}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), 200);
+    let view: Value = resp.json().await.unwrap();
+    assert!((view["tests"]["residual"]["threshold"].as_f64().unwrap() - 19.5114).abs() < 1e-4);
+    assert_eq!(view["tests"]["residual"]["own"], false);
+    assert_eq!(view["alarm_level"], "suspect");
+    // Refused as a whole, naming the field; nothing changes.
+    for (put, field) in [
+        (json!({"tests": {"nope": {"p_fa": 0.01}}}), "tests.nope"),
+        (json!({"tests": {"residual": {}}}), "tests.residual"),
+        (
+            json!({"p_fa": 0.01, "tests": {"residual": {"p_fa": 2.0}}}),
+            "tests.residual",
+        ),
+    ] {
+        let resp = c.put(&url).json(&put).send().await.unwrap();
+        assert_eq!(resp.status(), 422, "{put}");
+        let err: Value = resp.json().await.unwrap();
+        assert_eq!(err["error"]["field"], field, "{err}");
+    }
+    let (_, view) = get_json(&url).await;
+    assert_eq!(
+        view["p_fa"], 1e-5,
+        "the refused p_fa change was not applied"
+    );
+    // A session whose thresholds name an unknown test is refused at creation.
+    let mut bad = cv_session("pt2", &MODEL, json!({"kind": "classic"}), json!({}), false);
+    bad["monitors"][0]["thresholds"] = json!({"gnss": {"threshold": 3.0}});
+    let resp = c
+        .post(format!("{base}/api/v1/sessions"))
+        .json(&bad)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), 422);
+    let err: Value = resp.json().await.unwrap();
+    assert_eq!(err["error"]["field"], "monitors[0].thresholds.gnss");
+
+    let resp = c
+        .put(&url)
+        .json(&json!({"tests": {"residual": {"threshold": 25.0}}}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), 200);
+    server.shutdown().await;
+    let server = start(&db, None, Limits::default()).await;
+    let (_, view) = get_json(&format!(
+        "{}/api/v1/sessions/pt/monitors/cv/threshold",
+        http(&server)
+    ))
+    .await;
+    assert_eq!(view["tests"]["residual"]["threshold"], 25.0, "persisted");
+    assert_eq!(view["alarm_level"], "suspect", "persisted");
+    let (_, session) = get_json(&format!("{}/api/v1/sessions/pt", http(&server))).await;
+    assert_eq!(
+        session["monitors"][0]["thresholds"],
+        json!({"residual": {"threshold": 25.0}})
+    );
+    server.shutdown().await;
+}
+
+/// A model whose R is four times too small is named `overconfident` in the stats and
+/// counted in `/metrics`; a well-tuned one is `ok`.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn consistency_diagnostics_name_a_mis_tuned_model() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = start(&dir.path().join("c.db"), None, Limits::default()).await;
+    let c = client();
+    let tuned = CvModel {
+        q: MODEL.q,
+        sigma: MODEL.sigma,
+        p0: MODEL.p0,
+    };
+    let optimistic = CvModel {
+        q: MODEL.q,
+        sigma: MODEL.sigma / 2.0,
+        p0: MODEL.p0,
+    };
+    // Both see the same measurements, drawn with the true σ; a raw threshold far away
+    // keeps every epoch healthy.
+    let z = MODEL.measurements(400, 11, |_| 0.0);
+    for (id, model) in [("tuned", &tuned), ("optimistic", &optimistic)] {
+        let body = cv_session(
+            id,
+            model,
+            json!({"kind": "classic"}),
+            json!({"threshold": 1e6}),
+            false,
+        );
+        create_session(&c, &server, &body).await;
+        let mut socket = ingest(&server, id).await;
+        stream(&mut socket, &epochs(&z, 0), 100).await;
+    }
+    let flag = |stats: &Value| stats["monitors"]["cv"]["tests"]["residual"]["consistency"].clone();
+    let tuned = flag(&wait_for_epochs(&server, "tuned", 400).await);
+    let optimistic = flag(&wait_for_epochs(&server, "optimistic", 400).await);
+    assert_eq!(tuned["flag"], "ok", "{tuned}");
+    assert_eq!(tuned["samples"], 100);
+    assert_eq!(optimistic["flag"], "overconfident", "{optimistic}");
+    assert!(
+        optimistic["nis_mean"].as_f64().unwrap() > optimistic["nis_bounds"][1].as_f64().unwrap()
+    );
+    let text = c
+        .get(format!("{}/metrics", http(&server)))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert!(
+        text.contains("navguard_tests_by_consistency{flag=\"ok\"} 1"),
+        "{text}"
+    );
+    assert!(
+        text.contains("navguard_tests_by_consistency{flag=\"overconfident\"} 1"),
+        "{text}"
+    );
     server.shutdown().await;
 }

@@ -245,8 +245,11 @@ fn echo_session(kind: MonitorKind, config: Value) -> CreateSession {
             policy: PolicyConfig::Counters { n1: 10, n2: 5 },
             p_fa: None,
             threshold: None,
+            alarm_level: None,
+            tests: Default::default(),
         }],
         echo: true,
+        alarm_level: None,
     }
 }
 

@@ -297,11 +297,14 @@ pub(crate) fn session_body(args: &ReplayArgs, scan: &FileScan) -> anyhow::Result
         policy,
         p_fa: args.p_fa,
         threshold: args.threshold,
+        alarm_level: None,
+        tests: Default::default(),
     };
     Ok(CreateSession {
         id: Some(args.session.clone()),
         monitors: vec![monitor],
         echo: false,
+        alarm_level: None,
     })
 }
 
@@ -929,6 +932,7 @@ mod tests {
             delay_s: 0.0,
             raised_at_ms: 0,
             cleared_t: None,
+            severity: Default::default(),
         };
         tagged("alarm", &record)
     }
@@ -948,6 +952,8 @@ mod tests {
             t: 1.5,
             from: Health::Healthy,
             to: Health::Suspect,
+            severity: None,
+            log_id: None,
         };
         t.take(&tagged("state", &change));
         t.take(r#"{"type":"result","t":1.0,"monitors":{}}"#);

@@ -168,8 +168,11 @@ pub(crate) fn run(args: SimulateArgs) -> anyhow::Result<()> {
                 policy: PolicyConfig::Counters { n1: 10, n2: 5 },
                 p_fa: None,
                 threshold: None,
+                alarm_level: None,
+                tests: Default::default(),
             }],
             echo: false,
+            alarm_level: None,
         };
         std::fs::write(path, serde_json::to_string_pretty(&spec)?)
             .with_context(|| format!("writing {}", path.display()))?;

@@ -185,6 +185,8 @@ impl ParitySpace {
 #[derive(Debug, Clone, PartialEq)]
 pub struct FssWindow {
     c_inv: DMatrix<f64>,
+    /// `L⁻¹` with `C = L Lᵀ`: whitens one residual.
+    l_inv: DMatrix<f64>,
     window: usize,
     terms: std::collections::VecDeque<f64>,
 }
@@ -195,13 +197,20 @@ impl FssWindow {
         if window == 0 {
             return Err(ParityError::new("fss_window", "must be at least 1"));
         }
-        let c_inv = c
-            .clone()
-            .cholesky()
-            .ok_or_else(|| ParityError::new("sigma", "parity covariance is not positive definite"))?
-            .inverse();
+        let chol = c.clone().cholesky().ok_or_else(|| {
+            ParityError::new("sigma", "parity covariance is not positive definite")
+        })?;
+        let c_inv = chol.inverse();
+        let p = c.nrows();
+        let l_inv = chol
+            .l()
+            .solve_lower_triangular(&DMatrix::identity(p, p))
+            .ok_or_else(|| {
+                ParityError::new("sigma", "parity covariance is not positive definite")
+            })?;
         Ok(FssWindow {
             c_inv,
+            l_inv,
             window,
             terms: std::collections::VecDeque::with_capacity(window),
         })
@@ -225,6 +234,12 @@ impl FssWindow {
         let kept = self.terms.len().min(self.window - 1);
         let sum: f64 = self.terms.iter().rev().take(kept).sum::<f64>() + q;
         (q, full.then_some(sum))
+    }
+
+    /// The whitened residual `L⁻¹ r` (`‖L⁻¹ r‖² = rᵀC⁻¹r`): what the consistency
+    /// diagnostics take (docs/methods.md §M22).
+    pub fn whiten(&self, r: &DVector<f64>) -> DVector<f64> {
+        &self.l_inv * r
     }
 
     /// Appends one epoch's term `q = rᵀC⁻¹r` (from [`FssWindow::peek`]).
@@ -397,5 +412,14 @@ mod tests {
         assert_eq!(ParitySpace::new(h).unwrap_err().field, "h[2]");
         let h = DMatrix::from_row_slice(4, 3, &[1., 0., 0., 2., 0., 0., 0., 1., 0., 0., 3., 0.]);
         assert!(ParitySpace::new(h).unwrap_err().reason.contains("span"));
+    }
+
+    #[test]
+    fn whitened_residual_has_the_windowed_term_as_its_squared_norm() {
+        let c = DMatrix::from_row_slice(2, 2, &[4.0, 1.2, 1.2, 1.0]);
+        let fss = FssWindow::new(&c, 3).unwrap();
+        let r = DVector::from_column_slice(&[1.5, -0.5]);
+        let (q, _) = fss.peek(&r);
+        assert!((fss.whiten(&r).norm_squared() - q).abs() < 1e-12);
     }
 }

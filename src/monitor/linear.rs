@@ -324,6 +324,11 @@ impl Monitor for LinearMonitor {
         // the policy counters untouched too.
         let posterior = kalman::update(&prior, &self.observation, &innovation)?.0;
         let outcome = self.bank.evaluate(RESIDUAL, innovation.statistic);
+        // docs/methods.md §M22: ν = L⁻¹r, so ‖ν‖² is the statistic.
+        if let Some(nu) = innovation.s_chol.l().solve_lower_triangular(&innovation.r) {
+            self.bank
+                .observe(RESIDUAL, nu.as_slice(), outcome.decision.health);
+        }
         // seed 004 §2: a suspect or isolated filter predicts without updating.
         self.estimate = if outcome.decision.update {
             posterior

@@ -2,6 +2,7 @@
 //! per epoch, one `Statistic` and health decision per test plus its outputs.
 //! Pure and synchronous; the session actor in `service/session` drives them.
 
+pub mod calibrate;
 pub mod channel;
 pub mod federated;
 pub mod linear;

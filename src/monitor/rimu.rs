@@ -381,6 +381,9 @@ impl Monitor for RimuMonitor {
         let mut tests = Vec::new();
         if let Some(lambda) = lambda {
             let outcome = self.bank.evaluate(PARITY, lambda);
+            let nu = self.fss.whiten(&r);
+            self.bank
+                .observe(PARITY, nu.as_slice(), outcome.decision.health);
             let detected = outcome.decision.health != Health::Healthy;
             let full = self.history[0].len() == self.config.feature_window;
             // Isolate once: while nothing is isolated, each detecting epoch classifies

@@ -214,6 +214,13 @@ impl TestBank {
         &self.slots
     }
 
+    /// The tests, mutably: for reading consistency summaries (which cache their
+    /// bounds). Names, dofs and thresholds are the bank's to keep consistent; change
+    /// them through the bank's methods.
+    pub fn slots_mut(&mut self) -> &mut [TestSlot] {
+        &mut self.slots
+    }
+
     /// The threshold spec in force.
     pub fn spec(&self) -> ThresholdSpec {
         self.spec

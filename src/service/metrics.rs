@@ -9,6 +9,54 @@ const LATENCY_BUCKETS_S: [f64; 12] = [
     1e-5, 2.5e-5, 5e-5, 1e-4, 2.5e-4, 5e-4, 1e-3, 2.5e-3, 5e-3, 1e-2, 5e-2, 0.25,
 ];
 
+/// What the sessions' latest statistics show, counted over every session for
+/// `/metrics` (docs/methods.md §M22, §M24): tests by consistency flag and by state,
+/// monitors by availability. Gathered when `/metrics` is read, not per epoch.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct SessionGauges {
+    /// Tests by consistency flag: ok, overconfident, underconfident, correlated,
+    /// not yet judged.
+    pub consistency: [u64; 5],
+    /// Tests by state: healthy, suspect, isolated.
+    pub states: [u64; 3],
+    /// Monitors with a protection level by availability: converging, available,
+    /// unavailable.
+    pub availability: [u64; 3],
+}
+
+impl SessionGauges {
+    /// Adds one session's statistics.
+    pub fn add(&mut self, stats: &crate::service::session::stats::SessionStats) {
+        use crate::detect::Health;
+        use crate::detect::consistency::ConsistencyFlag;
+        use crate::monitor::Availability;
+        for m in stats.monitors.values() {
+            for t in m.tests.values() {
+                let c = match t.consistency.and_then(|c| c.flag) {
+                    Some(ConsistencyFlag::Ok) => 0,
+                    Some(ConsistencyFlag::Overconfident) => 1,
+                    Some(ConsistencyFlag::Underconfident) => 2,
+                    Some(ConsistencyFlag::Correlated) => 3,
+                    None => 4,
+                };
+                self.consistency[c] += 1;
+                self.states[match t.state {
+                    Health::Healthy => 0,
+                    Health::Suspect => 1,
+                    Health::Isolated => 2,
+                }] += 1;
+            }
+            if let Some(i) = &m.integrity {
+                self.availability[match i.state {
+                    Availability::Converging => 0,
+                    Availability::Available => 1,
+                    Availability::Unavailable => 2,
+                }] += 1;
+            }
+        }
+    }
+}
+
 /// Counters shared by every socket and session.
 #[derive(Debug, Default)]
 pub struct Metrics {
@@ -20,6 +68,8 @@ pub struct Metrics {
     pub frame_errors: AtomicU64,
     /// Alarms raised.
     pub alarms: AtomicU64,
+    /// Warnings raised (stored, announced as `state` events only).
+    pub warnings: AtomicU64,
     /// Open ingest sockets.
     pub ingest_sockets: AtomicU64,
     /// Open event sockets.
@@ -44,7 +94,7 @@ impl Metrics {
     /// Renders the Prometheus text exposition.
     // Over 80 lines: the exposition's metrics one after another (HELP, TYPE, value),
     // in the order Prometheus shows them; no branch worth a function of its own.
-    pub fn render(&self, sessions: usize) -> String {
+    pub fn render(&self, sessions: usize, gauges: &SessionGauges) -> String {
         let mut out = String::with_capacity(2048);
         let counter = |out: &mut String, name: &str, help: &str, v: u64| {
             let _ = writeln!(
@@ -79,6 +129,42 @@ impl Metrics {
             "navguard_alarms_total",
             "Alarms raised.",
             get(&self.alarms),
+        );
+        counter(
+            &mut out,
+            "navguard_warnings_total",
+            "Warnings raised (stored, announced as state events only).",
+            get(&self.warnings),
+        );
+        labelled(
+            &mut out,
+            "navguard_tests_by_consistency",
+            "Tests by the consistency flag of their normalised innovation.",
+            "flag",
+            &[
+                "ok",
+                "overconfident",
+                "underconfident",
+                "correlated",
+                "pending",
+            ],
+            &gauges.consistency,
+        );
+        labelled(
+            &mut out,
+            "navguard_tests_by_state",
+            "Tests by health state.",
+            "state",
+            &["healthy", "suspect", "isolated"],
+            &gauges.states,
+        );
+        labelled(
+            &mut out,
+            "navguard_monitors_by_availability",
+            "Monitors with a protection level, by integrity availability.",
+            "availability",
+            &["converging", "available", "unavailable"],
+            &gauges.availability,
         );
         gauge(
             &mut out,
@@ -128,6 +214,21 @@ impl Metrics {
     }
 }
 
+/// A gauge with one label, one sample per value.
+fn labelled(
+    out: &mut String,
+    name: &str,
+    help: &str,
+    label: &str,
+    values: &[&str],
+    counts: &[u64],
+) {
+    let _ = writeln!(out, "# HELP {name} {help}\n# TYPE {name} gauge");
+    for (v, n) in values.iter().zip(counts) {
+        let _ = writeln!(out, "{name}{{{label}=\"{v}\"}} {n}");
+    }
+}
+
 /// Resident set size from `/proc/self/statm` (Linux); `None` elsewhere.
 fn resident_memory_bytes() -> Option<u64> {
     let statm = std::fs::read_to_string("/proc/self/statm").ok()?;
@@ -145,7 +246,15 @@ mod tests {
         m.observe_frame_latency(Duration::from_micros(20));
         m.observe_frame_latency(Duration::from_millis(2));
         m.observe_frame_latency(Duration::from_secs(1));
-        let text = m.render(3);
+        let gauges = SessionGauges {
+            consistency: [4, 1, 0, 2, 3],
+            ..SessionGauges::default()
+        };
+        let text = m.render(3, &gauges);
+        assert!(
+            text.contains("navguard_tests_by_consistency{flag=\"correlated\"} 2"),
+            "{text}"
+        );
         assert!(
             text.contains("navguard_frame_latency_seconds_bucket{le=\"0.000025\"} 1"),
             "{text}"

@@ -8,7 +8,7 @@ use crate::service::app::AppState;
 use crate::service::error::ApiError;
 use crate::service::extract::ApiQuery;
 use crate::service::store::AlarmQuery;
-use crate::service::wire::AlarmRecord;
+use crate::service::wire::{AlarmRecord, Severity};
 
 /// Default and largest page size.
 const DEFAULT_LIMIT: i64 = 100;
@@ -27,6 +27,8 @@ pub struct AlarmsQuery {
     before: Option<i64>,
     /// Only ids above this (catch up after a reconnect: the newest id seen).
     after: Option<i64>,
+    /// Only `alarm` or only `warning` entries (default both).
+    severity: Option<Severity>,
     limit: Option<i64>,
 }
 
@@ -39,7 +41,7 @@ pub struct AlarmPage {
     next_before: Option<i64>,
 }
 
-/// `GET /api/v1/alarms?session=&monitor=&since=&until=&before=&after=&limit=`
+/// `GET /api/v1/alarms?session=&monitor=&since=&until=&before=&after=&severity=&limit=`
 pub async fn list(
     State(state): State<AppState>,
     ApiQuery(q): ApiQuery<AlarmsQuery>,
@@ -58,6 +60,7 @@ pub async fn list(
         until_ms: q.until,
         before_id: q.before,
         after_id: q.after,
+        severity: q.severity,
         limit,
     };
     let alarms = state.store.alarms(&query).await?;

@@ -8,6 +8,7 @@ use serde_json::{Value, json};
 
 use crate::service::app::AppState;
 use crate::service::error::ApiError;
+use crate::service::metrics::SessionGauges;
 
 /// `GET /healthz`: liveness, with the version and session count.
 pub async fn healthz(State(state): State<AppState>) -> Json<Value> {
@@ -16,14 +17,19 @@ pub async fn healthz(State(state): State<AppState>) -> Json<Value> {
     )
 }
 
-/// `GET /metrics`: Prometheus text exposition.
+/// `GET /metrics`: Prometheus text exposition, with gauges gathered from every
+/// session's latest published statistics.
 pub async fn metrics(State(state): State<AppState>) -> impl IntoResponse {
+    let mut gauges = SessionGauges::default();
+    for handle in state.registry.list() {
+        gauges.add(&handle.stats_watch().borrow());
+    }
     (
         [(
             header::CONTENT_TYPE,
             "text/plain; version=0.0.4; charset=utf-8",
         )],
-        state.metrics.render(state.registry.len()),
+        state.metrics.render(state.registry.len(), &gauges),
     )
 }
 

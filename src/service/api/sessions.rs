@@ -38,6 +38,8 @@ pub struct SessionView {
     echo: bool,
     created_at_ms: i64,
     connected: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    alarm_level: Option<crate::service::wire::AlarmLevel>,
     monitors: Vec<MonitorView>,
 }
 
@@ -75,6 +77,7 @@ fn view(handle: &SessionHandle) -> SessionView {
         echo: stored.echo,
         created_at_ms: stored.created_at_ms,
         connected: stats.connected,
+        alarm_level: stored.alarm_level,
         monitors,
     }
 }
@@ -112,6 +115,7 @@ pub async fn create(
         echo: req.echo,
         monitors,
         created_at_ms: now_ms(),
+        alarm_level: req.alarm_level,
     };
     // Building the actor validates every monitor (422 naming the field).
     let handle = actor::spawn(stored.clone(), state.actor_deps())?;

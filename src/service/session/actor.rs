@@ -14,17 +14,17 @@ use tokio::sync::{mpsc, watch};
 use super::SessionError;
 use super::handle::{ControlCommand, FrameCommand, IngestLink, SessionHandle, SessionShared};
 use super::spec::{NamedMonitors, build_monitors};
-use super::stats::{MonitorStats, Position, SessionStats, TestStats, Track};
+use super::stats::{IntegrityStats, MonitorStats, Position, SessionStats, TestStats, Track};
 use crate::detect::{Health, ThresholdSpec};
 use crate::epoch::Epoch;
-use crate::monitor::{Monitor, MonitorReport, Outputs, TestOutcome};
+use crate::monitor::{Availability, Integrity, Monitor, MonitorReport, Outputs, TestOutcome};
 use crate::service::metrics::Metrics;
 use crate::service::now_ms;
 use crate::service::store::{Store, StoredSession};
 use crate::service::train::Models;
 use crate::service::wire::{
-    self, AlarmRecord, ErrorEvent, FrameError, FrameErrorCode, MonitorResultWire, StateChange,
-    TestThreshold, ThresholdUpdate, ThresholdView,
+    self, AlarmLevel, AlarmRecord, AvailabilityChange, ErrorEvent, FrameError, FrameErrorCode,
+    MonitorResultWire, Severity, StateChange, TestThreshold, ThresholdUpdate, ThresholdView,
 };
 
 /// Frames queued per session before the ingest socket stops reading.
@@ -50,6 +50,11 @@ pub struct ActorDeps {
 struct NamedMonitor {
     name: String,
     monitor: Box<dyn Monitor>,
+    /// Which state change of its tests is an alarm.
+    alarm_level: AlarmLevel,
+    /// Availability at the last epoch that reported one; `None` for a monitor without
+    /// a protection level and before its first such epoch (a stream starts converging).
+    availability: Option<Availability>,
 }
 
 struct Actor {
@@ -87,7 +92,13 @@ pub fn spawn(stored: StoredSession, deps: ActorDeps) -> Result<SessionHandle, Se
         echo: stored.echo,
         monitors: monitors
             .into_iter()
-            .map(|(name, monitor)| NamedMonitor { name, monitor })
+            .zip(&stored.monitors)
+            .map(|((name, monitor), wire)| NamedMonitor {
+                name,
+                monitor,
+                alarm_level: wire.alarm_level.or(stored.alarm_level).unwrap_or_default(),
+                availability: None,
+            })
             .collect(),
         stats,
         deps,
@@ -134,11 +145,21 @@ fn initial_stats(id: &str, monitors: &NamedMonitors) -> SessionStats {
                         worst_test_ratio: None,
                         tests,
                         track: None,
+                        integrity: None,
                     },
                 )
             })
             .collect(),
     }
+}
+
+/// The 422 reason for a test name the monitor does not have.
+fn unknown_test(test: &str, bank: &crate::monitor::TestBank) -> String {
+    let names: Vec<&str> = bank.slots().iter().map(|s| &*s.name).collect();
+    format!(
+        "no test '{test}' in this monitor; its tests are {}",
+        names.join(", ")
+    )
 }
 
 /// The `result` frame of one epoch.
@@ -204,6 +225,7 @@ impl Actor {
                 let _ = reply.send(self.set_threshold(&name, update));
             }
             ControlCommand::Stats(reply) => {
+                self.refresh_consistency();
                 self.stats.published_at_ms = now_ms();
                 let _ = reply.send(self.stats.clone());
             }
@@ -226,6 +248,7 @@ impl Actor {
                 }
             }
             m.monitor.reset();
+            m.availability = None;
         }
         let t = self.last_t;
         for (monitor, test, from) in returned {
@@ -244,6 +267,8 @@ impl Actor {
                 t: t.unwrap_or(0.0),
                 from,
                 to: Health::Healthy,
+                severity: None,
+                log_id: None,
             };
             self.broadcast(&Arc::from(wire::tagged("state", &change)));
         }
@@ -265,8 +290,10 @@ impl Actor {
             for slot in m.monitor.tests().slots() {
                 if let Some(test) = monitor_stats.tests.get_mut(&slot.name) {
                     test.state = slot.policy.health();
+                    test.consistency = None;
                 }
             }
+            monitor_stats.integrity = None;
         }
         self.publish(true);
         Ok(IngestLink {
@@ -294,17 +321,20 @@ impl Actor {
             p_fa: spec.p_fa_part(),
             threshold: spec.threshold_part(),
             policy: bank.policy(),
+            alarm_level: m.alarm_level,
             tests: bank
                 .slots()
                 .iter()
                 .map(|s| {
-                    let p_fa = spec.p_fa(s.dof).unwrap_or(f64::NAN);
+                    let own = s.own_spec.unwrap_or(spec);
+                    let p_fa = own.p_fa(s.dof).unwrap_or(f64::NAN);
                     (
                         s.name.to_string(),
                         TestThreshold {
                             dof: s.dof,
                             threshold: s.threshold,
                             p_fa,
+                            own: s.own_spec.is_some(),
                         },
                     )
                 })
@@ -318,42 +348,55 @@ impl Actor {
         update: ThresholdUpdate,
     ) -> Result<(ThresholdView, StoredSession), SessionError> {
         let index = self.find(name)?;
-        if update.p_fa.is_none() && update.threshold.is_none() && update.policy.is_none() {
+        if update.p_fa.is_none()
+            && update.threshold.is_none()
+            && update.policy.is_none()
+            && update.alarm_level.is_none()
+            && update.tests.is_none()
+        {
             return Err(SessionError::Invalid {
                 field: None,
-                reason: "give `p_fa` or `threshold`, and/or `policy`".into(),
+                reason: "give `p_fa` or `threshold`, `policy`, `alarm_level` and/or `tests`".into(),
             });
         }
-        let spec = match (update.p_fa, update.threshold) {
-            (None, None) => None,
-            (p, t) => Some(
-                ThresholdSpec::from_parts(p, t)
-                    .map_err(|e| SessionError::invalid("p_fa", e.to_string()))?,
-            ),
-        };
-        if let Some(policy) = update.policy {
-            policy
-                .check()
-                .map_err(|e| SessionError::invalid("policy", e.to_string()))?;
-        }
-        let bank = self.monitors[index].monitor.tests_mut();
-        if let Some(spec) = spec {
+        // Everything is applied to a copy of the bank first, so a refused part changes
+        // nothing.
+        let mut bank = self.monitors[index].monitor.tests().clone();
+        if update.p_fa.is_some() || update.threshold.is_some() {
+            let spec = ThresholdSpec::from_parts(update.p_fa, update.threshold)
+                .map_err(|e| SessionError::invalid("p_fa", e.to_string()))?;
             bank.set_spec(spec)
                 .map_err(|e| SessionError::invalid("p_fa", e.to_string()))?;
         }
         if let Some(policy) = update.policy {
+            policy
+                .check()
+                .map_err(|e| SessionError::invalid("policy", e.to_string()))?;
             bank.set_policy(policy);
         }
+        for (test, spec) in update.tests.iter().flatten() {
+            let field = format!("tests.{test}");
+            let Some(i) = bank.index_of(test) else {
+                return Err(SessionError::invalid(field, unknown_test(test, &bank)));
+            };
+            let own = spec
+                .map(|s| super::spec::test_spec(&s))
+                .transpose()
+                .map_err(|e| SessionError::invalid(field.clone(), e))?;
+            bank.set_test_spec(i, own)
+                .map_err(|e| SessionError::invalid(field, e.to_string()))?;
+        }
+        let m = &mut self.monitors[index];
+        *m.monitor.tests_mut() = bank;
+        if let Some(level) = update.alarm_level {
+            m.alarm_level = level;
+        }
+        let bank = m.monitor.tests();
         let (spec, policy) = (bank.spec(), bank.policy());
-        let thresholds: Vec<(crate::monitor::TestName, f64)> = bank
-            .slots()
-            .iter()
-            .map(|s| (s.name.clone(), s.threshold))
-            .collect();
         if let Some(stats) = self.stats.monitors.get_mut(name) {
-            for (test, threshold) in thresholds {
-                if let Some(t) = stats.tests.get_mut(&test) {
-                    t.threshold = threshold;
+            for slot in bank.slots() {
+                if let Some(t) = stats.tests.get_mut(&slot.name) {
+                    t.threshold = slot.threshold;
                 }
             }
         }
@@ -363,6 +406,19 @@ impl Actor {
             wire.p_fa = spec.p_fa_part();
             wire.threshold = spec.threshold_part();
             wire.policy = policy;
+            if let Some(level) = update.alarm_level {
+                wire.alarm_level = Some(level);
+            }
+            for (test, own) in update.tests.iter().flatten() {
+                match own {
+                    Some(own) => {
+                        wire.tests.insert(test.clone(), *own);
+                    }
+                    None => {
+                        wire.tests.remove(test);
+                    }
+                }
+            }
             stored.clone()
         };
         self.publish(true);
@@ -502,10 +558,13 @@ impl Actor {
         .unwrap_or_default()
     }
 
-    /// Updates statistics; announces state changes and alarms. Returns true if any state changed.
+    /// Updates statistics; announces state changes, alarms and availability changes.
+    /// Returns true if any state changed.
     async fn record(&mut self, epoch: &Epoch, reports: &[MonitorReport]) -> bool {
         let t = epoch.t;
         let mut transitions: Vec<(usize, TestOutcome, f64)> = Vec::new();
+        let mut availability: Vec<(usize, Availability, Integrity)> = Vec::new();
+        let mut latest: Vec<(usize, Availability)> = Vec::new();
         for (index, (m, report)) in self.monitors.iter().zip(reports).enumerate() {
             let Some(monitor_stats) = self.stats.monitors.get_mut(&m.name) else {
                 continue;
@@ -525,6 +584,23 @@ impl Actor {
             }
             if worst.is_some() {
                 monitor_stats.worst_test_ratio = worst;
+            }
+            if let Some(integrity) = &report.integrity {
+                let from = match &mut monitor_stats.integrity {
+                    Some(stats) => stats.record(t, integrity),
+                    None => {
+                        monitor_stats.integrity = Some(IntegrityStats::new(t, integrity));
+                        // A stream starts converging: a first epoch in another state is
+                        // a change.
+                        (integrity.state != Availability::Converging)
+                            .then_some(Availability::Converging)
+                    }
+                };
+                if let Some(from) = from {
+                    availability.push((index, from, *integrity));
+                } else if m.availability.is_none() {
+                    latest.push((index, integrity.state));
+                }
             }
             // The track moves only on INS epochs: on the others the monitor repeats
             // its last solution, which is already recorded with its own time.
@@ -550,66 +626,112 @@ impl Actor {
                 });
             }
         }
-        let changed = !transitions.is_empty();
+        let changed = !transitions.is_empty() || !availability.is_empty();
+        for (index, state) in latest {
+            self.monitors[index].availability = Some(state);
+        }
         for (index, outcome, delay_s) in transitions {
             self.announce(index, t, &outcome, delay_s).await;
+        }
+        for (index, from, integrity) in availability {
+            self.announce_availability(index, t, from, &integrity).await;
         }
         changed
     }
 
-    /// Announces one test's state change: `state` always; an `alarm` (stored
-    /// first) when entering suspect or isolated; clears open alarms on healthy.
+    /// The severity of test `outcome` of monitor `index` entering its new state: a
+    /// warning while the monitor is still converging (docs/methods.md §M24), else what
+    /// the monitor's alarm level says.
+    fn severity(&self, index: usize, to: Health) -> Option<Severity> {
+        let m = &self.monitors[index];
+        let severity = m.alarm_level.severity(to)?;
+        Some(if m.availability == Some(Availability::Converging) {
+            Severity::Warning
+        } else {
+            severity
+        })
+    }
+
+    /// Stores a log entry (committed before it is announced, docs/architecture.md §A2)
+    /// and returns it with its id, or with id -1 when the store failed: an operator must
+    /// not miss an alarm because the disk did.
+    async fn store_entry(store: &Store, entry: AlarmRecord) -> AlarmRecord {
+        match store.insert_alarm(entry.clone()).await {
+            Ok(stored) => stored,
+            Err(e) => {
+                tracing::error!(session = %entry.session, error = %e, "could not store alarm");
+                AlarmRecord { id: -1, ..entry }
+            }
+        }
+    }
+
+    /// Announces one test's state change: `state` always; entering suspect or isolated
+    /// also stores a log entry of the change's severity, and an `alarm` event for an
+    /// alarm; the return to healthy clears the open entries.
     async fn announce(&mut self, index: usize, t: f64, outcome: &TestOutcome, delay_s: f64) {
         let monitor = self.monitors[index].name.clone();
         let (from, to) = (outcome.previous, outcome.decision.health);
+        let severity = self.severity(index, to);
+        let mut alarm_text = None;
+        let mut log_id = None;
+        if let Some(severity) = severity {
+            let entry = Self::store_entry(
+                &self.deps.store,
+                AlarmRecord {
+                    id: 0,
+                    severity,
+                    session: self.id.to_string(),
+                    monitor: monitor.clone(),
+                    test: outcome.name.to_string(),
+                    state: to,
+                    t,
+                    statistic: outcome.statistic.value,
+                    threshold: outcome.statistic.threshold,
+                    dof: outcome.statistic.dof,
+                    test_ratio: outcome.statistic.test_ratio(),
+                    delay_s,
+                    raised_at_ms: now_ms(),
+                    cleared_t: None,
+                },
+            )
+            .await;
+            log_id = Some(entry.id);
+            if let Some(test) = self
+                .stats
+                .monitors
+                .get_mut(&monitor)
+                .and_then(|m| m.tests.get_mut(&outcome.name))
+            {
+                test.count(severity, delay_s);
+            }
+            match severity {
+                Severity::Alarm => {
+                    self.deps.metrics.alarms.fetch_add(1, Ordering::Relaxed);
+                    alarm_text = Some(Arc::<str>::from(wire::tagged("alarm", &entry)));
+                }
+                Severity::Warning => {
+                    self.deps.metrics.warnings.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        } else if let Err(e) = self
+            .deps
+            .store
+            .clear_alarms(&self.id, &monitor, &outcome.name, Some(t))
+            .await
+        {
+            tracing::error!(session = %self.id, error = %e, "could not mark alarms cleared");
+        }
         let change = StateChange {
             session: self.id.to_string(),
-            monitor: monitor.clone(),
+            monitor,
             test: outcome.name.to_string(),
             t,
             from,
             to,
+            severity,
+            log_id,
         };
         let state_text: Arc<str> = Arc::from(wire::tagged("state", &change));
-        let alarm_text = if to == Health::Healthy {
-            if let Err(e) = self
-                .deps
-                .store
-                .clear_alarms(&self.id, &monitor, &outcome.name, Some(t))
-                .await
-            {
-                tracing::error!(session = %self.id, error = %e, "could not mark alarms cleared");
-            }
-            None
-        } else {
-            let alarm = AlarmRecord {
-                id: 0,
-                session: self.id.to_string(),
-                monitor,
-                test: outcome.name.to_string(),
-                state: to,
-                t,
-                statistic: outcome.statistic.value,
-                threshold: outcome.statistic.threshold,
-                dof: outcome.statistic.dof,
-                test_ratio: outcome.statistic.test_ratio(),
-                delay_s,
-                raised_at_ms: now_ms(),
-                cleared_t: None,
-            };
-            // docs/architecture.md §A2: committed before it is broadcast. If the store fails
-            // the alarm is still announced (id -1): an operator must not miss an
-            // alarm because the disk did.
-            let alarm = match self.deps.store.insert_alarm(alarm.clone()).await {
-                Ok(stored) => stored,
-                Err(e) => {
-                    tracing::error!(session = %self.id, error = %e, "could not store alarm");
-                    AlarmRecord { id: -1, ..alarm }
-                }
-            };
-            self.deps.metrics.alarms.fetch_add(1, Ordering::Relaxed);
-            Some(Arc::<str>::from(wire::tagged("alarm", &alarm)))
-        };
         self.broadcast(&state_text);
         if let Some(text) = &alarm_text {
             self.broadcast(text);
@@ -620,11 +742,115 @@ impl Actor {
         }
     }
 
+    /// Announces a change of monitor `index`'s availability (never an alarm). When the
+    /// monitor has just converged, a test it left suspect or isolated while converging
+    /// (a warning then) is raised now at its alarm level, so a fault present from the
+    /// start is not left unannounced.
+    async fn announce_availability(
+        &mut self,
+        index: usize,
+        t: f64,
+        from: Availability,
+        integrity: &Integrity,
+    ) {
+        self.monitors[index].availability = Some(integrity.state);
+        let change = AvailabilityChange {
+            session: self.id.to_string(),
+            monitor: self.monitors[index].name.clone(),
+            t,
+            from,
+            to: integrity.state,
+            protection_level: integrity.protection_level,
+            alert_limit: integrity.alert_limit,
+        };
+        let text: Arc<str> = Arc::from(wire::tagged("availability", &change));
+        self.broadcast(&text);
+        self.send_ingest(text.to_string()).await;
+        if from == Availability::Converging {
+            self.raise_left_over(index, t).await;
+        }
+    }
+
+    /// Raises an alarm for every test of monitor `index` that stands in a state its alarm
+    /// level counts as an alarm (see [`Actor::announce_availability`]).
+    async fn raise_left_over(&mut self, index: usize, t: f64) {
+        let m = &self.monitors[index];
+        let standing: Vec<_> = m
+            .monitor
+            .tests()
+            .slots()
+            .iter()
+            .filter(|s| m.alarm_level.severity(s.policy.health()) == Some(Severity::Alarm))
+            .map(|s| (s.name.clone(), s.policy.health(), s.dof))
+            .collect();
+        let monitor = m.name.clone();
+        for (test, state, dof) in standing {
+            let Some(stats) = self
+                .stats
+                .monitors
+                .get(&monitor)
+                .and_then(|m| m.tests.get(&test))
+            else {
+                continue;
+            };
+            let (statistic, threshold) = (stats.last.unwrap_or(0.0), stats.threshold);
+            let delay_s = stats.episode_delay(t);
+            let entry = Self::store_entry(
+                &self.deps.store,
+                AlarmRecord {
+                    id: 0,
+                    severity: Severity::Alarm,
+                    session: self.id.to_string(),
+                    monitor: monitor.clone(),
+                    test: test.to_string(),
+                    state,
+                    t,
+                    statistic,
+                    threshold,
+                    dof,
+                    test_ratio: statistic / threshold,
+                    delay_s,
+                    raised_at_ms: now_ms(),
+                    cleared_t: None,
+                },
+            )
+            .await;
+            if let Some(stats) = self
+                .stats
+                .monitors
+                .get_mut(&monitor)
+                .and_then(|m| m.tests.get_mut(&test))
+            {
+                stats.count(Severity::Alarm, delay_s);
+            }
+            self.deps.metrics.alarms.fetch_add(1, Ordering::Relaxed);
+            let text: Arc<str> = Arc::from(wire::tagged("alarm", &entry));
+            self.broadcast(&text);
+            self.send_ingest(text.to_string()).await;
+        }
+    }
+
+    /// Copies each test's consistency diagnostics into the statistics (done at
+    /// publication, at most [`STATS_PERIOD`]⁻¹ times a second, not per epoch).
+    fn refresh_consistency(&mut self) {
+        for m in &mut self.monitors {
+            let Some(monitor_stats) = self.stats.monitors.get_mut(&m.name) else {
+                continue;
+            };
+            for slot in m.monitor.tests_mut().slots_mut() {
+                if let Some(test) = monitor_stats.tests.get_mut(&slot.name) {
+                    test.consistency = slot.consistency.summary();
+                }
+            }
+        }
+    }
+
     fn publish(&mut self, force: bool) {
         let now = Instant::now();
         if force || now.duration_since(self.last_published) >= STATS_PERIOD {
             self.last_published = now;
             self.stats_pending = false;
+            self.refresh_consistency();
             self.stats.published_at_ms = now_ms();
             self.stats_tx.send_replace(Arc::new(self.stats.clone()));
         } else {

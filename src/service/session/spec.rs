@@ -6,7 +6,7 @@ use crate::detect::ThresholdSpec;
 use crate::monitor::{self, BuildError, ModelSource, Monitor, MonitorConfig, MonitorSpec};
 use crate::service::config::Limits;
 use crate::service::store::StoredSession;
-use crate::service::wire::{CreateSession, MonitorSpecWire};
+use crate::service::wire::{CreateSession, MonitorSpecWire, TestThresholdSpec};
 
 /// Ids and names: 1–64 characters of `A–Z a–z 0–9 _ - .`, so they are safe in URLs and logs.
 pub fn valid_name(s: &str) -> bool {
@@ -26,6 +26,41 @@ pub fn monitor_spec(wire: &MonitorSpecWire) -> Result<MonitorSpec, BuildError> {
     })
 }
 
+/// A test's own threshold spec from its wire form: exactly one of `p_fa` and
+/// `threshold`, each in range.
+pub fn test_spec(wire: &TestThresholdSpec) -> Result<ThresholdSpec, String> {
+    if wire.p_fa.is_none() && wire.threshold.is_none() {
+        return Err("give `p_fa` or `threshold` (or null to follow the monitor's)".into());
+    }
+    ThresholdSpec::from_parts(wire.p_fa, wire.threshold).map_err(|e| e.to_string())
+}
+
+/// Applies a monitor's stored per-test thresholds to its freshly built bank; errors name
+/// the test (`tests.<name>`) and why.
+fn apply_test_specs(
+    monitor: &mut dyn Monitor,
+    wire: &MonitorSpecWire,
+) -> Result<(), (String, String)> {
+    for (test, own) in &wire.tests {
+        let field = format!("thresholds.{test}");
+        let bank = monitor.tests_mut();
+        let Some(i) = bank.index_of(test) else {
+            let names: Vec<&str> = bank.slots().iter().map(|s| &*s.name).collect();
+            return Err((
+                field,
+                format!(
+                    "no test '{test}' in this monitor; its tests are {}",
+                    names.join(", ")
+                ),
+            ));
+        };
+        let spec = test_spec(own).map_err(|e| (field.clone(), e))?;
+        bank.set_test_spec(i, Some(spec))
+            .map_err(|e| (field, e.to_string()))?;
+    }
+    Ok(())
+}
+
 /// A monitor with its name in the session.
 pub type NamedMonitors = Vec<(String, Box<dyn Monitor>)>;
 
@@ -43,10 +78,11 @@ pub fn build_monitors(
         .enumerate()
         .map(|(i, wire)| {
             let built = monitor_spec(wire).and_then(|spec| monitor::build(&spec, models));
-            match built {
-                Ok(m) => Ok((wire.name.clone(), m)),
-                Err(source) => Err(SessionError::Build { index: i, source }),
-            }
+            let mut m = built.map_err(|source| SessionError::Build { index: i, source })?;
+            apply_test_specs(&mut *m, wire).map_err(|(field, reason)| {
+                SessionError::invalid(format!("monitors[{i}].{field}"), reason)
+            })?;
+            Ok((wire.name.clone(), m))
         })
         .collect()
 }

@@ -1,13 +1,20 @@
 //! Per-session statistics (`GET /api/v1/sessions/{id}/stats` and the `stats`
-//! event): per monitor and test, counts, statistic summary, time in each state
-//! and the detection delay of the last alarm. Updated by the session actor.
+//! event): per monitor and test, counts, statistic summary, time in each state,
+//! the detection delay of the last alarm and the consistency diagnostics; per
+//! monitor with a protection level, its availability timeline. Updated by the
+//! session actor.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
 
 use serde::{Deserialize, Serialize};
 
 use crate::detect::Health;
-use crate::monitor::{MonitorKind, TestName, TestOutcome};
+use crate::detect::consistency::ConsistencySummary;
+use crate::monitor::{Availability, Integrity, MonitorKind, TestName, TestOutcome};
+use crate::service::wire::Severity;
+
+/// Availability changes kept in a monitor's timeline.
+pub const TIMELINE_SPANS: usize = 64;
 
 /// Seconds spent in each state, by epoch time.
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
@@ -35,8 +42,12 @@ pub struct TestStats {
     pub epochs: u64,
     /// Epochs whose statistic exceeded the threshold.
     pub exceedances: u64,
-    /// Alarms raised (transitions into suspect or isolated).
+    /// Alarms raised (transitions of severity `alarm`).
     pub alarms: u64,
+    /// Warnings raised (transitions of severity `warning`: into suspect under the
+    /// default alarm level, or any while the monitor converges).
+    #[serde(default)]
+    pub warnings: u64,
     /// Last statistic.
     pub last: Option<f64>,
     /// Last statistic / threshold.
@@ -49,6 +60,10 @@ pub struct TestStats {
     pub time_in_state_s: TimeInState,
     /// Seconds from the first exceedance of the episode to the last alarm.
     pub last_alarm_delay_s: Option<f64>,
+    /// NIS mean, lag-1 autocorrelation and the `consistency` flag of the test's
+    /// normalised innovation (docs/methods.md §M22); absent for tests fed none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub consistency: Option<ConsistencySummary>,
     #[serde(skip)]
     sum: f64,
     #[serde(skip)]
@@ -68,20 +83,23 @@ impl TestStats {
             epochs: 0,
             exceedances: 0,
             alarms: 0,
+            warnings: 0,
             last: None,
             last_test_ratio: None,
             mean: None,
             max: None,
             time_in_state_s: TimeInState::default(),
             last_alarm_delay_s: None,
+            consistency: None,
             sum: 0.0,
             last_t: None,
             episode_start_t: None,
         }
     }
 
-    /// Records one evaluation at epoch time `t`. Returns the detection delay
-    /// to put on the alarm when this outcome raises one.
+    /// Records one evaluation at epoch time `t`. Returns the detection delay to put on
+    /// the log entry when this outcome enters suspect or isolated (the caller then
+    /// [`TestStats::count`]s it with its severity).
     pub fn record(&mut self, t: f64, outcome: &TestOutcome) -> f64 {
         let s = outcome.statistic;
         if let Some(last_t) = self.last_t {
@@ -115,14 +133,136 @@ impl TestStats {
             if health == Health::Healthy {
                 self.episode_start_t = None;
             } else {
-                self.alarms += 1;
-                delay = t - self.episode_start_t.unwrap_or(t);
-                self.last_alarm_delay_s = Some(delay);
+                delay = self.episode_delay(t);
             }
         } else if health == Health::Healthy && !s.exceeds() {
             self.episode_start_t = None;
         }
         delay
+    }
+
+    /// Seconds from the first exceedance of the current episode to `t`.
+    pub fn episode_delay(&self, t: f64) -> f64 {
+        t - self.episode_start_t.unwrap_or(t)
+    }
+
+    /// Counts one log entry of `severity` raised after `delay_s`.
+    pub fn count(&mut self, severity: Severity, delay_s: f64) {
+        match severity {
+            Severity::Alarm => {
+                self.alarms += 1;
+                self.last_alarm_delay_s = Some(delay_s);
+            }
+            Severity::Warning => self.warnings += 1,
+        }
+    }
+}
+
+/// Seconds spent in each availability, by epoch time.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct TimeInAvailability {
+    /// Converging, s.
+    pub converging: f64,
+    /// Available, s.
+    pub available: f64,
+    /// Unavailable, s.
+    pub unavailable: f64,
+}
+
+/// One stretch of the availability timeline.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
+pub struct AvailabilitySpan {
+    /// Availability over the stretch.
+    pub state: Availability,
+    /// Epoch time it began, s.
+    pub from_t: f64,
+    /// Epoch time it ended (`None`: still in force).
+    pub to_t: Option<f64>,
+}
+
+/// Integrity availability of a monitor with a protection level (docs/methods.md §M24).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct IntegrityStats {
+    /// Availability now.
+    pub state: Availability,
+    /// Epoch time it was entered.
+    pub state_since_t: f64,
+    /// Last protection level, m.
+    pub protection_level: f64,
+    /// Alert limit, m.
+    pub alert_limit: f64,
+    /// Largest protection level since the monitor converged, m.
+    pub max_protection_level: Option<f64>,
+    /// Time in each availability.
+    pub time_s: TimeInAvailability,
+    /// Changes of availability since the stream started.
+    pub changes: u64,
+    /// The last [`TIMELINE_SPANS`] stretches, oldest first.
+    pub timeline: VecDeque<AvailabilitySpan>,
+    #[serde(skip)]
+    last_t: f64,
+}
+
+impl IntegrityStats {
+    /// The statistics of a stream whose first integrity epoch is `integrity` at `t`.
+    pub fn new(t: f64, integrity: &Integrity) -> Self {
+        let mut stats = IntegrityStats {
+            state: integrity.state,
+            state_since_t: t,
+            protection_level: integrity.protection_level,
+            alert_limit: integrity.alert_limit,
+            max_protection_level: None,
+            time_s: TimeInAvailability::default(),
+            changes: 0,
+            timeline: VecDeque::from([AvailabilitySpan {
+                state: integrity.state,
+                from_t: t,
+                to_t: None,
+            }]),
+            last_t: t,
+        };
+        stats.note_level(integrity);
+        stats
+    }
+
+    fn note_level(&mut self, integrity: &Integrity) {
+        self.protection_level = integrity.protection_level;
+        self.alert_limit = integrity.alert_limit;
+        if integrity.state != Availability::Converging {
+            let pl = integrity.protection_level;
+            self.max_protection_level = Some(self.max_protection_level.map_or(pl, |m| m.max(pl)));
+        }
+    }
+
+    /// Records one epoch; returns the previous availability when it changed.
+    pub fn record(&mut self, t: f64, integrity: &Integrity) -> Option<Availability> {
+        let dt = (t - self.last_t).max(0.0);
+        match self.state {
+            Availability::Converging => self.time_s.converging += dt,
+            Availability::Available => self.time_s.available += dt,
+            Availability::Unavailable => self.time_s.unavailable += dt,
+        }
+        self.last_t = t;
+        self.note_level(integrity);
+        if integrity.state == self.state {
+            return None;
+        }
+        let from = self.state;
+        self.state = integrity.state;
+        self.state_since_t = t;
+        self.changes += 1;
+        if let Some(last) = self.timeline.back_mut() {
+            last.to_t = Some(t);
+        }
+        self.timeline.push_back(AvailabilitySpan {
+            state: integrity.state,
+            from_t: t,
+            to_t: None,
+        });
+        if self.timeline.len() > TIMELINE_SPANS {
+            self.timeline.pop_front();
+        }
+        Some(from)
     }
 }
 
@@ -167,6 +307,10 @@ pub struct MonitorStats {
     /// before the first INS epoch and for other kinds.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub track: Option<Track>,
+    /// Monitors with a protection level: availability now and its timeline; absent
+    /// before the first epoch that reports one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub integrity: Option<IntegrityStats>,
 }
 
 /// Statistics of one session.
@@ -204,6 +348,15 @@ impl SessionStats {
             .map(|t| t.alarms)
             .sum()
     }
+
+    /// Warnings counted, summed over every monitor and test.
+    pub fn warnings(&self) -> u64 {
+        self.monitors
+            .values()
+            .flat_map(|m| m.tests.values())
+            .map(|t| t.warnings)
+            .sum()
+    }
 }
 
 #[cfg(test)]
@@ -221,12 +374,20 @@ mod tests {
         let mut delays = vec![];
         for (k, v) in values.iter().enumerate() {
             let o = bank.evaluate(0, *v);
-            delays.push(stats.record(k as f64, &o));
+            let delay = stats.record(k as f64, &o);
+            if o.previous != o.decision.health && o.decision.health != Health::Healthy {
+                let severity = crate::service::wire::AlarmLevel::Isolated
+                    .severity(o.decision.health)
+                    .unwrap();
+                stats.count(severity, delay);
+            }
+            delays.push(delay);
         }
         // t=1 suspect (delay 0), t=2 isolated (delay 1 s from the first exceedance).
         assert_eq!(delays, vec![0.0, 0.0, 1.0, 0.0, 0.0]);
         assert_eq!(stats.exceedances, 2);
-        assert_eq!(stats.alarms, 2);
+        // Under the default alarm level the suspect entry is a warning.
+        assert_eq!((stats.alarms, stats.warnings), (1, 1));
         // t=3 still isolated (t1 = 1), t=4 healthy again (t1 = 0).
         assert_eq!(stats.state, Health::Healthy);
         assert_eq!(stats.state_since_t, Some(4.0));
@@ -265,6 +426,7 @@ mod tests {
                     solution: position,
                     ins: position,
                 }),
+                integrity: None,
             },
         );
         monitors.insert(
@@ -275,6 +437,7 @@ mod tests {
                 worst_test_ratio: None,
                 tests: BTreeMap::from([(TestName::from("r"), test)]),
                 track: None,
+                integrity: None,
             },
         );
         SessionStats {
@@ -311,5 +474,52 @@ mod tests {
     #[test]
     fn session_alarms_sum_over_monitors_and_tests() {
         assert_eq!(sample().alarms(), 6);
+        assert_eq!(sample().warnings(), 0);
+    }
+
+    #[test]
+    fn availability_timeline_records_time_and_changes() {
+        let at = |state, pl| Integrity {
+            state,
+            protection_level: pl,
+            alert_limit: 25.0,
+        };
+        let mut s = IntegrityStats::new(0.0, &at(Availability::Converging, 80.0));
+        assert_eq!(s.record(1.0, &at(Availability::Converging, 40.0)), None);
+        assert_eq!(
+            s.record(2.0, &at(Availability::Available, 20.0)),
+            Some(Availability::Converging)
+        );
+        assert_eq!(s.record(5.0, &at(Availability::Available, 21.0)), None);
+        assert_eq!(
+            s.record(6.0, &at(Availability::Unavailable, 30.0)),
+            Some(Availability::Available)
+        );
+        assert_eq!(
+            s.time_s,
+            TimeInAvailability {
+                converging: 2.0,
+                available: 4.0,
+                unavailable: 0.0
+            }
+        );
+        assert_eq!(s.changes, 2);
+        assert_eq!(
+            s.max_protection_level,
+            Some(30.0),
+            "converging levels are left out"
+        );
+        assert_eq!(s.timeline.len(), 3);
+        assert_eq!(s.timeline[1].to_t, Some(6.0));
+        assert_eq!(s.timeline[2].to_t, None);
+        for k in 0..100 {
+            let state = if k % 2 == 0 {
+                Availability::Available
+            } else {
+                Availability::Unavailable
+            };
+            s.record(7.0 + k as f64, &at(state, 1.0));
+        }
+        assert_eq!(s.timeline.len(), TIMELINE_SPANS);
     }
 }

@@ -77,8 +77,8 @@ async fn commit(
     let mut ids = Vec::with_capacity(batch.len());
     for (alarm, _) in batch {
         let done = sqlx::query(
-            "INSERT INTO alarms (session, monitor, test, state, t, statistic, threshold, dof, delay_s, raised_at_ms, cleared_t)
-             VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, NULL)",
+            "INSERT INTO alarms (session, monitor, test, state, t, statistic, threshold, dof, delay_s, raised_at_ms, cleared_t, severity)
+             VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, NULL, ?)",
         )
         .bind(&alarm.session)
         .bind(&alarm.monitor)
@@ -90,6 +90,7 @@ async fn commit(
         .bind(alarm.dof)
         .bind(alarm.delay_s)
         .bind(alarm.raised_at_ms)
+        .bind(alarm.severity.as_str())
         .execute(&mut *tx)
         .await?;
         ids.push(done.last_insert_rowid());

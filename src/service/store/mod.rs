@@ -14,7 +14,7 @@ use sqlx::sqlite::{
 };
 
 use crate::detect::Health;
-use crate::service::wire::{AlarmRecord, MonitorSpecWire};
+use crate::service::wire::{AlarmLevel, AlarmRecord, MonitorSpecWire, Severity};
 
 pub use models::StoredModel;
 
@@ -80,6 +80,9 @@ pub struct StoredSession {
     pub monitors: Vec<MonitorSpecWire>,
     /// Creation time, Unix milliseconds.
     pub created_at_ms: i64,
+    /// The session's alarm level (monitors may override it; default `isolated`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alarm_level: Option<AlarmLevel>,
 }
 
 /// Filters for the alarm log.
@@ -97,6 +100,8 @@ pub struct AlarmQuery {
     pub before_id: Option<i64>,
     /// Only alarms with an id above this (catching up after a reconnect).
     pub after_id: Option<i64>,
+    /// Only entries of this severity.
+    pub severity: Option<Severity>,
     /// At most this many, newest first.
     pub limit: i64,
 }
@@ -133,6 +138,11 @@ const SCHEMA: &[&str] = &[
     "CREATE INDEX IF NOT EXISTS alarms_by_time ON alarms (raised_at_ms)",
 ];
 
+/// Columns added after the first schema, with their definitions: added to an older
+/// database at open (rows written before read their default).
+const ADDED_COLUMNS: &[(&str, &str, &str)] =
+    &[("alarms", "severity", "TEXT NOT NULL DEFAULT 'alarm'")];
+
 impl Store {
     /// Opens (creating if needed) the database file in WAL mode and applies the schema.
     pub async fn open(path: &Path) -> Result<Self, StoreError> {
@@ -150,6 +160,19 @@ impl Store {
             .await?;
         for statement in SCHEMA.iter().chain(models::SCHEMA) {
             sqlx::query(statement).execute(&pool).await?;
+        }
+        for (table, column, definition) in ADDED_COLUMNS {
+            let present: Vec<String> =
+                sqlx::query_scalar(&format!("SELECT name FROM pragma_table_info('{table}')"))
+                    .fetch_all(&pool)
+                    .await?;
+            if !present.iter().any(|c| c == column) {
+                sqlx::query(&format!(
+                    "ALTER TABLE {table} ADD COLUMN {column} {definition}"
+                ))
+                .execute(&pool)
+                .await?;
+            }
         }
         let alarms = alarm_writer::AlarmWriter::spawn(pool.clone());
         Ok(Store { pool, alarms })
@@ -236,7 +259,7 @@ impl Store {
     /// The alarm log, newest first.
     pub async fn alarms(&self, q: &AlarmQuery) -> Result<Vec<AlarmRecord>, StoreError> {
         let mut sql = String::from(
-            "SELECT id, session, monitor, test, state, t, statistic, threshold, dof, delay_s, raised_at_ms, cleared_t FROM alarms WHERE 1 = 1",
+            "SELECT id, session, monitor, test, state, t, statistic, threshold, dof, delay_s, raised_at_ms, cleared_t, severity FROM alarms WHERE 1 = 1",
         );
         if q.session.is_some() {
             sql.push_str(" AND session = ?");
@@ -255,6 +278,9 @@ impl Store {
         }
         if q.after_id.is_some() {
             sql.push_str(" AND id > ?");
+        }
+        if q.severity.is_some() {
+            sql.push_str(" AND severity = ?");
         }
         sql.push_str(" ORDER BY id DESC LIMIT ?");
         let mut query = sqlx::query(&sql);
@@ -276,6 +302,9 @@ impl Store {
         if let Some(v) = q.after_id {
             query = query.bind(v);
         }
+        if let Some(v) = q.severity {
+            query = query.bind(v.as_str());
+        }
         let rows = query.bind(q.limit).fetch_all(&self.pool).await?;
         rows.iter().map(alarm_from_row).collect()
     }
@@ -283,10 +312,13 @@ impl Store {
 
 fn alarm_from_row(row: &sqlx::sqlite::SqliteRow) -> Result<AlarmRecord, StoreError> {
     let state: String = row.try_get("state")?;
+    let severity: String = row.try_get("severity")?;
     let statistic: f64 = row.try_get("statistic")?;
     let threshold: f64 = row.try_get("threshold")?;
     Ok(AlarmRecord {
         id: row.try_get("id")?,
+        severity: Severity::parse(&severity)
+            .ok_or_else(|| StoreError::Corrupt(format!("alarm severity '{severity}'")))?,
         session: row.try_get("session")?,
         monitor: row.try_get("monitor")?,
         test: row.try_get("test")?,
@@ -310,6 +342,7 @@ mod tests {
     fn alarm(session: &str, t: f64) -> AlarmRecord {
         AlarmRecord {
             id: 0,
+            severity: Severity::Alarm,
             session: session.into(),
             monitor: "m".into(),
             test: "residual".into(),
@@ -451,6 +484,53 @@ mod tests {
     }
 
     #[tokio::test]
+    async fn an_alarm_log_from_before_severities_opens_and_reads_as_alarms() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("old.db");
+        {
+            // The alarms table as the previous version created it, with one row.
+            let url = format!("sqlite://{}?mode=rwc", path.display());
+            let pool = SqlitePool::connect(&url).await.unwrap();
+            sqlx::query(
+                "CREATE TABLE alarms (id INTEGER PRIMARY KEY AUTOINCREMENT, session TEXT NOT NULL, monitor TEXT NOT NULL, test TEXT NOT NULL, state TEXT NOT NULL, t REAL NOT NULL, statistic REAL NOT NULL, threshold REAL NOT NULL, dof INTEGER NOT NULL, delay_s REAL NOT NULL, raised_at_ms INTEGER NOT NULL, cleared_t REAL)",
+            )
+            .execute(&pool)
+            .await
+            .unwrap();
+            sqlx::query("INSERT INTO alarms (session, monitor, test, state, t, statistic, threshold, dof, delay_s, raised_at_ms) VALUES ('s', 'm', 'r', 'suspect', 1.0, 30.0, 20.0, 1, 0.0, 5)")
+                .execute(&pool)
+                .await
+                .unwrap();
+            pool.close().await;
+        }
+        let store = Store::open(&path).await.unwrap();
+        let mut warning = alarm("s", 2.0);
+        warning.severity = Severity::Warning;
+        store.insert_alarm(warning).await.unwrap();
+        let all = store
+            .alarms(&AlarmQuery {
+                limit: 10,
+                ..Default::default()
+            })
+            .await
+            .unwrap();
+        assert_eq!(
+            all.iter().map(|a| a.severity).collect::<Vec<_>>(),
+            vec![Severity::Warning, Severity::Alarm]
+        );
+        let alarms_only = store
+            .alarms(&AlarmQuery {
+                severity: Some(Severity::Alarm),
+                limit: 10,
+                ..Default::default()
+            })
+            .await
+            .unwrap();
+        assert_eq!(alarms_only.len(), 1);
+        assert_eq!(alarms_only[0].state, Health::Suspect);
+    }
+
+    #[tokio::test]
     async fn sessions_survive_reopening() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("t.db");
@@ -459,6 +539,7 @@ mod tests {
             echo: true,
             monitors: vec![],
             created_at_ms: 5,
+            alarm_level: None,
         };
         {
             let store = Store::open(&path).await.unwrap();

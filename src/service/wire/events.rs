@@ -6,7 +6,39 @@ use serde::{Deserialize, Serialize};
 
 use super::ingest::{FrameError, FrameErrorCode};
 use crate::detect::{Health, Statistic};
-use crate::monitor::MonitorReport;
+use crate::monitor::{Availability, Integrity, MonitorReport};
+
+/// How loud a state change is (docs/architecture.md §A2): an `alarm` is stored,
+/// announced as an `alarm` event and counted; a `warning` is stored and announced only
+/// as a `state` event.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Severity {
+    /// An alarm.
+    #[default]
+    Alarm,
+    /// A warning.
+    Warning,
+}
+
+impl Severity {
+    /// The wire and store name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Severity::Alarm => "alarm",
+            Severity::Warning => "warning",
+        }
+    }
+
+    /// Parses the store name.
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "alarm" => Some(Severity::Alarm),
+            "warning" => Some(Severity::Warning),
+            _ => None,
+        }
+    }
+}
 
 // ------------------------------------------------------------- server messages
 
@@ -38,11 +70,35 @@ impl TestResultWire {
     }
 }
 
+/// A monitor's integrity on the wire: availability, protection level, alert limit.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct IntegrityWire {
+    /// `converging`, `available` or `unavailable`.
+    pub state: Availability,
+    /// Protection level, m.
+    pub protection_level: f64,
+    /// Alert limit, m.
+    pub alert_limit: f64,
+}
+
+impl From<&Integrity> for IntegrityWire {
+    fn from(i: &Integrity) -> Self {
+        IntegrityWire {
+            state: i.state,
+            protection_level: i.protection_level,
+            alert_limit: i.alert_limit,
+        }
+    }
+}
+
 /// One monitor's part of a `result` frame.
 #[derive(Debug, Clone, Serialize)]
 pub struct MonitorResultWire<'a> {
     /// Tests that ran this epoch.
     pub tests: BTreeMap<crate::monitor::TestName, TestResultWire>,
+    /// Integrity availability, for monitors with a protection level.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub integrity: Option<IntegrityWire>,
     /// Monitor outputs, flattened beside `tests`.
     #[serde(flatten)]
     pub outputs: &'a crate::monitor::Outputs,
@@ -61,15 +117,21 @@ pub fn monitor_result(report: &MonitorReport) -> MonitorResultWire<'_> {
                 )
             })
             .collect(),
+        integrity: report.integrity.as_ref().map(IntegrityWire::from),
         outputs: &report.outputs,
     }
 }
 
-/// An alarm: a test's transition into suspect or isolated, as stored and sent.
+/// An entry of the alarm log: a test's transition into suspect or isolated, as stored
+/// (alarms and warnings) and sent (alarms, as the `alarm` event).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct AlarmRecord {
     /// Store id (increasing).
     pub id: i64,
+    /// `alarm` or `warning` (docs/architecture.md §A2); entries stored before severities
+    /// existed read as `alarm`.
+    #[serde(default)]
+    pub severity: Severity,
     /// Session id.
     pub session: String,
     /// Monitor name.
@@ -111,6 +173,34 @@ pub struct StateChange {
     pub from: Health,
     /// New state.
     pub to: Health,
+    /// Entering suspect or isolated: `alarm` or `warning`; absent on the return to
+    /// healthy.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub severity: Option<Severity>,
+    /// The alarm-log entry of this change (absent on the return to healthy, and `-1`
+    /// when the store failed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub log_id: Option<i64>,
+}
+
+/// A change of a monitor's integrity availability (docs/methods.md §M24): not a fault,
+/// so neither stored as an alarm nor counted as one.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct AvailabilityChange {
+    /// Session id.
+    pub session: String,
+    /// Monitor name.
+    pub monitor: String,
+    /// Epoch time, s.
+    pub t: f64,
+    /// Previous availability (a stream starts `converging`).
+    pub from: Availability,
+    /// New availability.
+    pub to: Availability,
+    /// Protection level, m.
+    pub protection_level: f64,
+    /// Alert limit, m.
+    pub alert_limit: f64,
 }
 
 /// The `error` event.

@@ -89,6 +89,8 @@ mod tests {
             t: 1.0,
             from: Health::Healthy,
             to: Health::Suspect,
+            severity: Some(Severity::Warning),
+            log_id: Some(3),
         };
         let v: serde_json::Value = serde_json::from_str(&tagged("state", &change)).unwrap();
         assert_eq!(v["type"], "state");

@@ -4,8 +4,35 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::detect::PolicyConfig;
+use crate::detect::{Health, PolicyConfig};
 use crate::monitor::MonitorKind;
+
+use super::events::Severity;
+
+/// Which state change is an *alarm* (docs/architecture.md §A2): entering `isolated`
+/// only (the default: entering `suspect` is then a *warning*, stored and announced as a
+/// `state` event but not as an `alarm`), or entering `suspect` already. Under the
+/// `classic` and `traditional` policies a test never is suspect, so both read the same.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AlarmLevel {
+    /// Entering `suspect` (and `isolated`) raises an alarm.
+    Suspect,
+    /// Entering `isolated` raises an alarm; entering `suspect` a warning.
+    #[default]
+    Isolated,
+}
+
+impl AlarmLevel {
+    /// The severity of entering `state` (`None` for healthy).
+    pub fn severity(self, state: Health) -> Option<Severity> {
+        match (state, self) {
+            (Health::Healthy, _) => None,
+            (Health::Isolated, _) | (Health::Suspect, AlarmLevel::Suspect) => Some(Severity::Alarm),
+            (Health::Suspect, AlarmLevel::Isolated) => Some(Severity::Warning),
+        }
+    }
+}
 
 /// `POST /api/v1/sessions` body.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -19,6 +46,10 @@ pub struct CreateSession {
     /// Send one `result` per epoch back on the ingest socket.
     #[serde(default)]
     pub echo: bool,
+    /// Which state change is an alarm, for every monitor that does not say (default
+    /// `isolated`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alarm_level: Option<AlarmLevel>,
 }
 
 /// One monitor in a session spec, as the user writes it and as it is stored.
@@ -42,6 +73,30 @@ pub struct MonitorSpecWire {
     /// Raw threshold (exclusive with `p_fa`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub threshold: Option<f64>,
+    /// Which state change is an alarm for this monitor (default: the session's).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alarm_level: Option<AlarmLevel>,
+    /// Per-test thresholds that override the monitor's `p_fa`/`threshold` (e.g. from
+    /// `navguard calibrate`), by test name (`thresholds` on the wire: a monitor's view
+    /// also has `tests`).
+    #[serde(
+        default,
+        rename = "thresholds",
+        skip_serializing_if = "BTreeMap::is_empty"
+    )]
+    pub tests: BTreeMap<String, TestThresholdSpec>,
+}
+
+/// One test's own threshold: exactly one of `p_fa` and `threshold`.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct TestThresholdSpec {
+    /// False-alarm probability for the test's dof.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub p_fa: Option<f64>,
+    /// Raw threshold.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub threshold: Option<f64>,
 }
 
 fn empty_object() -> serde_json::Value {
@@ -61,6 +116,13 @@ pub struct ThresholdUpdate {
     /// New policy.
     #[serde(default)]
     pub policy: Option<PolicyConfig>,
+    /// New alarm level for the monitor.
+    #[serde(default)]
+    pub alarm_level: Option<AlarmLevel>,
+    /// Per-test thresholds to set (a test's `p_fa` or `threshold`), or with `null` to
+    /// return to the monitor's. Tests not named keep what they have.
+    #[serde(default)]
+    pub tests: Option<BTreeMap<String, Option<TestThresholdSpec>>>,
 }
 
 /// A test's effective threshold, as reported by the threshold routes.
@@ -72,6 +134,9 @@ pub struct TestThreshold {
     pub threshold: f64,
     /// False-alarm probability that threshold gives for the dof.
     pub p_fa: f64,
+    /// The test has a threshold of its own (per-test setting or its kind's default),
+    /// which the monitor's `p_fa`/`threshold` does not change.
+    pub own: bool,
 }
 
 /// Threshold and policy of one monitor (`GET`/`PUT …/threshold`).
@@ -85,6 +150,8 @@ pub struct ThresholdView {
     pub threshold: Option<f64>,
     /// Decision policy.
     pub policy: PolicyConfig,
+    /// Which state change is an alarm.
+    pub alarm_level: AlarmLevel,
     /// Effective threshold per test.
     pub tests: BTreeMap<String, TestThreshold>,
 }

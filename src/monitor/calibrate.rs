@@ -1,0 +1,293 @@
+//! Thresholds calibrated from fault-free data (docs/methods.md §M25): run a session's
+//! monitors over recorded epochs with every test's threshold out of reach (so every
+//! epoch is healthy and every filter updates, as in fault-free operation), collect
+//! each test's statistic, and propose per test the threshold that gives a requested
+//! false-alarm rate on that data, with a confidence bound.
+//!
+//! Statistics of one test may have several dofs (GNSS with and without velocity), so
+//! each value is first mapped to its χ² upper-tail probability `u = 1 − F_χ²(dof)(v)`
+//! (for the calibrated window tests this is their own tail, [`crate::detect::window`]).
+//! A threshold is then a tail level `u*`: an epoch fails when `u < u*`. With `N` values
+//! and `k` of them below `u*`, the true rate `F(u*)` of the `k`-th smallest value is
+//! `Beta(k, N − k + 1)`; the proposal is the largest `k` for which
+//! `P(Beta(k, N − k + 1) ≤ far) ≥ confidence`, i.e. `P(Bin(N, far) ≥ k) ≥ confidence`, so
+//! the proposed level keeps the true rate at or below `far` with that confidence. It
+//! needs `N ≥ ln(1 − confidence)/ln(1 − far)` epochs (about 3/far at 95 %); with fewer,
+//! the test is refused, saying how many it needs. Values of consecutive epochs are
+//! correlated (windowed tests especially), so the bound is optimistic by the ratio of
+//! real to effective samples; the report states the count used.
+//!
+//! The proposal is returned as the test's own `p_fa` (the level `u*`: each dof then gets
+//! `F⁻¹_χ²(dof)(1 − u*)`) and, for the test's primary dof, the equivalent raw threshold,
+//! beside the χ² threshold at `p_fa = far` it replaces and the rate that one would give
+//! on this data.
+
+use statrs::distribution::{Binomial, DiscreteCDF};
+
+use super::{Monitor, StepError};
+use crate::detect::{ThresholdSpec, chi2};
+use crate::epoch::Epoch;
+
+/// A threshold out of reach of any statistic, so calibration runs see only healthy epochs.
+const OUT_OF_REACH: f64 = 1e300;
+
+/// Why a test could not be calibrated.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CalibrateError {
+    /// The requested rate or confidence is not in (0, 1).
+    #[error("{0} must lie in (0, 1)")]
+    Range(&'static str),
+    /// A monitor failed numerically on an epoch.
+    #[error("epoch {index}: {source}")]
+    Step {
+        /// Index of the epoch in the data.
+        index: usize,
+        /// The failure.
+        source: StepError,
+    },
+}
+
+/// One test's statistics over the data.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TestSample {
+    /// Test name.
+    pub test: String,
+    /// The test's primary dof.
+    pub dof: u32,
+    /// Upper-tail probability of each epoch's statistic under its own dof.
+    pub tails: Vec<f64>,
+}
+
+/// What calibration proposes for one test.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Proposal {
+    /// A calibrated level.
+    Calibrated {
+        /// The tail level `u*` to set as the test's own `p_fa`.
+        p_fa: f64,
+        /// The raw threshold that level gives at the primary dof.
+        threshold: f64,
+        /// Epochs below the level in the data (`k`).
+        below: usize,
+    },
+    /// Too few epochs for the rate asked.
+    TooShort {
+        /// Epochs needed.
+        needed: usize,
+    },
+}
+
+/// The calibration of one test.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TestCalibration {
+    /// Test name.
+    pub test: String,
+    /// Primary dof.
+    pub dof: u32,
+    /// Epochs on which the test ran.
+    pub epochs: usize,
+    /// The χ² threshold at `p_fa = far` for the primary dof (what the proposal replaces).
+    pub chi2_threshold: f64,
+    /// The share of epochs that χ² threshold would fail on this data.
+    pub chi2_rate: f64,
+    /// The proposal.
+    pub proposal: Proposal,
+}
+
+/// Runs `monitor` over `epochs` with every test's threshold out of reach and collects
+/// each test's tails. The monitor is reset first and left as the run leaves it.
+pub fn sample(
+    monitor: &mut dyn Monitor,
+    epochs: &[Epoch],
+) -> Result<Vec<TestSample>, CalibrateError> {
+    monitor.reset();
+    let bank = monitor.tests_mut();
+    let out_of_reach = ThresholdSpec::Threshold(OUT_OF_REACH);
+    // A raw threshold is valid for every dof, so these cannot fail.
+    let _ = bank.set_spec(out_of_reach);
+    for i in 0..bank.slots().len() {
+        let _ = bank.set_test_spec(i, Some(out_of_reach));
+    }
+    let mut samples: Vec<TestSample> = bank
+        .slots()
+        .iter()
+        .map(|s| TestSample {
+            test: s.name.to_string(),
+            dof: s.dof,
+            tails: Vec::new(),
+        })
+        .collect();
+    for (index, epoch) in epochs.iter().enumerate() {
+        let report = monitor
+            .step(epoch)
+            .map_err(|source| CalibrateError::Step { index, source })?;
+        for o in report.tests {
+            let v = o.statistic.value;
+            let tail = if v > 0.0 {
+                chi2::false_alarm_probability(o.statistic.dof, v).unwrap_or(0.0)
+            } else {
+                1.0
+            };
+            samples[o.index].tails.push(tail);
+        }
+    }
+    Ok(samples)
+}
+
+/// The smallest number of epochs that can support a rate of `far` at `confidence`.
+pub fn epochs_needed(far: f64, confidence: f64) -> usize {
+    ((1.0 - confidence).ln() / (1.0 - far).ln()).ceil() as usize
+}
+
+/// Proposes a threshold for one test at false-alarm rate `far` with `confidence`.
+pub fn calibrate(
+    sample: &TestSample,
+    far: f64,
+    confidence: f64,
+) -> Result<TestCalibration, CalibrateError> {
+    if !(far > 0.0 && far < 1.0) {
+        return Err(CalibrateError::Range("far"));
+    }
+    if !(confidence > 0.0 && confidence < 1.0) {
+        return Err(CalibrateError::Range("confidence"));
+    }
+    let n = sample.tails.len();
+    let dof = sample.dof.max(1);
+    let chi2_threshold = chi2::threshold(dof, far).unwrap_or(f64::NAN);
+    let chi2_rate = if n == 0 {
+        0.0
+    } else {
+        sample.tails.iter().filter(|&&u| u < far).count() as f64 / n as f64
+    };
+    let needed = epochs_needed(far, confidence);
+    let mut proposal = Proposal::TooShort { needed };
+    if n >= needed {
+        let mut sorted = sample.tails.clone();
+        sorted.sort_by(f64::total_cmp);
+        // Largest k with P(Bin(n, far) ≥ k) ≥ confidence; k = 1 holds since n ≥ needed.
+        let bin = Binomial::new(far, n as u64).expect("far in (0, 1)");
+        let mut k = 1;
+        while k < n && 1.0 - bin.cdf(k as u64) >= confidence {
+            k += 1;
+        }
+        // The level: the k-th smallest tail (an epoch fails when its tail is below it).
+        let level = sorted[k - 1].clamp(1e-300, 0.5);
+        proposal = Proposal::Calibrated {
+            p_fa: level,
+            threshold: chi2::threshold(dof, level).unwrap_or(f64::NAN),
+            below: k - 1,
+        };
+    }
+    Ok(TestCalibration {
+        test: sample.test.clone(),
+        dof,
+        epochs: n,
+        chi2_threshold,
+        chi2_rate,
+        proposal,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::detect::PolicyConfig;
+    use crate::monitor::linear::{LinearConfig, LinearConfigWire, LinearMonitor};
+    use rand::SeedableRng;
+    use rand::rngs::StdRng;
+    use rand_distr::{Distribution, StandardNormal};
+
+    /// A random walk seen in white noise of σ = `scale` while the model says σ = 1:
+    /// λ = r²/S with the model's S is `scale²`-inflated once the filter has converged.
+    fn run(scale: f64, epochs: usize, seed: u64) -> Vec<TestSample> {
+        let config = LinearConfig::try_from(LinearConfigWire {
+            f: vec![vec![1.0]],
+            h: vec![vec![1.0]],
+            q: vec![vec![1e-8]],
+            r: vec![vec![1.0]],
+            x0: vec![0.0],
+            p0: vec![vec![1e-8]],
+            b: None,
+        })
+        .unwrap();
+        let mut m =
+            LinearMonitor::new(config, PolicyConfig::Classic, ThresholdSpec::default()).unwrap();
+        let mut rng = StdRng::seed_from_u64(seed);
+        let data: Vec<Epoch> = (0..epochs)
+            .map(|k| {
+                let e: f64 = StandardNormal.sample(&mut rng);
+                Epoch {
+                    t: k as f64,
+                    z: Some(vec![scale * e]),
+                    ..Default::default()
+                }
+            })
+            .collect();
+        sample(&mut m, &data).unwrap()
+    }
+
+    #[test]
+    fn a_mis_scaled_model_gets_the_scaled_threshold() {
+        // Noise √2 × what the model says: λ ~ 2 χ²(1), so the threshold for a rate of
+        // 1e-3 is 2 × 10.828 = 21.66 (the χ² one, 10.83, would fail ≈ 2.1 % of epochs).
+        for seed in [1, 2, 3] {
+            let samples = run(2f64.sqrt(), 100_000, seed);
+            let c = calibrate(&samples[0], 1e-3, 0.95).unwrap();
+            assert_eq!(c.epochs, 100_000);
+            assert!((c.chi2_threshold - 10.8276).abs() < 1e-3);
+            assert!((c.chi2_rate - 0.0209).abs() < 0.002, "{}", c.chi2_rate);
+            let Proposal::Calibrated {
+                threshold, below, ..
+            } = c.proposal
+            else {
+                panic!("calibrated");
+            };
+            // The conservative order statistic sits a little above the true quantile.
+            assert!(
+                (21.0..24.5).contains(&threshold),
+                "seed {seed}: {threshold}"
+            );
+            assert!(below < 100, "{below}");
+        }
+    }
+
+    #[test]
+    fn too_little_data_is_refused_saying_how_much_is_needed() {
+        assert_eq!(epochs_needed(1e-4, 0.95), 29_956);
+        let samples = run(1.0, 1000, 4);
+        let c = calibrate(&samples[0], 1e-4, 0.95).unwrap();
+        assert_eq!(c.proposal, Proposal::TooShort { needed: 29_956 });
+        assert_eq!(
+            calibrate(&samples[0], 0.0, 0.95),
+            Err(CalibrateError::Range("far"))
+        );
+        assert_eq!(
+            calibrate(&samples[0], 0.1, 1.0),
+            Err(CalibrateError::Range("confidence"))
+        );
+    }
+
+    #[test]
+    fn the_proposed_level_keeps_the_rate_below_far_at_the_stated_confidence() {
+        // Uniform tails (a well-tuned model): the level's true rate is the level itself.
+        // Over 200 data sets of 5,000 epochs at far 0.01, at most ≈ 5 % may exceed it.
+        let mut rng = StdRng::seed_from_u64(9);
+        let mut over = 0;
+        for _ in 0..200 {
+            let tails: Vec<f64> = (0..5000)
+                .map(|_| rand::Rng::random::<f64>(&mut rng))
+                .collect();
+            let s = TestSample {
+                test: "t".into(),
+                dof: 1,
+                tails,
+            };
+            let Proposal::Calibrated { p_fa, .. } = calibrate(&s, 0.01, 0.95).unwrap().proposal
+            else {
+                panic!()
+            };
+            over += usize::from(p_fa > 0.01);
+        }
+        assert!(over <= 20, "{over} of 200 above the rate asked");
+    }
+}
