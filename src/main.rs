@@ -1,6 +1,6 @@
 //! The `navguard` binary: parses flags, opens the store and serves (thin; the
 //! service lives in the library), or runs one of the tools in [`cli`]
-//! (`simulate`, `replay`, `loadgen`, `experiment`). `anyhow` is used only here and in `cli/`.
+//! (`simulate`, `replay`, `loadgen`, `calibrate`, `experiment`). `anyhow` is used only here and in `cli/`.
 
 mod cli;
 
@@ -31,6 +31,8 @@ enum Command {
     Replay(cli::replay::ReplayArgs),
     /// Put simulated load on a running server: N sessions, a rate, a batch size; report throughput, latency and memory.
     Loadgen(cli::loadgen::LoadgenArgs),
+    /// Propose per-test thresholds for a false-alarm rate from fault-free recorded epochs.
+    Calibrate(cli::calibrate::CalibrateArgs),
     /// Rerun a paper's experiment in-process: print its table, write its figures.
     #[command(subcommand)]
     Experiment(cli::experiment::ExperimentCommand),
@@ -155,6 +157,7 @@ async fn run() -> anyhow::Result<()> {
         Some(Command::Simulate(args)) => cli::simulate::run(args),
         Some(Command::Replay(args)) => cli::replay::run(args).await,
         Some(Command::Loadgen(args)) => cli::loadgen::run(args).await,
+        Some(Command::Calibrate(args)) => cli::calibrate::run(args).await,
         Some(Command::Experiment(command)) => cli::experiment::run(command),
         None => serve(cli.serve).await,
     }
