@@ -1,9 +1,9 @@
 // alarms.js — the persisted alarm log (GET /api/v1/alarms), newest first,
-// filtered by session, monitor and raise time, a page at a time with the
+// filtered by session, monitor, severity and raise time, a page at a time with the
 // server's `next_before` cursor. On the first page an alarm arriving live on
 // any events socket is inserted at the top when it passes the filters.
 
-import { el, badge, fmtNum, fmtRatio, fmtT, fmtClock } from "./dom.js";
+import { el, badge, fmtNum, fmtRatio, fmtT, fmtClock, severityTag } from "./dom.js";
 import { get } from "./api.js";
 
 const PAGE = 25;
@@ -38,6 +38,7 @@ export class AlarmsView {
     this.filters = {
       session: String(f.get("session") || "").trim() || null,
       monitor: String(f.get("monitor") || "").trim() || null,
+      severity: String(f.get("severity") || "") || null,
       since: ms(f.get("since")),
       until: ms(f.get("until")),
     };
@@ -52,12 +53,13 @@ export class AlarmsView {
   matches(a) {
     const f = this.filters;
     return (!f.session || a.session === f.session) && (!f.monitor || a.monitor === f.monitor) &&
+      (!f.severity || (a.severity || "alarm") === f.severity) &&
       (f.since === null || a.raised_at_ms >= f.since) && (f.until === null || a.raised_at_ms < f.until);
   }
 
   async load() {
     const q = new URLSearchParams({ limit: String(PAGE) });
-    for (const k of ["session", "monitor", "since", "until"]) if (this.filters[k] !== null) q.set(k, String(this.filters[k]));
+    for (const k of ["session", "monitor", "severity", "since", "until"]) if (this.filters[k] !== null) q.set(k, String(this.filters[k]));
     const before = this.cursors[this.cursors.length - 1];
     if (before !== null) q.set("before", String(before));
     this.pageText.textContent = "Loading\u2026";
@@ -86,8 +88,9 @@ export class AlarmsView {
   row(a, fresh) {
     if (a.id > 0) this.shown.add(a.id);
     const cleared = a.cleared_t !== null && a.cleared_t !== undefined;
-    const tr = el("tr", { "data-alarm-id": a.id, "data-session": a.session, class: (cleared ? "cleared" : "") + (fresh ? " fresh" : "") },
+    const tr = el("tr", { "data-alarm-id": a.id, "data-session": a.session, "data-severity": a.severity || "alarm", class: (cleared ? "cleared" : "") + (fresh ? " fresh" : "") },
       el("td", null, el("time", { datetime: new Date(a.raised_at_ms).toISOString() }, fmtClock(a.raised_at_ms))),
+      el("td", null, severityTag(a.severity)),
       el("td", { class: "wrap" }, el("a", { href: "#/session/" + encodeURIComponent(a.session) }, a.session)),
       el("td", { class: "wrap" }, a.monitor), el("td", { class: "wrap" }, a.test),
       el("td", null, badge(a.state)),

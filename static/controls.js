@@ -1,14 +1,13 @@
-// controls.js — edit one monitor's threshold and policy. The operator states
-// either a false-alarm probability or a raw threshold; while they type, the
-// threshold each test would get is previewed from /api/v1/chi2/threshold for
-// that test's dof. "Apply" sends the REST PUT, and the panel shows what the
-// server answered (the thresholds now in force), not what was typed.
+// controls.js — edit one monitor's threshold, policy and alarm level, and
+// per-test thresholds. The operator states either a false-alarm probability
+// or a raw threshold; while they type, the threshold each test would get is
+// previewed from /api/v1/chi2/threshold for that test's dof (a test with a
+// threshold of its own keeps it). "Apply" sends the REST PUT, and the panel
+// shows what the server answered (the thresholds now in force), not what was
+// typed.
 
-import { el, fmtNum, policyText, isNum } from "./dom.js";
+import { el, fmtNum, policyLevelText, isNum } from "./dom.js";
 import { get, request } from "./api.js";
-
-/** Tests whose threshold does not follow the monitor's spec (the HPL is compared with the HAL). */
-const FIXED_TESTS = new Set(["hpl"]);
 
 export class ThresholdControls {
   constructor(sessionId, monitor, onApplied) {
@@ -22,7 +21,12 @@ export class ThresholdControls {
       el("option", { value: "threshold" }, "raw threshold"));
     this.value = el("input", { id: id("value"), name: "value", type: "number", step: "any", min: "0", required: true, "data-control": "value" });
     this.policy = el("select", { id: id("policy"), name: "policy", "data-control": "policy" },
-      el("option", { value: "classic" }, "classic"), el("option", { value: "counters" }, "counters (seed 004)"));
+      el("option", { value: "classic" }, "classic"), el("option", { value: "counters" }, "counters (seed 004)"),
+      el("option", { value: "traditional" }, "traditional (seed 004: update, leave out of fusion)"));
+    this.level = el("select", { id: id("level"), name: "alarm_level", "data-control": "alarm-level" },
+      el("option", { value: "isolated" }, "isolated (suspect is a warning)"), el("option", { value: "suspect" }, "suspect"));
+    this.own = el("div", { class: "own-thresholds" });
+    this.ownInputs = new Map();
     this.n1 = el("input", { id: id("n1"), type: "number", min: "1", step: "1", value: "10", "data-control": "n1" });
     this.n2 = el("input", { id: id("n2"), type: "number", min: "0", step: "1", value: "5", "data-control": "n2" });
     this.counters = el("span", { class: "counters" },
@@ -35,9 +39,12 @@ export class ThresholdControls {
         el("label", { for: id("mode") }, "Set by"), this.mode,
         el("label", { for: id("value") }, "value"), this.value),
       el("div", { class: "row" },
-        el("label", { for: id("policy") }, "Policy"), this.policy, this.counters, this.apply),
+        el("label", { for: id("policy") }, "Policy"), this.policy, this.counters,
+        el("label", { for: id("level") }, "Alarm on"), this.level, this.apply),
       el("div", { class: "row" }, el("span", { class: "muted" }, "Preview:"), this.preview),
+      el("details", null, el("summary", null, "Per-test thresholds (e.g. from navguard calibrate)"), this.own),
       this.applied);
+    this.idPrefix = id("test");
     this.el = this.form;
     this.form.addEventListener("submit", (ev) => { ev.preventDefault(); this.submit(); });
     for (const input of [this.mode, this.value]) input.addEventListener("input", () => this.schedulePreview());
@@ -60,16 +67,31 @@ export class ThresholdControls {
     this.mode.value = byP ? "p_fa" : "threshold";
     this.value.value = String(byP ? view.p_fa : view.threshold);
     const p = view.policy || { kind: "classic" };
-    this.policy.value = p.kind === "counters" ? "counters" : "classic";
+    this.policy.value = ["counters", "traditional"].includes(p.kind) ? p.kind : "classic";
     if (p.kind === "counters") { this.n1.value = String(p.n1); this.n2.value = String(p.n2); }
     this.counters.hidden = this.policy.value !== "counters";
+    this.level.value = view.alarm_level === "suspect" ? "suspect" : "isolated";
+    this.fillOwn(view);
     const tests = Object.entries(view.tests || {})
-      .map(([t, v]) => t + " " + fmtNum(v.threshold) + " (dof " + v.dof + ")").join(", ");
+      .map(([t, v]) => t + " " + fmtNum(v.threshold) + (v.own ? " own" : "") + " (dof " + v.dof + ")").join(", ");
     this.applied.textContent = (applied ? "Applied: " : "In force: ") +
-      (byP ? "p_fa " + view.p_fa : "threshold " + fmtNum(view.threshold)) + ", " + policyText(p) +
+      (byP ? "p_fa " + view.p_fa : "threshold " + fmtNum(view.threshold)) + ", " + policyLevelText(p, view.alarm_level) +
       (tests ? " \u2014 " + tests : "");
     this.applied.dataset.state = applied ? "applied" : "loaded";
     this.renderPreview();
+  }
+
+  /** One raw-threshold field per test: filled when the test has its own, blank when it follows the monitor. */
+  fillOwn(view) {
+    this.ownInputs = new Map();
+    const rows = Object.entries(view.tests || {}).map(([name, t]) => {
+      const input = el("input", { id: this.idPrefix + "-" + name, type: "number", step: "any", min: "0",
+        placeholder: "monitor's", "data-control": "own", "data-test": name });
+      if (t.own) input.value = String(t.threshold);
+      this.ownInputs.set(name, { input, own: t.own });
+      return el("div", { class: "row" }, el("label", { for: input.id }, name + " (dof " + t.dof + ")"), input);
+    });
+    this.own.replaceChildren(...rows);
   }
 
   schedulePreview() {
@@ -84,7 +106,7 @@ export class ThresholdControls {
     const v = Number(this.value.value);
     const lines = [];
     for (const [name, t] of tests) {
-      if (FIXED_TESTS.has(name)) { lines.push(name + ": fixed at " + fmtNum(t.threshold) + " (HAL)"); continue; }
+      if (t.own) { lines.push(name + ": own " + fmtNum(t.threshold)); continue; }
       if (this.mode.value === "threshold") { lines.push(name + ": " + (isNum(v) && v > 0 ? fmtNum(v) : "?")); continue; }
       if (!(v > 0 && v < 1)) { lines.push(name + ": p_fa must be in (0, 1)"); continue; }
       try {
@@ -103,7 +125,14 @@ export class ThresholdControls {
     const body = this.mode.value === "p_fa" ? { p_fa: v } : { threshold: v };
     body.policy = this.policy.value === "counters"
       ? { kind: "counters", n1: Number(this.n1.value), n2: Number(this.n2.value) }
-      : { kind: "classic" };
+      : { kind: this.policy.value };
+    body.alarm_level = this.level.value;
+    const tests = {};
+    for (const [name, { input, own }] of this.ownInputs) {
+      if (input.value !== "") tests[name] = { threshold: Number(input.value) };
+      else if (own) tests[name] = null;
+    }
+    if (Object.keys(tests).length) body.tests = tests;
     this.apply.disabled = true;
     this.applied.textContent = "Applying\u2026";
     try {

@@ -106,3 +106,24 @@ export function policyText(p) {
   if (p.kind === "counters") return "counters (N1 " + p.n1 + ", N2 " + p.n2 + ")";
   return String(p.kind ?? "");
 }
+
+/** An alarm-log entry's severity as a tag: "alarm" (red) or "warning" (amber). */
+export function severityTag(severity) {
+  const s = severity === "warning" ? "warning" : "alarm";
+  return el("span", { class: "severity", "data-severity": s }, s);
+}
+
+/** A test's consistency summary as one line: "NIS 1.02 × dof · ρ₁ 0.04 · ok". */
+export function consistencyText(c) {
+  if (!c || !isNum(c.nis_mean)) return "";
+  const parts = ["NIS " + fmtNum(c.nis_mean / c.dof) + "\u00d7dof"];
+  if (isNum(c.autocorr)) parts.push("\u03c1\u2081 " + c.autocorr.toFixed(2));
+  parts.push(c.flag || "(" + c.samples + " epochs)");
+  return parts.join(" \u00b7 ");
+}
+
+/** `{kind: "counters", n1, n2}` → "counters (N1 10, N2 5)"; the alarm level when not the default. */
+export function policyLevelText(p, level) {
+  const text = policyText(p);
+  return level === "suspect" ? text + ", alarm on suspect" : text;
+}

@@ -1,7 +1,8 @@
 // live.js — the page's model of the server: the session list (polled over
 // REST, so new sessions appear without a reload), one events socket per
-// session (stats, state and alarm messages), and a bounded history of every
-// test's statistic for the charts. Views read from here and subscribe to
+// session (stats, state, alarm and availability messages), and a bounded
+// history of every test's statistic, and of every protection level against
+// its alert limit, for the charts. Views read from here and subscribe to
 // changes; nothing here touches the DOM.
 
 import { get, socketUrl, AuthError } from "./api.js";
@@ -21,6 +22,13 @@ const WGS84_A = 6378137.0;
 const WGS84_E2 = 6.69437999014e-3;
 /** Recent alarms kept in memory for the overview and session views. */
 const RECENT_ALARMS = 200;
+/** The series key of a monitor's protection level ("#" cannot start a test name). */
+export const INTEGRITY = "#integrity";
+/**
+ * Availability drawn with the test bands: converging amber, unavailable red.
+ * Availability is not a fault; the chart's caption says which is which.
+ */
+export const AVAILABILITY_BAND = { available: "healthy", converging: "suspect", unavailable: "isolated" };
 
 /**
  * One test's history: parallel arrays (cheaper than objects at 20 Hz × many
@@ -298,6 +306,7 @@ export class Live {
       if (msg && msg.type === "stats") this.onStats(s, msg);
       else if (msg && msg.type === "state") this.onState(s, msg);
       else if (msg && msg.type === "alarm") this.onAlarm(msg, true);
+      else if (msg && msg.type === "availability") this.onAvailability(s, msg);
       this.handleMs.push(performance.now() - started);
       if (this.handleMs.length > 5000) this.handleMs.splice(0, 2500);
     };
@@ -349,11 +358,29 @@ export class Live {
         }
       }
     }
-    // Federated monitors carry their latest corrected and INS positions.
+    // Federated monitors carry their latest corrected and INS positions, and
+    // monitors with a protection level their integrity.
     for (const [mname, m] of Object.entries(st.monitors || {})) {
       if (m.track && isNum(m.track.t)) s.trackFor(mname).push(m.track);
+      const i = m.integrity;
+      if (i && isNum(t) && isNum(i.protection_level)) {
+        const series = s.seriesFor(mname, INTEGRITY);
+        if (m.epochs < series.lastEpochs) series.clear();
+        if (m.epochs !== series.lastEpochs) {
+          series.lastEpochs = m.epochs;
+          series.push(t, i.protection_level, i.alert_limit, AVAILABILITY_BAND[i.state] || "unknown");
+        }
+      }
     }
     this.emit("stats", s);
+  }
+
+  onAvailability(s, msg) {
+    if (typeof msg.monitor !== "string") return;
+    s.seriesFor(msg.monitor, INTEGRITY).transition(msg.t, AVAILABILITY_BAND[msg.to] || "unknown");
+    const m = s.stats && s.stats.monitors && s.stats.monitors[msg.monitor];
+    if (m && m.integrity) m.integrity.state = msg.to;
+    this.emit("availability", s, msg);
   }
 
   onState(s, msg) {
@@ -366,6 +393,9 @@ export class Live {
       for (const a of this.recentAlarms) {
         if (a.session === s.id && a.monitor === msg.monitor && a.test === msg.test && a.cleared_t == null) a.cleared_t = msg.t;
       }
+    } else if (msg.severity === "warning") {
+      // A warning is announced only as this state change; its log entry is read back.
+      this.catchUpAlarms(s);
     }
     this.emit("state", s, msg);
   }

@@ -73,6 +73,7 @@ export class OverviewView {
       card.rows = new Map();
       const rows = monitors.map((m) => {
         const mb = badge(null, { "data-kind": "monitor", "data-monitor": m.name });
+        const avail = el("span", { class: "availability", "data-kind": "availability", "data-monitor": m.name, hidden: true });
         const worst = el("td", { class: "num" }, DASH);
         const list = el("ul", { class: "tests" });
         const tests = new Map();
@@ -80,8 +81,9 @@ export class OverviewView {
           const tb = badge(null, { "data-kind": "test", "data-monitor": m.name, "data-test": t }, t);
           const since = el("span", { class: "num muted since" });
           const ratio = el("span", { class: "num ratio" }, DASH);
-          list.append(el("li", null, tb, since, ratio));
-          tests.set(t, { badge: tb, since, ratio });
+          const cons = el("span", { class: "consistency", "data-kind": "consistency", "data-monitor": m.name, "data-test": t });
+          list.append(el("li", null, tb, since, ratio, cons));
+          tests.set(t, { badge: tb, since, ratio, cons });
         }
         let config = m.type || "";
         if (m.spec) {
@@ -90,8 +92,8 @@ export class OverviewView {
           if (isNum(m.spec.threshold)) extra.push("threshold " + fmtNum(m.spec.threshold));
           config = [config, ...extra.filter(Boolean)].join(" \u00b7 ");
         }
-        card.rows.set(m.name, { badge: mb, worst, tests });
-        return el("tr", null, el("th", { scope: "row" }, m.name), el("td", null, config), el("td", null, mb), worst, el("td", null, list));
+        card.rows.set(m.name, { badge: mb, avail, worst, tests });
+        return el("tr", null, el("th", { scope: "row" }, m.name), el("td", null, config), el("td", null, mb, " ", avail), worst, el("td", null, list));
       });
       card.tbody.replaceChildren(...rows);
     }
@@ -109,12 +111,23 @@ export class OverviewView {
         setText(cell.since, isNum(ts.state_since_t) && ts.state !== "healthy" ? "since t " + fmtNum(ts.state_since_t) + " s" : "");
         setText(cell.ratio, fmtRatio(ts.last_test_ratio));
         cell.ratio.classList.toggle("over", ts.last_test_ratio > 1);
+        // Only a model that is not ok is worth the space here; the session view has the figures.
+        const flag = ts.consistency && ts.consistency.flag;
+        const bad = flag && flag !== "ok" ? flag : "";
+        setText(cell.cons, bad);
+        if (cell.cons.dataset.flag !== bad) cell.cons.dataset.flag = bad;
         const title = t + ": " + (ts.state || "unknown") + (isNum(ts.dof) ? ", dof " + ts.dof : "") +
           (isNum(ts.threshold) ? ", threshold " + fmtNum(ts.threshold) : "") + (isNum(ts.last) ? ", last " + fmtNum(ts.last) : "");
         if (cell.badge.title !== title) cell.badge.title = title;
       }
       const w = worstState(states);
       setBadge(row.badge, w);
+      const integrity = m.live && m.live.integrity;
+      row.avail.hidden = !integrity;
+      if (integrity) {
+        setText(row.avail, integrity.state);
+        if (row.avail.dataset.state !== integrity.state) row.avail.dataset.state = integrity.state;
+      }
       if (w) all.push(w);
       const wr = m.live ? m.live.worst_test_ratio : null;
       setText(row.worst, fmtRatio(wr));

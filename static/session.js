@@ -4,9 +4,10 @@
 // track, the threshold controls, and the session's alarms.
 // All charts of the session share one time range, so zooming one zooms all.
 
-import { el, setText, badge, setBadge, fmtNum, fmtRatio, fmtT, fmtClock, policyText, isNum } from "./dom.js";
+import { el, setText, badge, setBadge, fmtNum, fmtRatio, fmtT, fmtClock, policyLevelText, isNum, severityTag, consistencyText } from "./dom.js";
 import { StripChart, TrackChart } from "./chart.js";
 import { ThresholdControls } from "./controls.js";
+import { INTEGRITY } from "./live.js";
 
 const SESSION_ALARMS = 50;
 
@@ -50,6 +51,11 @@ export class SessionView {
       for (const c of this.charts) c.chart.invalidate();
     });
     live.on("alarm", (a) => { if (a.session === this.id) this.alarmsDirty = true; });
+    live.on("availability", (s) => {
+      if (s.id !== this.id) return;
+      this.headDirty = true;
+      for (const c of this.charts) c.chart.invalidate();
+    });
     live.on("sessions", () => { this.headDirty = true; });
   }
 
@@ -101,7 +107,7 @@ export class SessionView {
       return;
     }
     const monitors = s.monitors();
-    const shape = JSON.stringify(monitors.map((m) => [m.name, Object.keys(m.tests)]));
+    const shape = JSON.stringify(monitors.map((m) => [m.name, Object.keys(m.tests), !!(m.live && m.live.integrity)]));
     if (shape !== this.shape) { this.shape = shape; this.build(s, monitors); }
     if (this.headDirty) { this.headDirty = false; this.fillHead(s, monitors); }
     for (const c of this.charts) c.chart.draw();
@@ -119,11 +125,11 @@ export class SessionView {
     this.charts = [];
     this.tracks = [];
     const cards = monitors.map((m) => {
-      const tests = Object.keys(m.tests);
-      // The HPL chart first: for a federated monitor it is the integrity headline.
-      tests.sort((a, b) => (a === "hpl" ? -1 : b === "hpl" ? 1 : a.localeCompare(b)));
+      const tests = Object.keys(m.tests).sort();
+      // The protection level first: for a federated monitor it is the integrity headline.
+      if (m.live && m.live.integrity) tests.unshift(INTEGRITY);
       const figures = tests.map((t) => {
-        const hpl = t === "hpl";
+        const hpl = t === INTEGRITY;
         const chart = new StripChart({
           label: hpl ? "HPL (m)" : "statistic",
           thresholdLabel: hpl ? "HAL" : "threshold",
@@ -132,16 +138,21 @@ export class SessionView {
         });
         chart.canvas.dataset.session = s.id;
         chart.canvas.dataset.monitor = m.name;
-        chart.canvas.dataset.test = t;
+        chart.canvas.dataset.test = hpl ? "hpl" : t;
         chart.setSeries(s.seriesFor(m.name, t));
         chart.setRange(this.range);
         chart.setLog(this.log);
-        const b = badge(null, { "data-kind": "test", "data-monitor": m.name, "data-test": t });
+        const b = hpl
+          ? el("span", { class: "availability", "data-kind": "availability", "data-monitor": m.name })
+          : badge(null, { "data-kind": "test", "data-monitor": m.name, "data-test": t });
         const value = el("span", { class: "num muted" });
+        const consistency = el("span", { class: "consistency", "data-kind": "consistency", "data-monitor": m.name, "data-test": t });
         const caption = el("figcaption", null,
-          el("strong", null, hpl ? "HPL vs HAL" : t), " ", b, " ", value);
-        this.charts.push({ chart, monitor: m.name, test: t, badge: b, value });
-        return el("figure", { class: "strip" + (hpl ? " hpl" : "") }, caption, chart.el);
+          el("strong", null, hpl ? "HPL vs HAL" : t), " ", b, " ", value, " ", consistency);
+        const note = hpl ? el("p", { class: "muted note" },
+          "Integrity availability, not a fault: amber while the filter converges from its initial covariance, red while the HPL is above the HAL.") : null;
+        this.charts.push({ chart, monitor: m.name, test: t, badge: b, value, consistency, hpl });
+        return el("figure", { class: "strip" + (hpl ? " hpl" : "") }, caption, chart.el, note);
       });
       const policy = el("span", { class: "muted policy" });
       const controlsSlot = el("div", { class: "controls-slot" });
@@ -184,15 +195,32 @@ export class SessionView {
     for (const m of monitors) {
       const cell = this.policyCells && this.policyCells.get(m.name);
       if (cell && m.spec) {
-        setText(cell, [policyText(m.spec.policy), isNum(m.spec.p_fa) ? "p_fa " + m.spec.p_fa : null,
+        const level = m.spec.alarm_level || (s.info && s.info.alarm_level);
+        setText(cell, [policyLevelText(m.spec.policy, level), isNum(m.spec.p_fa) ? "p_fa " + m.spec.p_fa : null,
           isNum(m.spec.threshold) ? "threshold " + fmtNum(m.spec.threshold) : null].filter(Boolean).join(" \u00b7 "));
       }
     }
     for (const c of this.charts) {
       const m = monitors.find((x) => x.name === c.monitor);
+      if (c.hpl) {
+        const i = m && m.live && m.live.integrity;
+        const state = i ? i.state : "unknown";
+        if (c.badge.dataset.state !== state) c.badge.dataset.state = state;
+        setText(c.badge, state);
+        setText(c.value, i ? "HPL " + fmtNum(i.protection_level) + " m / HAL " + fmtNum(i.alert_limit) + " m \u00b7 unavailable " +
+          fmtNum(i.time_s.unavailable) + " s, converging " + fmtNum(i.time_s.converging) + " s" : "");
+        continue;
+      }
       const ts = m && m.tests[c.test];
       setBadge(c.badge, ts && ts.state);
       setText(c.value, ts && isNum(ts.last) ? "last " + fmtNum(ts.last) + " / " + fmtNum(ts.threshold) + " (ratio " + fmtRatio(ts.last_test_ratio) + ")" : "");
+      const cons = ts && ts.consistency;
+      setText(c.consistency, consistencyText(cons));
+      const flag = (cons && cons.flag) || "";
+      if (c.consistency.dataset.flag !== flag) c.consistency.dataset.flag = flag;
+      c.consistency.title = cons ? "Consistency of the normalised innovation over the last " + cons.samples +
+        " healthy epochs: NIS mean " + fmtNum(cons.nis_mean) + " (bounds " + fmtNum(cons.nis_bounds[0]) + "\u2013" + fmtNum(cons.nis_bounds[1]) +
+        "), lag-1 autocorrelation bound \u00b1" + fmtNum(cons.autocorr_bound) : "";
     }
     const st = s.stats;
     setText(this.facts, st
@@ -203,14 +231,14 @@ export class SessionView {
   fillAlarms() {
     const rows = this.live.recentAlarms.filter((a) => a.session === this.id).slice(0, SESSION_ALARMS).map((a) => {
       const cleared = a.cleared_t !== null && a.cleared_t !== undefined;
-      return el("tr", { "data-alarm-id": a.id, class: cleared ? "cleared" : null },
-        el("td", null, fmtClock(a.raised_at_ms)), el("td", null, a.monitor), el("td", null, a.test),
+      return el("tr", { "data-alarm-id": a.id, "data-severity": a.severity || "alarm", class: cleared ? "cleared" : null },
+        el("td", null, fmtClock(a.raised_at_ms)), el("td", null, severityTag(a.severity)), el("td", null, a.monitor), el("td", null, a.test),
         el("td", null, badge(a.state)), el("td", { class: "num" }, fmtT(a.t)),
         el("td", { class: "num" }, fmtNum(a.statistic) + " / " + fmtNum(a.threshold)),
         el("td", { class: "num" }, fmtRatio(a.test_ratio)),
         el("td", null, cleared ? "at t " + fmtT(a.cleared_t) : "active"));
     });
     this.alarmBody.replaceChildren(...rows);
-    if (!rows.length) this.alarmBody.append(el("tr", null, el("td", { colspan: 8, class: "muted" }, "No alarms for this session.")));
+    if (!rows.length) this.alarmBody.append(el("tr", null, el("td", { colspan: 9, class: "muted" }, "No alarms or warnings for this session.")));
   }
 }
