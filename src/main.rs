@@ -82,6 +82,12 @@ struct ServeArgs {
     /// Training jobs running or queued before POST /api/v1/models answers 503.
     #[arg(long, env = "NAVGUARD_MAX_QUEUED_TRAININGS", default_value_t = Limits::default().max_queued_trainings)]
     max_queued_trainings: usize,
+    /// Largest state dimension of a user-defined model (linear's n).
+    #[arg(long, env = "NAVGUARD_MAX_STATE_DIM", default_value_t = Limits::default().max_state_dim)]
+    max_state_dim: usize,
+    /// Largest measurement dimension of a user-defined model (linear's m, a channel's dim).
+    #[arg(long, env = "NAVGUARD_MAX_MEASUREMENT_DIM", default_value_t = Limits::default().max_measurement_dim)]
+    max_measurement_dim: usize,
 }
 
 impl ServeArgs {
@@ -102,6 +108,8 @@ impl ServeArgs {
                 max_lssvm_samples: self.max_lssvm_samples,
                 max_concurrent_trainings: self.training_jobs,
                 max_queued_trainings: self.max_queued_trainings,
+                max_state_dim: self.max_state_dim,
+                max_measurement_dim: self.max_measurement_dim,
             },
         }
     }

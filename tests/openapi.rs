@@ -46,6 +46,7 @@ async fn state(dir: &Path, token: Option<&str>) -> AppState {
         metrics: Arc::new(Metrics::default()),
         config: Arc::new(config),
         shutdown: tokio::sync::watch::channel(false).1,
+        compute: navguard::service::compute::ComputePool::new(2),
     }
 }
 

@@ -10,6 +10,7 @@ use axum::routing::{MethodRouter, get, post};
 use tokio::sync::watch;
 
 use super::api::{alarms, chi2, features, health, models, sessions, thresholds};
+use super::compute::ComputePool;
 use super::config::ServiceConfig;
 use super::error::ApiError;
 use super::metrics::Metrics;
@@ -34,6 +35,8 @@ pub struct AppState {
     pub shutdown: watch::Receiver<bool>,
     /// Trained models and training jobs; the monitors' model source.
     pub models: Arc<Models>,
+    /// The threads session actors step their monitors on (docs/architecture.md §A3).
+    pub compute: Arc<ComputePool>,
 }
 
 impl AppState {
@@ -43,6 +46,7 @@ impl AppState {
             store: self.store.clone(),
             metrics: self.metrics.clone(),
             models: self.models.clone(),
+            compute: self.compute.clone(),
         }
     }
 }

@@ -31,6 +31,13 @@ pub struct Limits {
     pub max_concurrent_trainings: usize,
     /// Training jobs running or queued at once; one more gets 503 (default 16).
     pub max_queued_trainings: usize,
+    /// Largest state of a user-defined model (`linear`'s n; default 128: a tightly
+    /// coupled INS/GNSS filter with per-satellite ambiguities has a few dozen). One
+    /// epoch costs O(n³), so this bounds the compute one frame can ask for.
+    pub max_state_dim: usize,
+    /// Largest measurement vector of a user-defined model (`linear`'s m, a `channel`'s
+    /// `dim`; default 128).
+    pub max_measurement_dim: usize,
 }
 
 impl Default for Limits {
@@ -47,6 +54,8 @@ impl Default for Limits {
             max_lssvm_samples: 5_000,
             max_concurrent_trainings: 1,
             max_queued_trainings: 16,
+            max_state_dim: 128,
+            max_measurement_dim: 128,
         }
     }
 }

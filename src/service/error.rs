@@ -102,6 +102,7 @@ impl From<SessionError> for ApiError {
                 ApiError::NotFound(e.to_string())
             }
             e @ SessionError::Busy(_) => ApiError::Unavailable(e.to_string()),
+            SessionError::Store(e) => ApiError::Internal(e),
         }
     }
 }

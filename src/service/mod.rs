@@ -4,6 +4,7 @@
 pub mod api;
 pub mod app;
 pub mod auth;
+pub mod compute;
 pub mod config;
 pub mod error;
 pub mod events;
@@ -83,6 +84,7 @@ pub async fn start(config: ServiceConfig) -> Result<Server, StartError> {
         config: Arc::new(config),
         shutdown: shutdown_rx,
         models,
+        compute: compute::ComputePool::per_core(),
     };
     // Sessions, their monitors and thresholds persist; filter state starts afresh.
     for stored in store.sessions().await? {

@@ -133,16 +133,17 @@ pub async fn create(
             ))
         });
     }
-    if let Err(e) = state.store.put_session(&stored).await {
+    let handle = state
+        .registry
+        .get(&stored.id)
+        .ok_or_else(|| ApiError::NotFound(format!("no session '{}'", stored.id)))?;
+    // The actor stores the spec, in its own order with any change that reached it first.
+    if let Err(e) = handle.persist().await {
         if let Some(h) = state.registry.remove(&stored.id) {
             h.shutdown().await;
         }
         return Err(e.into());
     }
-    let handle = state
-        .registry
-        .get(&stored.id)
-        .ok_or_else(|| ApiError::NotFound(format!("no session '{}'", stored.id)))?;
     Ok((StatusCode::CREATED, Json(view(&handle))))
 }
 
@@ -179,12 +180,11 @@ pub async fn delete(
     State(state): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<StatusCode, ApiError> {
-    let handle = state
-        .registry
-        .remove(&id)
-        .ok_or_else(|| ApiError::NotFound(format!("no session '{id}'")))?;
-    handle.shutdown().await;
-    state.store.delete_session(&id).await?;
+    let handle = lookup(&state, &id)?;
+    // The actor deletes the row after every change it acknowledged before, then stops:
+    // a 204 is final (docs/architecture.md §A4).
+    handle.delete().await?;
+    state.registry.remove(&id);
     Ok(StatusCode::NO_CONTENT)
 }
 

@@ -31,7 +31,6 @@ pub async fn put(
         .registry
         .get(&id)
         .ok_or_else(|| ApiError::NotFound(format!("no session '{id}'")))?;
-    let (view, stored) = handle.set_threshold(&name, update).await?;
-    state.store.put_session(&stored).await?;
-    Ok(Json(view))
+    // The actor stores the change before it answers, in the order changes are applied.
+    Ok(Json(handle.set_threshold(&name, update).await?))
 }

@@ -17,7 +17,10 @@ use super::spec::{NamedMonitors, build_monitors};
 use super::stats::{IntegrityStats, MonitorStats, Position, SessionStats, TestStats, Track};
 use crate::detect::{Health, ThresholdSpec};
 use crate::epoch::Epoch;
-use crate::monitor::{Availability, Integrity, Monitor, MonitorReport, Outputs, TestOutcome};
+use crate::monitor::{
+    Availability, Integrity, Monitor, MonitorReport, Outputs, StepError, TestOutcome,
+};
+use crate::service::compute::{ComputePool, SLICE_BUDGET};
 use crate::service::metrics::Metrics;
 use crate::service::now_ms;
 use crate::service::store::{Store, StoredSession};
@@ -45,6 +48,8 @@ pub struct ActorDeps {
     pub metrics: Arc<Metrics>,
     /// Trained models, for monitors that name one (`config.model`).
     pub models: Arc<Models>,
+    /// Where monitors are stepped, off the runtime.
+    pub compute: Arc<ComputePool>,
 }
 
 struct NamedMonitor {
@@ -153,6 +158,54 @@ fn initial_stats(id: &str, monitors: &NamedMonitors) -> SessionStats {
     }
 }
 
+/// Whether the actor goes on after a command or frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Flow {
+    Continue,
+    Stop,
+}
+
+/// One slice of a frame stepped on the compute pool: the monitors and epochs (moved in
+/// and handed back), each stepped epoch's reports (`None` for a monitor that failed on
+/// it) and the first failure.
+struct Slice {
+    monitors: Vec<NamedMonitor>,
+    epochs: Vec<Epoch>,
+    stepped: Vec<Vec<Option<MonitorReport>>>,
+    failure: Option<(usize, String, StepError)>,
+}
+
+/// Steps every monitor through the epochs from `from`, until the frame ends, a monitor
+/// fails (that epoch is the last, stepped by the others) or the slice has used
+/// [`SLICE_BUDGET`] of compute.
+fn step_slice(mut monitors: Vec<NamedMonitor>, epochs: Vec<Epoch>, from: usize) -> Slice {
+    let start = Instant::now();
+    let mut stepped = Vec::new();
+    let mut failure = None;
+    for (i, epoch) in epochs.iter().enumerate().skip(from) {
+        let mut reports = Vec::with_capacity(monitors.len());
+        for m in &mut monitors {
+            match m.monitor.step(epoch) {
+                Ok(report) => reports.push(Some(report)),
+                Err(e) => {
+                    reports.push(None);
+                    failure.get_or_insert((i, m.name.clone(), e));
+                }
+            }
+        }
+        stepped.push(reports);
+        if failure.is_some() || start.elapsed() >= SLICE_BUDGET {
+            break;
+        }
+    }
+    Slice {
+        monitors,
+        epochs,
+        stepped,
+        failure,
+    }
+}
+
 /// The 422 reason for a test name the monitor does not have.
 fn unknown_test(test: &str, bank: &crate::monitor::TestBank) -> String {
     let names: Vec<&str> = bank.slots().iter().map(|s| &*s.name).collect();
@@ -182,11 +235,19 @@ impl Actor {
             tokio::select! {
                 biased;
                 command = control.recv() => match command {
-                    Some(ControlCommand::Shutdown) | None => break,
-                    Some(command) => self.control(command).await,
+                    Some(command) => {
+                        if self.command(command).await == Flow::Stop {
+                            break;
+                        }
+                    }
+                    None => break,
                 },
                 frame = frames.recv() => match frame {
-                    Some(frame) => self.frame(frame).await,
+                    Some(frame) => {
+                        if self.frame(frame, &mut control).await == Flow::Stop {
+                            break;
+                        }
+                    }
                     None => break,
                 },
                 () = tokio::time::sleep_until(trailing), if self.stats_pending => {
@@ -201,6 +262,33 @@ impl Actor {
             .unwrap_or_else(|p| p.into_inner())
             .clear();
         tracing::debug!(session = %self.id, "session actor stopped");
+    }
+
+    /// Serves one control command; `Stop` when the actor must end (shutdown, or the
+    /// session deleted).
+    async fn command(&mut self, command: ControlCommand) -> Flow {
+        match command {
+            ControlCommand::Shutdown => Flow::Stop,
+            ControlCommand::Delete(reply) => {
+                // docs/architecture.md §A4: the row goes in the session's own order, after
+                // every change acknowledged before; then the actor stops, so nothing can
+                // write the session back.
+                match self.deps.store.delete_session(&self.id).await {
+                    Ok(_) => {
+                        let _ = reply.send(Ok(()));
+                        Flow::Stop
+                    }
+                    Err(e) => {
+                        let _ = reply.send(Err(SessionError::Store(e.to_string())));
+                        Flow::Continue
+                    }
+                }
+            }
+            command => {
+                self.control(command).await;
+                Flow::Continue
+            }
+        }
     }
 
     async fn control(&mut self, command: ControlCommand) {
@@ -222,15 +310,62 @@ impl Actor {
                 let _ = reply.send(self.find(&name).map(|i| self.threshold_view(i)));
             }
             ControlCommand::SetThreshold(name, update, reply) => {
-                let _ = reply.send(self.set_threshold(&name, update));
+                let answer = self.set_threshold_stored(&name, update).await;
+                let _ = reply.send(answer);
+            }
+            ControlCommand::Persist(reply) => {
+                let stored = self.stored();
+                let answer = self
+                    .deps
+                    .store
+                    .put_session(&stored)
+                    .await
+                    .map_err(|e| SessionError::Store(e.to_string()));
+                let _ = reply.send(answer);
             }
             ControlCommand::Stats(reply) => {
                 self.refresh_consistency();
                 self.stats.published_at_ms = now_ms();
                 let _ = reply.send(self.stats.clone());
             }
-            ControlCommand::Shutdown => {}
+            // Served by `command`, which stops the actor.
+            ControlCommand::Shutdown | ControlCommand::Delete(_) => {}
         }
+    }
+
+    /// A copy of the session's spec as in force.
+    fn stored(&self) -> StoredSession {
+        self.shared
+            .stored
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone()
+    }
+
+    /// Applies a threshold change and stores the spec before answering (docs/architecture.md
+    /// §A4: stored in the order applied). If the store refuses, the change is undone, so
+    /// the state in force always equals the state stored.
+    async fn set_threshold_stored(
+        &mut self,
+        name: &str,
+        update: ThresholdUpdate,
+    ) -> Result<ThresholdView, SessionError> {
+        let index = self.find(name)?;
+        let before = (
+            self.monitors[index].monitor.tests().clone(),
+            self.monitors[index].alarm_level,
+            self.stored(),
+        );
+        let (view, stored) = self.set_threshold(name, update)?;
+        if let Err(e) = self.deps.store.put_session(&stored).await {
+            let (bank, level, spec) = before;
+            let m = &mut self.monitors[index];
+            *m.monitor.tests_mut() = bank;
+            m.alarm_level = level;
+            *self.shared.stored.lock().unwrap_or_else(|p| p.into_inner()) = spec;
+            return Err(SessionError::Store(e.to_string()));
+        }
+        Ok(view)
     }
 
     async fn attach(&mut self) -> Result<IngestLink, SessionError> {
@@ -481,57 +616,140 @@ impl Actor {
         self.send_ingest(text).await;
     }
 
-    async fn frame(&mut self, frame: FrameCommand) {
+    /// One frame: validated as a whole, then stepped on the compute pool a slice at a
+    /// time, each slice's epochs committed in order (docs/architecture.md §A2 step 3).
+    /// An epoch on which a monitor fails numerically is still committed for the
+    /// monitors that stepped it (their results, state changes and alarms are stored and
+    /// announced; the failing monitor's state is unchanged), then refused as `numerical`,
+    /// and the rest of the frame is not used.
+    async fn frame(
+        &mut self,
+        frame: FrameCommand,
+        control: &mut mpsc::Receiver<ControlCommand>,
+    ) -> Flow {
         if frame.stream != self.stream {
-            return; // from a stream that has since been replaced
+            return Flow::Continue; // from a stream that has since been replaced
         }
         if let Err(error) = self.validate(&frame.epochs) {
             self.reject(error).await;
-            return;
+            return Flow::Continue;
         }
         self.stats.frames += 1;
         self.stats.last_frame_at_ms = Some(now_ms());
         self.deps.metrics.frames.fetch_add(1, Ordering::Relaxed);
+        let FrameCommand {
+            epochs,
+            received,
+            stream: frame_stream,
+        } = frame;
+        let total = epochs.len();
+        let mut epochs = epochs;
+        let mut from = 0;
         let mut changed = false;
-        let mut reports: Vec<MonitorReport> = Vec::with_capacity(self.monitors.len());
-        for (i, epoch) in frame.epochs.iter().enumerate() {
-            reports.clear();
-            let mut failure = None;
-            for m in &mut self.monitors {
-                match m.monitor.step(epoch) {
-                    Ok(report) => reports.push(report),
-                    Err(e) => {
-                        failure = Some(FrameError::new(
-                            FrameErrorCode::Numerical,
-                            format!(
-                                "monitor '{}' could not process t = {}: {e}; this and later epochs of the frame were not used",
-                                m.name, epoch.t
-                            ),
-                        ));
-                        break;
+        while from < total {
+            let monitors = std::mem::take(&mut self.monitors);
+            let slice = match self
+                .deps
+                .compute
+                .run(move || step_slice(monitors, epochs, from))
+                .await
+            {
+                Ok(slice) => slice,
+                Err(e) => {
+                    // The monitors went with the job: start them afresh from the spec.
+                    tracing::error!(session = %self.id, error = %e, "stepping failed; monitors rebuilt");
+                    self.rebuild_monitors();
+                    let error = FrameError::new(
+                        FrameErrorCode::Internal,
+                        "the session's monitors could not process this frame; they were restarted from their configuration",
+                    );
+                    self.reject(error.at(from)).await;
+                    break;
+                }
+            };
+            self.monitors = slice.monitors;
+            epochs = slice.epochs;
+            for (k, reports) in slice.stepped.iter().enumerate() {
+                changed |= self.commit_epoch(&epochs[from + k], reports).await;
+            }
+            from += slice.stepped.len();
+            if slice.failure.is_none() && from < total {
+                // Between slices: observers see progress, and control commands are served
+                // (a threshold change applies from the next epoch). A new stream or a
+                // delete ends this frame: its later epochs belong to the old stream.
+                self.publish(false);
+                while let Ok(command) = control.try_recv() {
+                    let new_stream = matches!(command, ControlCommand::Attach(_));
+                    if self.command(command).await == Flow::Stop {
+                        return Flow::Stop;
+                    }
+                    if new_stream || frame_stream != self.stream {
+                        self.finish_frame(received, from, changed);
+                        return Flow::Continue;
                     }
                 }
             }
-            if let Some(error) = failure {
-                self.reject(error.at(i)).await;
+            if let Some((index, monitor, e)) = slice.failure {
+                let t = epochs[index].t;
+                let error = FrameError::new(
+                    FrameErrorCode::Numerical,
+                    format!(
+                        "monitor '{monitor}' could not process t = {t}: {e}; the other monitors took this epoch, later epochs of the frame were not used"
+                    ),
+                );
+                self.reject(error.at(index)).await;
                 break;
             }
-            self.last_t = Some(epoch.t);
-            self.stats.epochs += 1;
-            self.stats.last_t = Some(epoch.t);
-            self.deps.metrics.epochs.fetch_add(1, Ordering::Relaxed);
-            if self.echo {
-                let text = self.result_frame(epoch.t, &reports);
-                self.send_ingest(text).await;
-            }
-            changed |= self.record(epoch, &reports).await;
         }
-        self.finish_frame(&frame, changed);
+        self.finish_frame(received, total, changed);
+        Flow::Continue
     }
 
-    fn finish_frame(&mut self, frame: &FrameCommand, changed: bool) {
+    /// Makes one stepped epoch current: time, counters, the `result` (with the monitors
+    /// that stepped it), statistics, state changes and alarms.
+    async fn commit_epoch(&mut self, epoch: &Epoch, reports: &[Option<MonitorReport>]) -> bool {
+        self.last_t = Some(epoch.t);
+        self.stats.epochs += 1;
+        self.stats.last_t = Some(epoch.t);
+        self.deps.metrics.epochs.fetch_add(1, Ordering::Relaxed);
+        if self.echo {
+            let text = self.result_frame(epoch.t, reports);
+            self.send_ingest(text).await;
+        }
+        self.record(epoch, reports).await
+    }
+
+    /// Builds the monitors again from the stored spec (after a compute job lost them),
+    /// with their thresholds, policies and alarm levels as stored.
+    fn rebuild_monitors(&mut self) {
+        let stored = self
+            .shared
+            .stored
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone();
+        match build_monitors(&stored, &*self.deps.models) {
+            Ok(monitors) => {
+                self.monitors = monitors
+                    .into_iter()
+                    .zip(&stored.monitors)
+                    .map(|((name, monitor), wire)| NamedMonitor {
+                        name,
+                        monitor,
+                        alarm_level: wire.alarm_level.or(stored.alarm_level).unwrap_or_default(),
+                        availability: None,
+                    })
+                    .collect();
+            }
+            Err(e) => {
+                tracing::error!(session = %self.id, error = %e, "could not rebuild the monitors");
+            }
+        }
+    }
+
+    fn finish_frame(&mut self, received: Instant, epochs: usize, changed: bool) {
         let now = Instant::now();
-        self.rate_window.1 += frame.epochs.len() as u64;
+        self.rate_window.1 += epochs as u64;
         let elapsed = now.duration_since(self.rate_window.0);
         if elapsed >= Duration::from_secs(1) {
             self.stats.epochs_per_s = self.rate_window.1 as f64 / elapsed.as_secs_f64();
@@ -539,16 +757,16 @@ impl Actor {
         }
         self.deps
             .metrics
-            .observe_frame_latency(now.duration_since(frame.received));
+            .observe_frame_latency(now.duration_since(received));
         self.publish(changed);
     }
 
-    fn result_frame(&self, t: f64, reports: &[MonitorReport]) -> String {
+    fn result_frame(&self, t: f64, reports: &[Option<MonitorReport>]) -> String {
         let monitors = self
             .monitors
             .iter()
             .zip(reports)
-            .map(|(m, r)| (m.name.as_str(), wire::monitor_result(r)))
+            .filter_map(|(m, r)| Some((m.name.as_str(), wire::monitor_result(r.as_ref()?))))
             .collect();
         serde_json::to_string(&ResultFrame {
             kind: "result",
@@ -560,12 +778,15 @@ impl Actor {
 
     /// Updates statistics; announces state changes, alarms and availability changes.
     /// Returns true if any state changed.
-    async fn record(&mut self, epoch: &Epoch, reports: &[MonitorReport]) -> bool {
+    async fn record(&mut self, epoch: &Epoch, reports: &[Option<MonitorReport>]) -> bool {
         let t = epoch.t;
         let mut transitions: Vec<(usize, TestOutcome, f64)> = Vec::new();
         let mut availability: Vec<(usize, Availability, Integrity)> = Vec::new();
         let mut latest: Vec<(usize, Availability)> = Vec::new();
         for (index, (m, report)) in self.monitors.iter().zip(reports).enumerate() {
+            let Some(report) = report else {
+                continue; // this monitor failed on the epoch; its state is unchanged
+            };
             let Some(monitor_stats) = self.stats.monitors.get_mut(&m.name) else {
                 continue;
             };

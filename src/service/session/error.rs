@@ -46,6 +46,9 @@ pub enum SessionError {
     /// The session's actor did not answer in time.
     #[error("session '{0}' is busy")]
     Busy(String),
+    /// The store refused to record the change; nothing was changed.
+    #[error("store: {0}")]
+    Store(String),
 }
 
 impl SessionError {

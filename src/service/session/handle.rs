@@ -49,12 +49,16 @@ pub enum ControlCommand {
     Detach(u64),
     /// Read a monitor's thresholds.
     GetThreshold(String, oneshot::Sender<Result<ThresholdView, SessionError>>),
-    /// Change a monitor's threshold and/or policy.
+    /// Change a monitor's threshold and/or policy; answered once the change is stored.
     SetThreshold(
         String,
         ThresholdUpdate,
-        oneshot::Sender<Result<(ThresholdView, StoredSession), SessionError>>,
+        oneshot::Sender<Result<ThresholdView, SessionError>>,
     ),
+    /// Store the session's spec as it is now (a new session).
+    Persist(oneshot::Sender<Result<(), SessionError>>),
+    /// Delete the session's stored spec and stop; answered once the row is gone.
+    Delete(oneshot::Sender<Result<(), SessionError>>),
     /// Current statistics.
     Stats(oneshot::Sender<SessionStats>),
     /// Stop the actor.
@@ -165,14 +169,25 @@ impl SessionHandle {
             .await?
     }
 
-    /// Applies a threshold/policy change; returns the new view and the spec to persist.
+    /// Applies a threshold/policy change; the actor stores it before answering, so
+    /// changes are stored in the order they were applied (and acknowledged).
     pub async fn set_threshold(
         &self,
         monitor: &str,
         update: ThresholdUpdate,
-    ) -> Result<(ThresholdView, StoredSession), SessionError> {
+    ) -> Result<ThresholdView, SessionError> {
         self.ask(|tx| ControlCommand::SetThreshold(monitor.to_owned(), update, tx))
             .await?
+    }
+
+    /// Stores the session's spec as it is now (the actor writes it, in its own order).
+    pub async fn persist(&self) -> Result<(), SessionError> {
+        self.ask(ControlCommand::Persist).await?
+    }
+
+    /// Deletes the stored session and stops the actor, after every change queued before.
+    pub async fn delete(&self) -> Result<(), SessionError> {
+        self.ask(ControlCommand::Delete).await?
     }
 
     /// Exact current statistics.

@@ -87,6 +87,66 @@ pub fn build_monitors(
         .collect()
 }
 
+/// Checks a monitor's model dimensions against the limits before anything is built
+/// (the bound on compute per epoch, docs/architecture.md §A3): `linear`'s n (rows of `f`)
+/// and m (rows of `h`), a `channel`'s `dim` per channel. Read from the JSON as sent: a
+/// shape the config parser would refuse anyway is left to it.
+fn check_dimensions(i: usize, m: &MonitorSpecWire, limits: &Limits) -> Result<(), SessionError> {
+    let rows = |key: &str| {
+        m.config
+            .get(key)
+            .and_then(|v| v.as_array())
+            .map_or(0, Vec::len)
+    };
+    let over = |field: String, what: &str, got: usize, max: usize| {
+        SessionError::TooLarge(format!(
+            "{field}: {what} {got} is over the limit of {max} (--{})",
+            if what == "state dimension" {
+                "max-state-dim"
+            } else {
+                "max-measurement-dim"
+            }
+        ))
+    };
+    match m.kind {
+        crate::monitor::MonitorKind::Linear => {
+            let (n, k) = (rows("f"), rows("h"));
+            if n > limits.max_state_dim {
+                return Err(over(
+                    format!("monitors[{i}].config.f"),
+                    "state dimension",
+                    n,
+                    limits.max_state_dim,
+                ));
+            }
+            if k > limits.max_measurement_dim {
+                return Err(over(
+                    format!("monitors[{i}].config.h"),
+                    "measurement dimension",
+                    k,
+                    limits.max_measurement_dim,
+                ));
+            }
+        }
+        crate::monitor::MonitorKind::Channel => {
+            let channels = m.config.get("channels").and_then(|v| v.as_array());
+            for (j, c) in channels.into_iter().flatten().enumerate() {
+                let dim = c.get("dim").and_then(|d| d.as_u64()).unwrap_or(1) as usize;
+                if dim > limits.max_measurement_dim {
+                    return Err(over(
+                        format!("monitors[{i}].config.channels[{j}].dim"),
+                        "measurement dimension",
+                        dim,
+                        limits.max_measurement_dim,
+                    ));
+                }
+            }
+        }
+        _ => {}
+    }
+    Ok(())
+}
+
 /// Checks a create request against the naming rules and limits.
 pub fn validate_session(req: &CreateSession, limits: &Limits) -> Result<(), SessionError> {
     if let Some(id) = &req.id
@@ -111,6 +171,7 @@ pub fn validate_session(req: &CreateSession, limits: &Limits) -> Result<(), Sess
         )));
     }
     for (i, m) in req.monitors.iter().enumerate() {
+        check_dimensions(i, m, limits)?;
         if !valid_name(&m.name) {
             return Err(SessionError::invalid(
                 format!("monitors[{i}].name"),

@@ -118,6 +118,8 @@ pub enum FrameErrorCode {
     EmptyBatch,
     /// A monitor failed numerically on the epoch.
     Numerical,
+    /// A server fault (the session's monitors were restarted).
+    Internal,
 }
 
 impl FrameErrorCode {
@@ -134,6 +136,7 @@ impl FrameErrorCode {
             FrameErrorCode::BatchTooLarge => "batch_too_large",
             FrameErrorCode::EmptyBatch => "empty_batch",
             FrameErrorCode::Numerical => "numerical",
+            FrameErrorCode::Internal => "internal",
         }
     }
 }
