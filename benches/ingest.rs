@@ -81,6 +81,7 @@ fn bench(c: &mut Criterion) {
         }],
         echo: true,
         alarm_level: None,
+        record: None,
     };
     runtime.block_on(async {
         let resp = reqwest::Client::new()

@@ -88,6 +88,21 @@ struct ServeArgs {
     /// Largest measurement dimension of a user-defined model (linear's m, a channel's dim).
     #[arg(long, env = "NAVGUARD_MAX_MEASUREMENT_DIM", default_value_t = Limits::default().max_measurement_dim)]
     max_measurement_dim: usize,
+    /// Record every session's frames unless it says "record": false (default: only sessions that ask).
+    #[arg(long, env = "NAVGUARD_RECORD")]
+    record: bool,
+    /// Recording bytes kept per session, MiB (oldest frames dropped first).
+    #[arg(long, env = "NAVGUARD_RECORDING_SESSION_MIB", default_value_t = 64)]
+    recording_session_mib: u64,
+    /// Recording bytes kept in all, MiB (oldest frames of all sessions dropped first).
+    #[arg(long, env = "NAVGUARD_RECORDING_TOTAL_MIB", default_value_t = 1024)]
+    recording_total_mib: u64,
+    /// Recorded frames older than this are dropped, hours.
+    #[arg(long, env = "NAVGUARD_RECORDING_MAX_AGE_H", default_value_t = 168)]
+    recording_max_age_h: u64,
+    /// Seconds of 1 Hz statistics history kept per session for the dashboard.
+    #[arg(long, env = "NAVGUARD_HISTORY_S", default_value_t = 900)]
+    history_s: u32,
 }
 
 impl ServeArgs {
@@ -111,6 +126,13 @@ impl ServeArgs {
                 max_state_dim: self.max_state_dim,
                 max_measurement_dim: self.max_measurement_dim,
             },
+            record_default: self.record,
+            retention: navguard::service::store::Retention {
+                session_bytes: self.recording_session_mib << 20,
+                total_bytes: self.recording_total_mib << 20,
+                max_age_ms: (self.recording_max_age_h * 3600 * 1000) as i64,
+            },
+            history_s: self.history_s,
         }
     }
 }

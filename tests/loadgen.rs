@@ -51,6 +51,7 @@ fn linear_session(id: &str) -> CreateSession {
         }],
         echo: true,
         alarm_level: None,
+        record: None,
     }
 }
 

@@ -250,6 +250,7 @@ fn echo_session(kind: MonitorKind, config: Value) -> CreateSession {
         }],
         echo: true,
         alarm_level: None,
+        record: None,
     }
 }
 

@@ -131,6 +131,10 @@ pub(crate) struct ReplayArgs {
     /// Write the summary (counts, every alarm, final stats) as JSON to this file.
     #[arg(long)]
     pub summary_json: Option<PathBuf>,
+    /// Write every `result`, `state` and `alarm` message received, as received, one per
+    /// line, to this file (to compare a replayed recording with the original).
+    #[arg(long)]
+    pub messages: Option<PathBuf>,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -305,6 +309,7 @@ pub(crate) fn session_body(args: &ReplayArgs, scan: &FileScan) -> anyhow::Result
         monitors: vec![monitor],
         echo: false,
         alarm_level: None,
+        record: None,
     })
 }
 
@@ -357,6 +362,8 @@ struct Tally {
     states: u64,
     results: u64,
     closed: Option<String>,
+    /// `--messages`: where every result, state and alarm message goes.
+    messages: Option<std::io::BufWriter<std::fs::File>>,
 }
 
 impl Tally {
@@ -364,6 +371,12 @@ impl Tally {
         let Ok(event) = serde_json::from_str::<ServerEvent>(text) else {
             return;
         };
+        if let (Some(out), ServerEvent::Result | ServerEvent::State(_) | ServerEvent::Alarm(_)) =
+            (&mut self.messages, &event)
+        {
+            use std::io::Write as _;
+            let _ = writeln!(out, "{text}");
+        }
         match event {
             ServerEvent::Error(e) => {
                 self.error_total += 1;
@@ -445,7 +458,16 @@ pub(crate) async fn run(args: ReplayArgs) -> anyhow::Result<()> {
     let baseline = stats(&endpoint, &path).await?;
     let socket = endpoint.connect(&format!("{path}/ingest")).await?;
     let (sink, stream) = socket.split();
-    let tally = Arc::new(Mutex::new(Tally::default()));
+    let messages = match &args.messages {
+        Some(path) => Some(std::io::BufWriter::new(
+            std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?,
+        )),
+        None => None,
+    };
+    let tally = Arc::new(Mutex::new(Tally {
+        messages,
+        ..Tally::default()
+    }));
     let reader = tokio::spawn(read_events(stream, tally.clone()));
     let progress = progress_bar(
         scan.epochs,
@@ -472,7 +494,11 @@ pub(crate) async fn run(args: ReplayArgs) -> anyhow::Result<()> {
         .await;
     let _ = tokio::time::timeout(Duration::from_secs(2), reader).await;
     let final_stats = drained?;
-    let tally = std::mem::take(&mut *tally.lock().unwrap_or_else(|p| p.into_inner()));
+    let mut tally = std::mem::take(&mut *tally.lock().unwrap_or_else(|p| p.into_inner()));
+    if let Some(mut out) = tally.messages.take() {
+        use std::io::Write as _;
+        out.flush().context("writing --messages")?;
+    }
     let summary = ReplaySummary {
         session: args.session.clone(),
         created,

@@ -173,6 +173,7 @@ pub(crate) fn run(args: SimulateArgs) -> anyhow::Result<()> {
             }],
             echo: false,
             alarm_level: None,
+            record: None,
         };
         std::fs::write(path, serde_json::to_string_pretty(&spec)?)
             .with_context(|| format!("writing {}", path.display()))?;

@@ -9,7 +9,7 @@ use axum::middleware;
 use axum::routing::{MethodRouter, get, post};
 use tokio::sync::watch;
 
-use super::api::{alarms, chi2, features, health, models, sessions, thresholds};
+use super::api::{alarms, chi2, features, health, models, recording, sessions, thresholds};
 use super::compute::ComputePool;
 use super::config::ServiceConfig;
 use super::error::ApiError;
@@ -47,6 +47,9 @@ impl AppState {
             metrics: self.metrics.clone(),
             models: self.models.clone(),
             compute: self.compute.clone(),
+            record_default: self.config.record_default,
+            history_samples: (f64::from(self.config.history_s)
+                / crate::service::session::history::PERIOD_S) as usize,
         }
     }
 }
@@ -61,6 +64,8 @@ pub const ROUTES: &[(&str, &[&str])] = &[
     ("/api/v1/sessions", &["GET", "POST"]),
     ("/api/v1/sessions/{id}", &["GET", "DELETE"]),
     ("/api/v1/sessions/{id}/stats", &["GET"]),
+    ("/api/v1/sessions/{id}/history", &["GET"]),
+    ("/api/v1/sessions/{id}/recording", &["GET"]),
     (
         "/api/v1/sessions/{id}/monitors/{name}/threshold",
         &["GET", "PUT"],
@@ -85,6 +90,8 @@ fn handlers(path: &str) -> MethodRouter<AppState> {
         "/api/v1/sessions" => get(sessions::list).post(sessions::create),
         "/api/v1/sessions/{id}" => get(sessions::get).delete(sessions::delete),
         "/api/v1/sessions/{id}/stats" => get(sessions::stats),
+        "/api/v1/sessions/{id}/history" => get(recording::history),
+        "/api/v1/sessions/{id}/recording" => get(recording::recording),
         "/api/v1/sessions/{id}/monitors/{name}/threshold" => {
             get(thresholds::get).put(thresholds::put)
         }

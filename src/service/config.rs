@@ -3,6 +3,8 @@
 use std::net::SocketAddr;
 use std::path::PathBuf;
 
+use super::store::Retention;
+
 /// Limits on what a client may send (docs/architecture.md §A5). Over a limit: 413 or an `error` event.
 #[derive(Debug, Clone)]
 pub struct Limits {
@@ -71,6 +73,14 @@ pub struct ServiceConfig {
     pub token: Option<String>,
     /// Request limits.
     pub limits: Limits,
+    /// Sessions record their frames unless they say `"record": false` (default off:
+    /// only sessions that ask record).
+    pub record_default: bool,
+    /// Retention limits of the recordings.
+    pub retention: Retention,
+    /// Seconds of 1 Hz statistics history kept per session for the dashboard
+    /// (`GET …/history`, default 900).
+    pub history_s: u32,
 }
 
 impl ServiceConfig {
@@ -81,6 +91,9 @@ impl ServiceConfig {
             db_path: db_path.into(),
             token: None,
             limits: Limits::default(),
+            record_default: false,
+            retention: Retention::default(),
+            history_s: 900,
         }
     }
 }

@@ -84,7 +84,8 @@ enum Next {
     Refuse(FrameError),
 }
 
-fn on_text(text: &str, stream: u64, state: &AppState) -> Next {
+fn on_text(text: &str, link: (u64, bool), state: &AppState) -> Next {
+    let (stream, record) = link;
     let limits = &state.config.limits;
     if text.len() > limits.max_frame_bytes {
         return Next::Refuse(FrameError::new(
@@ -101,13 +102,14 @@ fn on_text(text: &str, stream: u64, state: &AppState) -> Next {
             stream,
             epochs,
             received: Instant::now(),
+            text: record.then(|| std::sync::Arc::from(text)),
         }),
         Err(e) => Next::Refuse(e),
     }
 }
 
 async fn run(mut socket: WebSocket, state: AppState, handle: SessionHandle, link: IngestLink) {
-    let stream = link.stream;
+    let (stream, record) = (link.stream, link.record);
     let mut outgoing = link.outgoing;
     let mut shutdown = state.shutdown.clone();
     let ready = json!({"type": "ready", "session": handle.id(), "stream": stream}).to_string();
@@ -163,7 +165,7 @@ async fn run(mut socket: WebSocket, state: AppState, handle: SessionHandle, link
                         break;
                     }
                 };
-                match on_text(&text, stream, &state) {
+                match on_text(&text, (stream, record), &state) {
                     Next::Forward(frame) => pending = Some(frame),
                     Next::Refuse(e) => {
                         if send_error(&mut socket, &state, &e).await.is_err() { break; }

@@ -73,7 +73,7 @@ pub async fn start(config: ServiceConfig) -> Result<Server, StartError> {
     if !config.bind.ip().is_loopback() && config.token.is_none() {
         return Err(StartError::OpenWithoutToken(config.bind));
     }
-    let store = Store::open(&config.db_path).await?;
+    let store = Store::open_with(&config.db_path, config.retention).await?;
     // Models first: restored sessions may name one.
     let models = Arc::new(Models::load(store.clone(), &config.limits).await?);
     let (shutdown_tx, shutdown_rx) = watch::channel(false);

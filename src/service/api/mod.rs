@@ -6,5 +6,6 @@ pub mod chi2;
 pub mod features;
 pub mod health;
 pub mod models;
+pub mod recording;
 pub mod sessions;
 pub mod thresholds;

@@ -115,6 +115,7 @@ pub async fn create(
         echo: req.echo,
         monitors,
         created_at_ms: now_ms(),
+        record: req.record,
         alarm_level: req.alarm_level,
     };
     // Building the actor validates every monitor (422 naming the field).

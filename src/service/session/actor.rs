@@ -13,6 +13,7 @@ use tokio::sync::{mpsc, watch};
 
 use super::SessionError;
 use super::handle::{ControlCommand, FrameCommand, IngestLink, SessionHandle, SessionShared};
+use super::history::History;
 use super::spec::{NamedMonitors, build_monitors};
 use super::stats::{IntegrityStats, MonitorStats, Position, SessionStats, TestStats, Track};
 use crate::detect::{Health, ThresholdSpec};
@@ -23,7 +24,7 @@ use crate::monitor::{
 use crate::service::compute::{ComputePool, SLICE_BUDGET};
 use crate::service::metrics::Metrics;
 use crate::service::now_ms;
-use crate::service::store::{Store, StoredSession};
+use crate::service::store::{RecordedFrame, Store, StoredSession};
 use crate::service::train::Models;
 use crate::service::wire::{
     self, AlarmLevel, AlarmRecord, AvailabilityChange, ErrorEvent, FrameError, FrameErrorCode,
@@ -50,6 +51,10 @@ pub struct ActorDeps {
     pub models: Arc<Models>,
     /// Where monitors are stepped, off the runtime.
     pub compute: Arc<ComputePool>,
+    /// Sessions record unless they say otherwise.
+    pub record_default: bool,
+    /// Samples of statistics history kept (one per second of epoch time).
+    pub history_samples: usize,
 }
 
 struct NamedMonitor {
@@ -78,6 +83,14 @@ struct Actor {
     stream: u64,
     last_t: Option<f64>,
     rate_window: (Instant, u64),
+    /// Record every accepted frame (docs/architecture.md §A12).
+    record: bool,
+    /// Epochs committed on the current stream (the recording's epoch index).
+    stream_epochs: u64,
+    /// The messages the frame being processed caused, each with its epoch index, for
+    /// the recording.
+    frame_events: Vec<String>,
+    history: History,
 }
 
 /// Builds the monitors of `stored` and starts its actor.
@@ -85,6 +98,8 @@ pub fn spawn(stored: StoredSession, deps: ActorDeps) -> Result<SessionHandle, Se
     let monitors = build_monitors(&stored, &*deps.models)?;
     let id: Arc<str> = Arc::from(stored.id.as_str());
     let stats = initial_stats(&id, &monitors);
+    let history = History::new(deps.history_samples, &stats);
+    let deps_record_default = deps.record_default;
     let (stats_tx, stats_rx) = watch::channel(Arc::new(stats.clone()));
     let (frames_tx, frames_rx) = mpsc::channel(FRAME_QUEUE);
     let (control_tx, control_rx) = mpsc::channel(CONTROL_QUEUE);
@@ -115,6 +130,10 @@ pub fn spawn(stored: StoredSession, deps: ActorDeps) -> Result<SessionHandle, Se
         stream: 0,
         last_t: None,
         rate_window: (Instant::now(), 0),
+        record: stored.record.unwrap_or(deps_record_default),
+        stream_epochs: 0,
+        frame_events: Vec::new(),
+        history,
     };
     tokio::spawn(actor.run(frames_rx, control_rx));
     Ok(SessionHandle::new(
@@ -323,6 +342,9 @@ impl Actor {
                     .map_err(|e| SessionError::Store(e.to_string()));
                 let _ = reply.send(answer);
             }
+            ControlCommand::History(since, reply) => {
+                let _ = reply.send(self.history.view(since));
+            }
             ControlCommand::Stats(reply) => {
                 self.refresh_consistency();
                 self.stats.published_at_ms = now_ms();
@@ -413,6 +435,8 @@ impl Actor {
         }
         self.last_t = None;
         self.stream += 1;
+        self.stream_epochs = 0;
+        self.history.clear();
         let (tx, rx) = mpsc::channel(INGEST_QUEUE);
         self.ingest = Some(tx);
         self.stats.connected = true;
@@ -433,6 +457,7 @@ impl Actor {
         self.publish(true);
         Ok(IngestLink {
             stream: self.stream,
+            record: self.record,
             outgoing: rx,
         })
     }
@@ -641,8 +666,11 @@ impl Actor {
             epochs,
             received,
             stream: frame_stream,
+            text,
         } = frame;
         let total = epochs.len();
+        let first_epoch = self.stream_epochs;
+        self.frame_events.clear();
         let mut epochs = epochs;
         let mut from = 0;
         let mut changed = false;
@@ -684,6 +712,8 @@ impl Actor {
                         return Flow::Stop;
                     }
                     if new_stream || frame_stream != self.stream {
+                        self.record_frame(text, frame_stream, first_epoch, from)
+                            .await;
                         self.finish_frame(received, from, changed);
                         return Flow::Continue;
                     }
@@ -701,13 +731,55 @@ impl Actor {
                 break;
             }
         }
+        let committed = (self.stream_epochs - first_epoch) as usize;
+        self.record_frame(text, frame_stream, first_epoch, committed)
+            .await;
         self.finish_frame(received, total, changed);
         Flow::Continue
+    }
+
+    /// Queues the frame for the recording: its text as sent, the epochs that were
+    /// committed (a frame refused part-way keeps those before the refusal) and the
+    /// messages they caused.
+    async fn record_frame(
+        &mut self,
+        text: Option<Arc<str>>,
+        stream: u64,
+        first_epoch: u64,
+        epochs: usize,
+    ) {
+        let (true, Some(frame), 1..) = (self.record, text, epochs) else {
+            return;
+        };
+        let events = format!("[{}]", self.frame_events.join(","));
+        self.frame_events.clear();
+        self.deps
+            .store
+            .record_frame(RecordedFrame {
+                session: self.id.to_string(),
+                stream,
+                first_epoch,
+                epochs: epochs as u64,
+                recorded_at_ms: now_ms(),
+                frame,
+                events,
+            })
+            .await;
+    }
+
+    /// Notes a message the current frame caused, for the recording.
+    fn note_event(&mut self, text: &str) {
+        if self.record {
+            let index = self.stream_epochs.saturating_sub(1);
+            self.frame_events
+                .push(format!(r#"{{"epoch_index":{index},"message":{text}}}"#));
+        }
     }
 
     /// Makes one stepped epoch current: time, counters, the `result` (with the monitors
     /// that stepped it), statistics, state changes and alarms.
     async fn commit_epoch(&mut self, epoch: &Epoch, reports: &[Option<MonitorReport>]) -> bool {
+        self.stream_epochs += 1;
         self.last_t = Some(epoch.t);
         self.stats.epochs += 1;
         self.stats.last_t = Some(epoch.t);
@@ -716,7 +788,9 @@ impl Actor {
             let text = self.result_frame(epoch.t, reports);
             self.send_ingest(text).await;
         }
-        self.record(epoch, reports).await
+        let changed = self.record(epoch, reports).await;
+        self.history.offer(epoch.t, &self.stats);
+        changed
     }
 
     /// Builds the monitors again from the stored spec (after a compute job lost them),
@@ -953,6 +1027,10 @@ impl Actor {
             log_id,
         };
         let state_text: Arc<str> = Arc::from(wire::tagged("state", &change));
+        self.note_event(&state_text);
+        if let Some(text) = &alarm_text {
+            self.note_event(text);
+        }
         self.broadcast(&state_text);
         if let Some(text) = &alarm_text {
             self.broadcast(text);
@@ -985,6 +1063,7 @@ impl Actor {
             alert_limit: integrity.alert_limit,
         };
         let text: Arc<str> = Arc::from(wire::tagged("availability", &change));
+        self.note_event(&text);
         self.broadcast(&text);
         self.send_ingest(text.to_string()).await;
         if from == Availability::Converging {
@@ -1046,6 +1125,7 @@ impl Actor {
             }
             self.deps.metrics.alarms.fetch_add(1, Ordering::Relaxed);
             let text: Arc<str> = Arc::from(wire::tagged("alarm", &entry));
+            self.note_event(&text);
             self.broadcast(&text);
             self.send_ingest(text.to_string()).await;
         }

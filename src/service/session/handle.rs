@@ -29,6 +29,8 @@ pub struct FrameCommand {
     pub epochs: Vec<Epoch>,
     /// When the frame arrived, for the latency metric.
     pub received: Instant,
+    /// The frame as the client sent it, for a recording session.
+    pub text: Option<Arc<str>>,
 }
 
 /// An attached ingest stream: its generation and the messages for its socket.
@@ -36,6 +38,8 @@ pub struct FrameCommand {
 pub struct IngestLink {
     /// Generation number; frames carry it.
     pub stream: u64,
+    /// The session records its frames: send their text with them.
+    pub record: bool,
     /// Messages (JSON text) for the ingest socket.
     pub outgoing: mpsc::Receiver<String>,
 }
@@ -61,6 +65,8 @@ pub enum ControlCommand {
     Delete(oneshot::Sender<Result<(), SessionError>>),
     /// Current statistics.
     Stats(oneshot::Sender<SessionStats>),
+    /// The statistics history at or after an epoch time.
+    History(Option<f64>, oneshot::Sender<super::history::HistoryView>),
     /// Stop the actor.
     Shutdown,
 }
@@ -193,6 +199,14 @@ impl SessionHandle {
     /// Exact current statistics.
     pub async fn stats(&self) -> Result<SessionStats, SessionError> {
         self.ask(ControlCommand::Stats).await
+    }
+
+    /// The 1 Hz statistics history from epoch time `since`.
+    pub async fn history(
+        &self,
+        since: Option<f64>,
+    ) -> Result<super::history::HistoryView, SessionError> {
+        self.ask(|tx| ControlCommand::History(since, tx)).await
     }
 
     /// Asks the actor to stop.

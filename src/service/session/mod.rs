@@ -5,6 +5,7 @@
 pub mod actor;
 pub mod error;
 pub mod handle;
+pub mod history;
 pub mod registry;
 pub mod spec;
 pub mod stats;

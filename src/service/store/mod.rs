@@ -4,6 +4,7 @@
 
 mod alarm_writer;
 pub mod models;
+pub mod recordings;
 
 use std::path::Path;
 use std::str::FromStr;
@@ -17,6 +18,7 @@ use crate::detect::Health;
 use crate::service::wire::{AlarmLevel, AlarmRecord, MonitorSpecWire, Severity};
 
 pub use models::StoredModel;
+pub use recordings::{RecordedFrame, Retention, StreamSummary};
 
 /// Store failures. These are server faults (HTTP 500), never the user's input.
 #[derive(Debug, thiserror::Error)]
@@ -80,6 +82,10 @@ pub struct StoredSession {
     pub monitors: Vec<MonitorSpecWire>,
     /// Creation time, Unix milliseconds.
     pub created_at_ms: i64,
+    /// Record every accepted frame (docs/architecture.md §A12); `None` follows the server's
+    /// `--record` default.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub record: Option<bool>,
     /// The session's alarm level (monitors may override it; default `isolated`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub alarm_level: Option<AlarmLevel>,
@@ -112,6 +118,8 @@ pub struct Store {
     pool: SqlitePool,
     /// Alarms go through one writer task that commits them in groups.
     alarms: alarm_writer::AlarmWriter,
+    /// Recorded frames go through another (not awaited per frame).
+    recordings: recordings::RecordingWriter,
 }
 
 const SCHEMA: &[&str] = &[
@@ -144,8 +152,14 @@ const ADDED_COLUMNS: &[(&str, &str, &str)] =
     &[("alarms", "severity", "TEXT NOT NULL DEFAULT 'alarm'")];
 
 impl Store {
-    /// Opens (creating if needed) the database file in WAL mode and applies the schema.
+    /// Opens (creating if needed) the database file in WAL mode and applies the schema,
+    /// with the default recording retention.
     pub async fn open(path: &Path) -> Result<Self, StoreError> {
+        Store::open_with(path, Retention::default()).await
+    }
+
+    /// [`Store::open`] with the given recording retention limits.
+    pub async fn open_with(path: &Path, retention: Retention) -> Result<Self, StoreError> {
         let url = format!("sqlite://{}", path.display());
         let options = SqliteConnectOptions::from_str(&url)?
             .create_if_missing(true)
@@ -158,7 +172,11 @@ impl Store {
             .max_connections(4)
             .connect_with(options)
             .await?;
-        for statement in SCHEMA.iter().chain(models::SCHEMA) {
+        for statement in SCHEMA
+            .iter()
+            .chain(models::SCHEMA)
+            .chain(recordings::SCHEMA)
+        {
             sqlx::query(statement).execute(&pool).await?;
         }
         for (table, column, definition) in ADDED_COLUMNS {
@@ -175,7 +193,12 @@ impl Store {
             }
         }
         let alarms = alarm_writer::AlarmWriter::spawn(pool.clone());
-        Ok(Store { pool, alarms })
+        let recordings = recordings::RecordingWriter::spawn(pool.clone(), retention);
+        Ok(Store {
+            pool,
+            alarms,
+            recordings,
+        })
     }
 
     /// Flushes the WAL into the main file and closes every connection.
@@ -225,6 +248,33 @@ impl Store {
     pub async fn insert_alarm(&self, mut alarm: AlarmRecord) -> Result<AlarmRecord, StoreError> {
         alarm.id = self.alarms.insert(alarm.clone()).await?;
         Ok(alarm)
+    }
+
+    /// Queues a frame for the recording (committed by the writer, not awaited).
+    pub async fn record_frame(&self, frame: RecordedFrame) {
+        self.recordings.record(frame).await;
+    }
+
+    /// Waits until every frame queued for the recording so far is committed.
+    pub async fn flush_recordings(&self) {
+        self.recordings.flush().await;
+    }
+
+    /// Up to `limit` recorded frames of a session's stream with ids above `after`,
+    /// oldest first, with their ids (the cursor of the next page).
+    pub async fn recording_page(
+        &self,
+        session: &str,
+        stream: u64,
+        after: i64,
+        limit: i64,
+    ) -> Result<Vec<(i64, RecordedFrame)>, StoreError> {
+        recordings::page(&self.pool, session, stream, after, limit).await
+    }
+
+    /// The streams a session has recorded.
+    pub async fn recording_streams(&self, session: &str) -> Result<Vec<StreamSummary>, StoreError> {
+        recordings::streams(&self.pool, session).await
     }
 
     /// Marks a test's open alarms as cleared at epoch time `t` (each alarm's
@@ -539,6 +589,7 @@ mod tests {
             echo: true,
             monitors: vec![],
             created_at_ms: 5,
+            record: None,
             alarm_level: None,
         };
         {

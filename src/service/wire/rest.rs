@@ -50,6 +50,9 @@ pub struct CreateSession {
     /// `isolated`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub alarm_level: Option<AlarmLevel>,
+    /// Record every accepted frame (default: the server's `--record`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub record: Option<bool>,
 }
 
 /// One monitor in a session spec, as the user writes it and as it is stored.
