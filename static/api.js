@@ -79,3 +79,30 @@ export function socketUrl(path) {
   if (token) url.searchParams.set("token", token);
   return url.href;
 }
+
+/**
+ * Downloads `path` (with the token, which a plain link could not carry) and saves it
+ * as `filename` through a temporary object URL.
+ */
+export async function download(path, filename) {
+  const headers = {};
+  if (token) headers.Authorization = "Bearer " + token;
+  const res = await fetch(new URL(path, document.baseURI), { headers, cache: "no-store" });
+  if (res.status === 401) {
+    for (const fn of authListeners) fn(token !== "");
+    throw new AuthError("the server needs a valid token");
+  }
+  if (!res.ok) {
+    let message = "HTTP " + res.status;
+    try { const data = await res.json(); if (data && data.error) message = data.error.message; } catch (_) { /* not JSON */ }
+    throw new HttpError(res.status, null, message);
+  }
+  const url = URL.createObjectURL(await res.blob());
+  const a = document.createElement("a");
+  a.href = url;
+  a.download = filename;
+  document.body.append(a);
+  a.click();
+  a.remove();
+  setTimeout(() => URL.revokeObjectURL(url), 10000);
+}

@@ -48,6 +48,21 @@ export class Series {
     if (this.firstState === null) this.firstState = state;
     if (this.t.length > 2 * HISTORY_CAP) this.trim();
   }
+  /**
+   * Puts `points` ({t, v, thr, state}, oldest first) before what is held: the past a
+   * history request returned, older than the live samples (later ones are dropped).
+   */
+  prepend(points) {
+    const first = this.t.length ? this.t[0] : Infinity;
+    const older = points.filter((p) => p.t < first);
+    if (!older.length) return;
+    this.t = older.map((p) => p.t).concat(this.t);
+    this.v = older.map((p) => p.v).concat(this.v);
+    this.thr = older.map((p) => p.thr).concat(this.thr);
+    this.state = older.map((p) => p.state).concat(this.state);
+    this.firstState = older[0].state;
+    if (this.t.length > 2 * HISTORY_CAP) this.trim();
+  }
   transition(t, to) {
     this.transitions.push({ t, to });
     if (this.transitions.length > HISTORY_CAP) this.transitions.splice(0, this.transitions.length - HISTORY_CAP);
@@ -117,6 +132,27 @@ export class Track {
     this.version = (this.version || 0) + 1; // lets a chart tell new data from a redraw
   }
   get length() { return this.t.length; }
+  /** Puts history tracks (oldest first) before what is held, keeping the origin of the oldest. */
+  prepend(list) {
+    const first = this.t.length ? this.t[0] : Infinity;
+    const older = list.filter((tr) => tr.t < first);
+    if (!older.length) return;
+    const newer = this.t.map((t, i) => i);
+    const keep = { t: this.t.slice(), sE: this.sE, sN: this.sN, iE: this.iE, iN: this.iN, origin: this.origin };
+    this.clear();
+    for (const tr of older) this.push(tr);
+    if (keep.origin && this.origin) {
+      // Re-express the held points in the new (older) origin's frame.
+      const o = this.origin, k = Math.PI / 180;
+      const dE = (keep.origin.lon - o.lon) * k * o.re, dN = (keep.origin.lat - o.lat) * k * o.rn;
+      for (const i of newer) {
+        this.t.push(keep.t[i]);
+        this.sE.push(keep.sE[i] + dE); this.sN.push(keep.sN[i] + dN);
+        this.iE.push(keep.iE[i] + dE); this.iN.push(keep.iN[i] + dN);
+      }
+    }
+    this.version++;
+  }
   /** Adds the `track` of one stats message; repeats (no new INS epoch) are skipped. */
   push(tr) {
     const n = this.t.length;
@@ -267,6 +303,44 @@ export class Live {
     }
     this.loaded = true;
     this.emit("sessions");
+  }
+
+  /**
+   * Draws the past: the session's 1 Hz statistics history (GET …/history) goes before
+   * the live samples, once per session (a view opened mid-run starts with it).
+   */
+  async loadHistory(id) {
+    const s = this.sessions.get(id);
+    if (!s || s.historyLoaded) return;
+    s.historyLoaded = true;
+    let h;
+    try { h = await get("api/v1/sessions/" + encodeURIComponent(id) + "/history"); } catch (_) { s.historyLoaded = false; return; }
+    const tests = new Map(), integrity = new Map(), tracks = new Map();
+    for (const sample of (h && h.samples) || []) {
+      for (const [m, mv] of Object.entries(sample.monitors || {})) {
+        for (const [t, tv] of Object.entries(mv.tests || {})) {
+          const key = m + "/" + t;
+          if (!tests.has(key)) tests.set(key, []);
+          tests.get(key).push({ t: sample.t, v: tv.last, thr: tv.threshold, state: tv.state });
+        }
+        if (mv.integrity) {
+          if (!integrity.has(m)) integrity.set(m, []);
+          const i = mv.integrity;
+          integrity.get(m).push({ t: sample.t, v: i.protection_level, thr: i.alert_limit, state: AVAILABILITY_BAND[i.state] || "unknown" });
+        }
+        if (mv.track) {
+          if (!tracks.has(m)) tracks.set(m, []);
+          tracks.get(m).push(mv.track);
+        }
+      }
+    }
+    for (const [key, points] of tests) {
+      const [m, ...rest] = key.split("/");
+      s.seriesFor(m, rest.join("/")).prepend(points);
+    }
+    for (const [m, points] of integrity) s.seriesFor(m, INTEGRITY).prepend(points);
+    for (const [m, list] of tracks) s.trackFor(m).prepend(list);
+    this.emit("stats", s);
   }
 
   /** Refreshes one session's REST view now (after a threshold change, say). */

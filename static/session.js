@@ -8,6 +8,7 @@ import { el, setText, badge, setBadge, fmtNum, fmtRatio, fmtT, fmtClock, policyL
 import { StripChart, TrackChart } from "./chart.js";
 import { ThresholdControls } from "./controls.js";
 import { INTEGRITY } from "./live.js";
+import { download } from "./api.js";
 
 const SESSION_ALARMS = 50;
 
@@ -37,6 +38,18 @@ export class SessionView {
       for (const c of this.charts) c.chart.setLog(this.log);
     });
     root.querySelector("#reset-zoom").addEventListener("click", () => this.setRange(null));
+    this.downloadBtn = root.querySelector("#download-recording");
+    this.downloadMsg = root.querySelector("#download-msg");
+    this.downloadBtn.addEventListener("click", async () => {
+      if (!this.id) return;
+      this.downloadMsg.textContent = "Downloading\u2026";
+      try {
+        await download("api/v1/sessions/" + encodeURIComponent(this.id) + "/recording", "recording-" + this.id + ".jsonl");
+        this.downloadMsg.textContent = "";
+      } catch (e) {
+        this.downloadMsg.textContent = e.message;
+      }
+    });
     live.on("stats", (s) => {
       if (s.id !== this.id) return;
       this.headDirty = true;
@@ -72,6 +85,7 @@ export class SessionView {
     }
     this.headDirty = true;
     this.alarmsDirty = true;
+    this.live.loadHistory(id);
   }
 
   setPaused(on) {
@@ -226,13 +240,20 @@ export class SessionView {
     setText(this.facts, st
       ? (st.connected ? "stream connected" : "stream not connected") + " \u00b7 " + st.epochs + " epochs \u00b7 t " + fmtT(st.last_t) + " s \u00b7 events " + s.liveText()
       : "events " + s.liveText());
+    this.downloadBtn.hidden = !(s.info && s.info.record);
   }
 
   fillAlarms() {
     const rows = this.live.recentAlarms.filter((a) => a.session === this.id).slice(0, SESSION_ALARMS).map((a) => {
       const cleared = a.cleared_t !== null && a.cleared_t !== undefined;
+      // Jumps the charts to a minute around the alarm.
+      const show = el("button", { type: "button", class: "link", "data-control": "show-alarm", title: "Show this moment in the charts" }, fmtClock(a.raised_at_ms));
+      show.addEventListener("click", () => {
+        this.setRange([a.t - 30, a.t + 30]);
+        this.body.scrollIntoView({ behavior: "smooth", block: "start" });
+      });
       return el("tr", { "data-alarm-id": a.id, "data-severity": a.severity || "alarm", class: cleared ? "cleared" : null },
-        el("td", null, fmtClock(a.raised_at_ms)), el("td", null, severityTag(a.severity)), el("td", null, a.monitor), el("td", null, a.test),
+        el("td", null, show), el("td", null, severityTag(a.severity)), el("td", null, a.monitor), el("td", null, a.test),
         el("td", null, badge(a.state)), el("td", { class: "num" }, fmtT(a.t)),
         el("td", { class: "num" }, fmtNum(a.statistic) + " / " + fmtNum(a.threshold)),
         el("td", { class: "num" }, fmtRatio(a.test_ratio)),

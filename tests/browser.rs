@@ -196,6 +196,7 @@ fn ship_session() -> Value {
             "config": scenario.default_monitor_config(),
             "policy": {"kind": "counters", "n1": 10, "n2": 5},
         }],
+        "record": true,
     })
 }
 
@@ -394,10 +395,61 @@ async fn the_dashboard_shows_a_faulty_replay_and_applies_a_threshold_change() {
     assert!(!gnss_alarms.is_empty(), "{log}");
     let t = gnss_alarms.last().unwrap()["t"].as_f64().unwrap();
     assert!((90.0..100.0).contains(&t), "GNSS alarm at t = {t}");
+    // Severities are told apart in the session's table; an alarm row jumps the charts
+    // to its moment; the recording can be downloaded.
+    let severities = wait_js(
+        &client,
+        r#"(() => { const r = [...document.querySelectorAll('#session-alarms tr[data-severity]')].map(r => r.dataset.severity); return r.includes('alarm') && r.includes('warning') && r.join(','); })()"#,
+        "an alarm and a warning in the session's table",
+    )
+    .await;
+    println!("session rows by severity: {severities}");
+    js(
+        &client,
+        r#"document.querySelector('#session-alarms [data-control="show-alarm"]').click(); return true;"#,
+    )
+    .await;
+    wait_js(
+        &client,
+        r#"document.querySelector('#range-text').textContent.startsWith('showing t')"#,
+        "the charts to zoom to the alarm's moment",
+    )
+    .await;
+    let download = js(
+        &client,
+        r#"return !document.querySelector('#download-recording').hidden;"#,
+    )
+    .await;
+    assert_eq!(
+        download,
+        json!(true),
+        "a recording session offers its recording"
+    );
+    js(
+        &client,
+        r#"document.querySelector('#reset-zoom').click(); return true;"#,
+    )
+    .await;
     let shot = save_screenshot(&client, "dashboard-session.png").await;
     if let Some(path) = std::env::var_os("NAVGUARD_DASHBOARD_PNG") {
         std::fs::copy(&shot, path).unwrap();
     }
+
+    // A view opened after the run draws the past from the 1 Hz history (the stream has
+    // ended, so nothing live can fill the charts).
+    client.goto(&format!("{http}/#/")).await.unwrap();
+    client.refresh().await.unwrap();
+    client
+        .goto(&format!("{http}/#/session/ship"))
+        .await
+        .unwrap();
+    let past = wait_js(
+        &client,
+        r#"(() => { const c = document.querySelector('canvas[data-monitor="federated"][data-test="gnss"]'); return c && Number(c.dataset.points) >= 100 && Number(c.dataset.points); })()"#,
+        "the gnss chart to draw the history of the run",
+    )
+    .await;
+    println!("gnss chart from the history: {past} points");
 
     // 4. Change the threshold through the controls; REST reports it.
     client

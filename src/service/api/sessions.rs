@@ -40,10 +40,11 @@ pub struct SessionView {
     connected: bool,
     #[serde(skip_serializing_if = "Option::is_none")]
     alarm_level: Option<crate::service::wire::AlarmLevel>,
+    record: bool,
     monitors: Vec<MonitorView>,
 }
 
-fn view(handle: &SessionHandle) -> SessionView {
+fn view(handle: &SessionHandle, record_default: bool) -> SessionView {
     let stored = handle.stored();
     let stats = handle.stats_watch().borrow().clone();
     let monitors = stored
@@ -78,6 +79,7 @@ fn view(handle: &SessionHandle) -> SessionView {
         created_at_ms: stored.created_at_ms,
         connected: stats.connected,
         alarm_level: stored.alarm_level,
+        record: stored.record.unwrap_or(record_default),
         monitors,
     }
 }
@@ -145,7 +147,10 @@ pub async fn create(
         }
         return Err(e.into());
     }
-    Ok((StatusCode::CREATED, Json(view(&handle))))
+    Ok((
+        StatusCode::CREATED,
+        Json(view(&handle, state.config.record_default)),
+    ))
 }
 
 /// The list answer.
@@ -157,7 +162,12 @@ pub struct SessionList {
 /// `GET /api/v1/sessions`
 pub async fn list(State(state): State<AppState>) -> Json<SessionList> {
     Json(SessionList {
-        sessions: state.registry.list().iter().map(view).collect(),
+        sessions: state
+            .registry
+            .list()
+            .iter()
+            .map(|h| view(h, state.config.record_default))
+            .collect(),
     })
 }
 
@@ -173,7 +183,10 @@ pub async fn get(
     State(state): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Json<SessionView>, ApiError> {
-    Ok(Json(view(&lookup(&state, &id)?)))
+    Ok(Json(view(
+        &lookup(&state, &id)?,
+        state.config.record_default,
+    )))
 }
 
 /// `DELETE /api/v1/sessions/{id}` → 204. The session's alarms stay in the log.
