@@ -106,7 +106,7 @@ async fn a_replayed_recording_reproduces_every_result_and_alarm_bit_for_bit() {
         resp.headers()[reqwest::header::CONTENT_DISPOSITION]
             .to_str()
             .unwrap()
-            .contains("recording-orig-1.jsonl")
+            .starts_with("attachment; filename=\"recording-orig-")
     );
     let text = resp.text().await.unwrap();
     let lines: Vec<&str> = text.lines().collect();

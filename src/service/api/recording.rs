@@ -43,7 +43,7 @@ pub enum RecordingFormat {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RecordingQuery {
-    /// Which stream (attach generation); default the latest recorded.
+    /// Which stream (its attach time, Unix ms, as the index lists it); default the latest.
     stream: Option<u64>,
     /// `epochs` (default), `events` or `index`.
     #[serde(default)]

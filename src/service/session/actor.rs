@@ -87,6 +87,10 @@ struct Actor {
     record: bool,
     /// Epochs committed on the current stream (the recording's epoch index).
     stream_epochs: u64,
+    /// The current stream's id in the recording: its attach time, Unix ms (made
+    /// increasing), so streams stay apart across server restarts, whose attach
+    /// generations start again at 1.
+    recording_stream: u64,
     /// The messages the frame being processed caused, each with its epoch index, for
     /// the recording.
     frame_events: Vec<String>,
@@ -132,6 +136,7 @@ pub fn spawn(stored: StoredSession, deps: ActorDeps) -> Result<SessionHandle, Se
         rate_window: (Instant::now(), 0),
         record: stored.record.unwrap_or(deps_record_default),
         stream_epochs: 0,
+        recording_stream: 0,
         frame_events: Vec::new(),
         history,
     };
@@ -436,6 +441,7 @@ impl Actor {
         self.last_t = None;
         self.stream += 1;
         self.stream_epochs = 0;
+        self.recording_stream = (now_ms().max(0) as u64).max(self.recording_stream + 1);
         self.history.clear();
         let (tx, rx) = mpsc::channel(INGEST_QUEUE);
         self.ingest = Some(tx);
@@ -670,6 +676,7 @@ impl Actor {
         } = frame;
         let total = epochs.len();
         let first_epoch = self.stream_epochs;
+        let recording_stream = self.recording_stream;
         self.frame_events.clear();
         let mut epochs = epochs;
         let mut from = 0;
@@ -712,7 +719,7 @@ impl Actor {
                         return Flow::Stop;
                     }
                     if new_stream || frame_stream != self.stream {
-                        self.record_frame(text, frame_stream, first_epoch, from)
+                        self.record_frame(text, recording_stream, first_epoch, from)
                             .await;
                         self.finish_frame(received, from, changed);
                         return Flow::Continue;
@@ -732,7 +739,7 @@ impl Actor {
             }
         }
         let committed = (self.stream_epochs - first_epoch) as usize;
-        self.record_frame(text, frame_stream, first_epoch, committed)
+        self.record_frame(text, recording_stream, first_epoch, committed)
             .await;
         self.finish_frame(received, total, changed);
         Flow::Continue

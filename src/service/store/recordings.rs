@@ -68,7 +68,8 @@ impl Default for Retention {
 pub struct RecordedFrame {
     /// Session id.
     pub session: String,
-    /// The ingest stream (attach generation) it came on.
+    /// The ingest stream it came on: its attach time, Unix ms (unique per session, also
+    /// across server restarts).
     pub stream: u64,
     /// Index, within its stream, of the frame's first epoch.
     pub first_epoch: u64,
@@ -334,7 +335,7 @@ pub(super) async fn streams(
 /// One recorded stream of a session.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct StreamSummary {
-    /// The stream (attach generation).
+    /// The stream: its attach time, Unix ms.
     pub stream: u64,
     /// Frames kept.
     pub frames: u64,
