@@ -21,7 +21,7 @@
 //!   over runs; the paper: its plain method stays in false alarm ≈ 20 s);
 //! - the docs/methods.md §M19 scorecard of the pooled trace (runs laid end to end).
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write as _;
 use std::sync::Arc;
 use std::time::Instant;
@@ -179,19 +179,40 @@ pub fn prediction(p: &Seed000Params) -> Result<PredictionResult, ExperimentError
     Ok(r)
 }
 
-/// One monitored flight: the `dh` test's samples `(t, T_a, health)` and the step time.
+/// One monitored flight: the main test's samples `(t, T_a, health)`, the channel's worst
+/// health over all its tests, and the step time.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ChannelTrace {
-    /// `(t, statistic, health)` on every epoch the test ran.
+    /// `(t, statistic, health)` of the first channel's main test on every epoch it ran.
     pub samples: Vec<(f64, f64, Health)>,
+    /// `(t, health)` of the first channel on the same epochs: the worst health over its
+    /// main, stuck and drift tests (a test that did not run keeps its last health).
+    pub channel: Vec<(f64, Health)>,
+    /// `(t, statistic, health)` per test name (every test of the monitor that ran).
+    pub tests: BTreeMap<String, Vec<(f64, f64, Health)>>,
     /// Total wall time of the monitor's steps, s.
     pub busy_s: f64,
     /// Epochs stepped.
     pub epochs: usize,
 }
 
-/// One scalar channel `name` with T_a over `n` differences, no outlier filter
-/// and the monitor's default warm-up.
+impl ChannelTrace {
+    /// `(t, health)` of the main test.
+    pub fn main_health(&self) -> Vec<(f64, Health)> {
+        self.samples.iter().map(|&(t, _, h)| (t, h)).collect()
+    }
+}
+
+fn severity(h: Health) -> u8 {
+    match h {
+        Health::Healthy => 0,
+        Health::Suspect => 1,
+        Health::Isolated => 2,
+    }
+}
+
+/// One scalar channel `name` with T_a over windows 1 and `n` (batch means), no outlier
+/// filter and every other field at its default.
 pub fn scalar_channel(
     name: &str,
     embedding: usize,
@@ -199,48 +220,89 @@ pub fn scalar_channel(
     predictor: PredictorWire,
 ) -> ChannelWire {
     ChannelWire {
-        name: name.to_owned(),
-        dim: 1,
         embedding,
-        predictor,
-        outlier_filter: None,
         n: Some(n),
-        min_differences: None,
+        ..ChannelWire::new(name, predictor)
     }
 }
 
-/// Runs `epochs` through a `channel` monitor built from `config` (models from `models`).
+/// Runs `epochs` through a `channel` monitor built from `config` (models from `models`)
+/// under the classic policy.
 pub fn run_channel(
     config: ChannelConfigWire,
     models: &HashMap<String, Arc<AnyModel>>,
     p_fa: f64,
     epochs: &[Epoch],
 ) -> Result<ChannelTrace, ExperimentError> {
+    run_channel_with(config, models, PolicyConfig::Classic, p_fa, epochs)
+}
+
+/// Runs `epochs` through a `channel` monitor built from `config` under `policy`.
+pub fn run_channel_with(
+    config: ChannelConfigWire,
+    models: &HashMap<String, Arc<AnyModel>>,
+    policy: PolicyConfig,
+    p_fa: f64,
+    epochs: &[Epoch],
+) -> Result<ChannelTrace, ExperimentError> {
+    let first = config
+        .channels
+        .first()
+        .map(|c| c.name.clone())
+        .unwrap_or_default();
     let spec = MonitorSpec {
         kind: MonitorKind::Channel,
         config: monitor::MonitorConfig::Channel(config),
-        policy: PolicyConfig::Classic,
+        policy,
         threshold: ThresholdSpec::PFa(p_fa),
     };
     let mut monitor = monitor::build(&spec, models)?;
+    // The first channel's tests: its main test and `<name>.…`.
+    let own: Vec<usize> = monitor
+        .tests()
+        .slots()
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| *s.name == *first || s.name.starts_with(&format!("{first}.")))
+        .map(|(i, _)| i)
+        .collect();
     let mut trace = ChannelTrace {
         samples: Vec::with_capacity(epochs.len()),
+        channel: Vec::with_capacity(epochs.len()),
+        tests: BTreeMap::new(),
         busy_s: 0.0,
         epochs: epochs.len(),
     };
-    let started = Instant::now();
+    let mut busy = 0.0;
     for e in epochs {
+        let started = Instant::now();
         let report = monitor
             .step(e)
             .map_err(|source| ExperimentError::Step { t: e.t, source })?;
-        if let Some(o) = report.tests.first() {
+        busy += started.elapsed().as_secs_f64();
+        for o in &report.tests {
+            trace.tests.entry(o.name.to_string()).or_default().push((
+                e.t,
+                o.statistic.value,
+                o.decision.health,
+            ));
+        }
+        // Test 0 is the first channel's main test (its stuck and drift tests follow).
+        if let Some(o) = report.tests.iter().find(|o| o.index == 0) {
             trace
                 .samples
                 .push((e.t, o.statistic.value, o.decision.health));
+            let slots = monitor.tests().slots();
+            let worst = own
+                .iter()
+                .map(|&i| slots[i].policy.health())
+                .max_by_key(|&h| severity(h))
+                .unwrap_or(Health::Healthy);
+            trace.channel.push((e.t, worst));
         }
         debug_assert!(matches!(report.outputs, Outputs::Channel { .. }));
     }
-    trace.busy_s = started.elapsed().as_secs_f64();
+    trace.busy_s = busy;
     Ok(trace)
 }
 
