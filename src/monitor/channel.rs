@@ -37,7 +37,11 @@
 //! **Learning** (the online window's sample, the tests' variances and the stuck test's
 //! reference) happens only on epochs where every test of the channel is healthy and the
 //! last non-healthy epoch is more than `guard` epochs back (docs/methods.md §M14): a fault
-//! flagged now and then is never learned between its flags. The outlier filter is bypassed
+//! flagged now and then is never learned between its flags. An online predictor frozen for
+//! `max_freeze` epochs learns again (not the variances) until the channel is healthy: a
+//! frozen sliding window cannot follow a signal that moves on, so without this a false
+//! alarm on a changing signal turns into a permanent one (measured in docs/experiments.md;
+//! `"max_freeze": 0` never relearns). The outlier filter is bypassed
 //! while a test is not healthy (it restarts on the return). The measured value still
 //! enters the embedding history: feeding the prediction back instead (free-running
 //! through the fault) was tried and deadlocks — once the free-run drifts from the signal
@@ -54,7 +58,7 @@ use std::sync::Arc;
 
 pub use config::{
     ChannelConfig, ChannelConfigWire, ChannelMonitorConfig, ChannelWire, DEFAULT_DRIFT_WINDOWS,
-    DEFAULT_EMBEDDING, DEFAULT_GUARD, DEFAULT_N, DEFAULT_OUTLIER_C, DriftWire, MainTestConfig,
+    DEFAULT_EMBEDDING, DEFAULT_GUARD, DEFAULT_MAX_FREEZE, DEFAULT_N, DEFAULT_OUTLIER_C, DriftWire, MainTestConfig,
     ModelIds, OutlierWire, PredictorConfig, PredictorWire, StuckConfig, StuckWire, Toggle,
     VarianceKind,
 };
@@ -167,6 +171,11 @@ struct ChannelState {
     /// Consecutive epochs, up to the last one, on which every test of the channel was
     /// healthy (saturating; starts high so a fresh channel learns at once).
     quiet: usize,
+    /// Consecutive epochs, up to the last one, on which the channel did not teach.
+    frozen: usize,
+    /// The predictor learns again after `max_freeze` frozen epochs, until the channel is
+    /// healthy (module doc).
+    relearning: bool,
 }
 
 impl ChannelState {
@@ -190,6 +199,8 @@ impl ChannelState {
             predictor,
             tests,
             quiet: usize::MAX / 2,
+            frozen: 0,
+            relearning: false,
             config,
         })
     }
@@ -291,6 +302,9 @@ struct Pending {
     healthy: bool,
     /// This epoch teaches the channel (healthy and past the guard).
     learn: bool,
+    /// The predictor learns this epoch although the channel does not teach (the freeze
+    /// has lasted `max_freeze` epochs).
+    forced: bool,
     /// Policy states of the tests that ran.
     policies: Vec<(usize, PolicyState)>,
     /// The main test's normalised residual and health, for the consistency diagnostics.
@@ -410,12 +424,14 @@ impl ChannelState {
             healthy &= h == Health::Healthy;
         }
         let learn = healthy && self.quiet >= self.config.guard;
+        let max_freeze = self.config.max_freeze;
+        let forced = !learn && max_freeze > 0 && (self.relearning || self.frozen >= max_freeze);
         let observed = match (&residual, main_value) {
             (Some(r), Some(_)) => self.main.normalise(r).map(|nu| (nu, main_health)),
             _ => None,
         };
         let (value, filters) = self.history_value(y, healthy);
-        let windows = self.learned_windows(x.as_deref(), &value, learn)?;
+        let windows = self.learned_windows(x.as_deref(), &value, learn || forced)?;
         Ok(Pending {
             channel,
             value,
@@ -425,6 +441,7 @@ impl ChannelState {
             residual,
             healthy,
             learn,
+            forced,
             policies,
             observed,
         })
@@ -480,10 +497,12 @@ impl ChannelState {
             bank.observe(self.tests.main, nu, *health);
         }
         if let Some(r) = &p.residual {
-            self.main.commit(r, p.learn);
+            // A forced relearn re-baselines the variances too (module doc).
+            let learn = p.learn || p.forced;
+            self.main.commit(r, learn);
             if let Some(d) = &mut self.drift {
                 // Cannot fail: checked by `evaluate` in the step.
-                let _ = d.commit(r, p.learn);
+                let _ = d.commit(r, learn);
             }
         }
         if let Some(s) = &mut self.stuck {
@@ -504,6 +523,12 @@ impl ChannelState {
         } else {
             0
         };
+        self.frozen = if p.learn {
+            0
+        } else {
+            self.frozen.saturating_add(1)
+        };
+        self.relearning = !p.healthy && (self.relearning || p.forced);
         if self.history.len() == self.config.embedding {
             self.history.pop_front();
         }

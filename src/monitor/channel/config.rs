@@ -27,7 +27,11 @@ pub const DEFAULT_OUTLIER_C: f64 = 3.0;
 
 /// Default guard: epochs after the channel's last non-healthy epoch during which nothing
 /// is learned from it (docs/methods.md §M14; measured on seed 001 in docs/experiments.md).
-pub const DEFAULT_GUARD: usize = 10;
+pub const DEFAULT_GUARD: usize = 0;
+
+/// Default longest freeze of an online predictor before it learns again (docs/methods.md
+/// §M14): a fault lasting longer is learned, after it has been flagged for this long.
+pub const DEFAULT_MAX_FREEZE: usize = 20;
 
 /// Default drift windows (docs/methods.md §M14: justified by seed 000's ramps).
 pub const DEFAULT_DRIFT_WINDOWS: [usize; 2] = [30, 60];
@@ -97,6 +101,10 @@ pub struct ChannelWire {
     /// learned (default [`DEFAULT_GUARD`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub guard: Option<usize>,
+    /// Epochs an online predictor stays frozen before it learns again although the
+    /// channel is not healthy (default [`DEFAULT_MAX_FREEZE`]; 0: never).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_freeze: Option<usize>,
 }
 
 impl ChannelWire {
@@ -116,6 +124,7 @@ impl ChannelWire {
             stuck: None,
             drift: None,
             guard: None,
+            max_freeze: None,
         }
     }
 }
@@ -312,6 +321,8 @@ pub struct ChannelConfig {
     pub drift: Option<WindowParams>,
     /// Guard after a non-healthy epoch, epochs.
     pub guard: usize,
+    /// Longest freeze of an online predictor, epochs (0: no limit).
+    pub max_freeze: usize,
 }
 
 impl ChannelConfig {
@@ -581,6 +592,10 @@ impl ChannelMonitorConfig {
                 Some(g) => in_range(format!("{at}.guard"), g, 0, MAX_EPOCHS)?,
                 None => DEFAULT_GUARD,
             };
+            let max_freeze = match c.max_freeze {
+                Some(g) => in_range(format!("{at}.max_freeze"), g, 0, MAX_EPOCHS)?,
+                None => DEFAULT_MAX_FREEZE,
+            };
             channels.push(ChannelConfig {
                 name: TestName::from(c.name.as_str()),
                 dim,
@@ -591,6 +606,7 @@ impl ChannelMonitorConfig {
                 stuck: parse_stuck(&at, c, dim)?,
                 drift: parse_drift(&at, c, dim)?,
                 guard,
+                max_freeze,
             });
         }
         check_names(&channels)?;

@@ -3,7 +3,7 @@
 use std::collections::HashMap;
 
 use super::*;
-use crate::detect::PolicyConfig;
+use crate::detect::{PolicyConfig, ThresholdSpec};
 use crate::monitor::ConfigError;
 use crate::learn::{Dataset, ModelKind, ModelParams, NoProgress, train};
 use crate::monitor::MonitorSpec;
@@ -174,8 +174,9 @@ fn step_fault_on_an_online_predictor_is_detected_at_once() {
         a.first().is_some_and(|&k| (400..=402).contains(&k)),
         "{a:?}"
     );
-    // The window did not learn the faulty values: the fault stays flagged.
-    assert!(a.contains(&499), "{a:?}");
+    // The window does not learn the faulty values: the fault stays flagged until the
+    // freeze has lasted `max_freeze` (20) epochs.
+    assert!((400..420).all(|k| a.contains(&k)), "{a:?}");
 }
 
 #[test]
@@ -298,6 +299,8 @@ fn every_new_field_is_refused_at_its_exact_path() {
         ("drift", json!(3), "channels[0].drift"),
         ("guard", json!(1_000_000), "channels[0].guard"),
         ("guard", json!(-1), "channels[0].guard"),
+        ("max_freeze", json!(1_000_000), "channels[0].max_freeze"),
+        ("max_freeze", json!("long"), "channels[0].max_freeze"),
     ];
     for (field, value, path) in cases {
         let e = config_error(online_with(field, value.clone()), &NoModels);
@@ -405,17 +408,44 @@ fn a_drift_test_reports_under_its_own_name_and_flags_a_slow_ramp() {
 }
 
 #[test]
-fn nothing_is_learned_during_the_guard_after_a_flag() {
-    // A bias that is flagged at once: with the guard the window never learns it and the
-    // fault stays flagged on most epochs; with guard 0 the window learns it between
-    // flags as soon as one epoch passes.
-    let run = |guard: usize| {
-        let config = online_with("guard", json!(guard));
-        let mut m = crate::monitor::build(&spec(config), &NoModels).unwrap();
-        let a = alarms(m.as_mut(), &signal(500, 300, 0.25, 13));
+fn nothing_is_learned_while_flagged_nor_during_the_guard_and_a_long_freeze_relearns() {
+    let config = |guard: usize, max_freeze: usize| {
+        let c = online_with("guard", json!(guard));
+        let mut c = c;
+        c["channels"][0]["max_freeze"] = json!(max_freeze);
+        let crate::monitor::MonitorConfig::Channel(wire) = spec(c).config else {
+            panic!("a channel config")
+        };
+        let config = ChannelMonitorConfig::from_wire(&wire, &NoModels).unwrap();
+        ChannelMonitor::new(config, PolicyConfig::Classic, ThresholdSpec::PFa(1e-5)).unwrap()
+    };
+    let series = signal(400, usize::MAX, 0.0, 13);
+    // A single 20σ spike at k = 300 is flagged by the window of 1 (and the window of 10
+    // for a few epochs after): no sample is learned then, nor for 3 epochs after.
+    let mut m = config(3, 0);
+    let mut learned = Vec::new();
+    for (k, &y) in series.iter().enumerate() {
+        let y = if k == 300 { y + 1.0 } else { y };
+        m.step(&epoch(k, "s", vec![y])).unwrap();
+        // `frozen` is reset by every epoch that teaches.
+        if (295..330).contains(&k) {
+            learned.push((k, m.channels[0].frozen == 0));
+        }
+    }
+    let first_frozen = learned.iter().find(|(_, l)| !l).map(|&(k, _)| k);
+    assert_eq!(first_frozen, Some(300), "{learned:?}");
+    let frozen_run = learned.iter().filter(|(_, l)| !l).count();
+    assert!(frozen_run >= 4, "flagged epoch(s) plus a guard of 3: {learned:?}");
+    assert!(learned.last().unwrap().1, "learning again by k = 329");
+    // A step that stays flagged: frozen for good with max_freeze 0, relearned after 20
+    // epochs otherwise (so the flag then clears).
+    let stepped = signal(500, 300, 1.0, 14);
+    let run = |max_freeze| {
+        let mut m = config(0, max_freeze);
+        let a = alarms(&mut m, &stepped);
         a.iter().filter(|&&k| k >= 300).count()
     };
-    let (guarded, unguarded) = (run(10), run(0));
-    assert!(guarded >= unguarded, "{guarded} vs {unguarded}");
-    assert!(guarded > 150, "{guarded} of 200 fault epochs flagged");
+    let (forever, relearned) = (run(0), run(20));
+    assert!(forever > 190, "{forever}");
+    assert!(relearned < forever, "{relearned} vs {forever}");
 }

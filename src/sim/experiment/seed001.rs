@@ -28,7 +28,7 @@ use crate::learn::online::{OnlineLsSvm, OnlineParams};
 use crate::learn::outlier::OutlierFilter;
 use crate::learn::{Dataset, LearnError, ModelKind, ModelParams};
 use crate::monitor::channel::{
-    ChannelConfigWire, DEFAULT_GUARD, PredictorWire, Toggle, VarianceKind,
+    ChannelConfigWire, DEFAULT_GUARD, DEFAULT_MAX_FREEZE, PredictorWire, Toggle, VarianceKind,
 };
 use crate::sim::faults::FaultKind;
 use crate::sim::imu_channel::{self, FAULT_K, SAMPLES};
@@ -111,6 +111,8 @@ pub struct Seed001Case {
     pub guard: usize,
     /// Decision policy.
     pub policy: PolicyConfig,
+    /// Longest freeze of the online predictor, epochs (0: never relearn).
+    pub max_freeze: usize,
 }
 
 /// Part 2's configurations: the paper's (each residual against a threshold, the
@@ -118,13 +120,16 @@ pub struct Seed001Case {
 /// calibrated monitor's defaults (windows 1 and 10 by batch means, the stuck test, guard
 /// 10) under the classic and the counters policy, and counters without the guard.
 pub fn cases(p: &Seed001Params) -> Vec<Seed001Case> {
-    let calibrated = |label, guard, policy| Seed001Case {
+    let (classic, counters) = (PolicyConfig::Classic, PolicyConfig::counters_default());
+    let f = DEFAULT_MAX_FREEZE;
+    let calibrated = |label, guard, policy, max_freeze| Seed001Case {
         label,
         variance: VarianceKind::BatchMeans,
         n: crate::detect::ta::DEFAULT_N,
         stuck: true,
         guard,
         policy,
+        max_freeze,
     };
     vec![
         Seed001Case {
@@ -134,10 +139,12 @@ pub fn cases(p: &Seed001Params) -> Vec<Seed001Case> {
             stuck: false,
             guard: 0,
             policy: PolicyConfig::Classic,
+            max_freeze: 0,
         },
-        calibrated("BM classic", DEFAULT_GUARD, PolicyConfig::Classic),
-        calibrated("BM counters", DEFAULT_GUARD, PolicyConfig::counters_default()),
-        calibrated("BM counters g0", 0, PolicyConfig::counters_default()),
+        calibrated("BM classic", DEFAULT_GUARD, classic, f),
+        calibrated("BM counters", DEFAULT_GUARD, counters, f),
+        calibrated("BM counters g10", 10, counters, f),
+        calibrated("BM counters f∞", DEFAULT_GUARD, counters, 0),
     ]
 }
 
@@ -157,6 +164,9 @@ pub struct FaultRow {
     pub stuck_delays: Vec<Option<usize>>,
     /// Flagged samples before the onset (lead-in included), all draws.
     pub false_alarms: usize,
+    /// Samples the `gyro.stuck` test flags before the onset (the whole record when
+    /// fault-free), all draws.
+    pub stuck_false_alarms: usize,
     /// The channel's scorecard (flagged = any of its tests not healthy), draws laid end
     /// to end; `t` = sample index.
     pub card: Scorecard,
@@ -286,6 +296,7 @@ fn case_config(p: &Seed001Params, case: &Seed001Case) -> Result<ChannelConfigWir
     channel.variance = Some(case.variance);
     channel.stuck = Some(Toggle::On(case.stuck));
     channel.guard = Some(case.guard);
+    channel.max_freeze = Some(case.max_freeze);
     Ok(ChannelConfigWire {
         channels: vec![channel],
     })
@@ -308,6 +319,7 @@ pub fn faults_case(p: &Seed001Params, case: &Seed001Case) -> Result<Vec<FaultRow
     let mut rows = Vec::new();
     for (name, kind) in modes {
         let (mut delays, mut stuck_delays, mut false_alarms) = (Vec::new(), Vec::new(), 0);
+        let mut stuck_false_alarms = 0;
         let (mut pooled, mut windows, mut statistic) = (Vec::new(), Vec::new(), Vec::new());
         let (mut busy, mut epochs) = (0.0, 0usize);
         for draw in 0..p.seeds.max(1) {
@@ -324,6 +336,11 @@ pub fn faults_case(p: &Seed001Params, case: &Seed001Case) -> Result<Vec<FaultRow
                 .map(|v| v.iter().map(|&(t, _, h)| (t, h)).collect())
                 .unwrap_or_default();
             stuck_delays.push(first_flag(&stuck, onset).filter(|_| kind.is_some()));
+            let onset_or_end = if kind.is_some() { onset } else { usize::MAX };
+            stuck_false_alarms += stuck
+                .iter()
+                .filter(|&&(t, h)| t < onset_or_end as f64 && h != Health::Healthy)
+                .count();
             false_alarms += trace
                 .channel
                 .iter()
@@ -358,6 +375,7 @@ pub fn faults_case(p: &Seed001Params, case: &Seed001Case) -> Result<Vec<FaultRow
             delays,
             stuck_delays,
             false_alarms,
+            stuck_false_alarms,
             card,
             statistic,
         });
@@ -507,8 +525,8 @@ fn render_faults(s: &mut String, r: &Seed001Result) {
     );
     let _ = writeln!(
         s,
-        "{:<16} {:<8} {:>9} {:>18} {:>18} {:>12} {:>10}",
-        "case", "fault", "flagged", "delay mean/max", "stuck mean/max", "FAR/p_fa", "FA before"
+        "{:<16} {:<8} {:>9} {:>18} {:>18} {:>12} {:>10} {:>9}",
+        "case", "fault", "flagged", "delay mean/max", "stuck mean/max", "FAR/p_fa", "FA before", "stuck FA"
     );
     for f in &r.faults {
         let stuck = if f.stuck_delays.iter().all(Option::is_none) {
@@ -528,7 +546,7 @@ fn render_faults(s: &mut String, r: &Seed001Result) {
         };
         let _ = writeln!(
             s,
-            "{:<16} {:<8} {:>9} {:>18} {:>18} {:>12} {:>10}",
+            "{:<16} {:<8} {:>9} {:>18} {:>18} {:>12} {:>10} {:>9}",
             f.case,
             f.fault,
             tpr,
@@ -538,6 +556,7 @@ fn render_faults(s: &mut String, r: &Seed001Result) {
                 .far_over_p_fa()
                 .map_or_else(|| "—".to_owned(), |v| format!("{v:.2}×")),
             f.false_alarms,
+            f.stuck_false_alarms,
         );
     }
 }
