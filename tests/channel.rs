@@ -74,7 +74,11 @@ fn seed_001_faults_are_detected_and_the_stuck_test_catches_a_freeze_within_ten_s
         }
     }
     let gain = rows.iter().find(|r| r.fault == "gain").unwrap();
-    assert!(gain.card.true_positive_rate.unwrap() > 0.9, "{:?}", gain.card);
+    assert!(
+        gain.card.true_positive_rate.unwrap() > 0.9,
+        "{:?}",
+        gain.card
+    );
 }
 
 #[test]

@@ -8,8 +8,8 @@ use std::path::{Path, PathBuf};
 use super::spinner;
 
 use anyhow::{Context, bail};
-use navguard::sim::experiment::{ramp, seed000, seed001, seed002, seed003, seed004};
 use navguard::sim::experiment::coloured;
+use navguard::sim::experiment::{ramp, seed000, seed001, seed002, seed003, seed004};
 
 /// The experiments.
 #[derive(Debug, clap::Subcommand)]

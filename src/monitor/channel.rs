@@ -58,9 +58,9 @@ use std::sync::Arc;
 
 pub use config::{
     ChannelConfig, ChannelConfigWire, ChannelMonitorConfig, ChannelWire, DEFAULT_DRIFT_WINDOWS,
-    DEFAULT_EMBEDDING, DEFAULT_GUARD, DEFAULT_MAX_FREEZE, DEFAULT_N, DEFAULT_OUTLIER_C, DriftWire, MainTestConfig,
-    ModelIds, OutlierWire, PredictorConfig, PredictorWire, StuckConfig, StuckWire, Toggle,
-    VarianceKind,
+    DEFAULT_EMBEDDING, DEFAULT_GUARD, DEFAULT_MAX_FREEZE, DEFAULT_N, DEFAULT_OUTLIER_C, DriftWire,
+    MainTestConfig, ModelIds, OutlierWire, PredictorConfig, PredictorWire, StuckConfig, StuckWire,
+    Toggle, VarianceKind,
 };
 
 use super::{
@@ -268,7 +268,9 @@ impl ChannelMonitor {
                 None => None,
             };
             let stuck = match &c.stuck {
-                Some(s) => Some(bank.add_test(&c.stuck_name(), 1, Some(ThresholdSpec::PFa(s.p_fa)))?),
+                Some(s) => {
+                    Some(bank.add_test(&c.stuck_name(), 1, Some(ThresholdSpec::PFa(s.p_fa)))?)
+                }
                 None => None,
             };
             let tests = TestIndices {
@@ -425,7 +427,11 @@ impl ChannelState {
         }
         let learn = healthy && self.quiet >= self.config.guard;
         let max_freeze = self.config.max_freeze;
-        let forced = !learn && max_freeze > 0 && (self.relearning || self.frozen >= max_freeze);
+        // Only an online predictor relearns: a stored model does not go stale, and its
+        // variances must not absorb a lasting fault.
+        let online = matches!(self.predictor, Predictor::Online(_));
+        let forced =
+            online && !learn && max_freeze > 0 && (self.relearning || self.frozen >= max_freeze);
         let observed = match (&residual, main_value) {
             (Some(r), Some(_)) => self.main.normalise(r).map(|nu| (nu, main_health)),
             _ => None,

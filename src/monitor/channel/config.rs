@@ -374,7 +374,6 @@ pub(super) fn learn_field(prefix: &str, e: LearnError) -> ConfigError {
     }
 }
 
-
 fn parse_predictor(
     at: &str,
     value: &PredictorWire,
@@ -442,7 +441,6 @@ fn parse_predictor(
     params.check().map_err(|e| learn_field(&field, e))?;
     Ok(PredictorConfig::Online(params.clone()))
 }
-
 
 /// The main test from `n`, `variance`, `min_blocks`, `max_blocks` (and, for the old
 /// form, `min_differences`).

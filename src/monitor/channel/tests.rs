@@ -4,8 +4,8 @@ use std::collections::HashMap;
 
 use super::*;
 use crate::detect::{PolicyConfig, ThresholdSpec};
-use crate::monitor::ConfigError;
 use crate::learn::{Dataset, ModelKind, ModelParams, NoProgress, train};
+use crate::monitor::ConfigError;
 use crate::monitor::MonitorSpec;
 use crate::monitor::NoModels;
 use rand::SeedableRng;
@@ -47,8 +47,7 @@ fn signal(len: usize, at: usize, step: f64, seed: u64) -> Vec<f64> {
     let noise = Normal::new(0.0, 0.05).unwrap();
     (0..len)
         .map(|k| {
-            let s =
-                (2.0 * std::f64::consts::PI * k as f64 / 25.0).sin() + noise.sample(&mut rng);
+            let s = (2.0 * std::f64::consts::PI * k as f64 / 25.0).sin() + noise.sample(&mut rng);
             if k >= at { s + step } else { s }
         })
         .collect()
@@ -137,8 +136,7 @@ fn stored_model_of_the_wrong_dimension_is_refused() {
     let (x, y) = embed_series(&signal(120, usize::MAX, 0.0, 1), 3);
     let data = Dataset::new(&x, Some(&y)).unwrap();
     let params =
-        ModelParams::from_json(ModelKind::LsSvm, &json!({"gamma": 10.0, "sigma2": 5.0}))
-            .unwrap();
+        ModelParams::from_json(ModelKind::LsSvm, &json!({"gamma": 10.0, "sigma2": 5.0})).unwrap();
     let model = train(&params, None, &data, &NoProgress).unwrap().model;
     let models: HashMap<String, Arc<AnyModel>> =
         HashMap::from([("m3".to_owned(), Arc::new(model))]);
@@ -185,11 +183,9 @@ fn stored_model_predictor_detects_a_step_and_not_the_clean_signal() {
     let (x, y) = embed_series(&train_series, 5);
     let data = Dataset::new(&x, Some(&y)).unwrap();
     let params =
-        ModelParams::from_json(ModelKind::LsSvm, &json!({"gamma": 10.0, "sigma2": 5.0}))
-            .unwrap();
+        ModelParams::from_json(ModelKind::LsSvm, &json!({"gamma": 10.0, "sigma2": 5.0})).unwrap();
     let model = train(&params, None, &data, &NoProgress).unwrap().model;
-    let models: HashMap<String, Arc<AnyModel>> =
-        HashMap::from([("m".to_owned(), Arc::new(model))]);
+    let models: HashMap<String, Arc<AnyModel>> = HashMap::from([("m".to_owned(), Arc::new(model))]);
     let config = json!({"channels": [{"name": "s", "predictor": {"model": "m"}}]});
     let mut m = crate::monitor::build(&spec(config.clone()), &models).unwrap();
     assert!(alarms(m.as_mut(), &signal(400, usize::MAX, 0.0, 4)).is_empty());
@@ -217,11 +213,10 @@ fn vector_channel_predicts_each_component_and_checks_its_length() {
         last = Some(m.step(&e).unwrap());
     }
     let Some(MonitorReport {
-        outputs:
-            Outputs::Channel {
-                prediction,
-                residual,
-            },
+        outputs: Outputs::Channel {
+            prediction,
+            residual,
+        },
         ..
     }) = last
     else {
@@ -275,7 +270,11 @@ fn online_with(field: &str, value: Value) -> Value {
 /// The test names of the monitor built from `config`, in bank order.
 fn test_names(config: Value) -> Vec<String> {
     let m = crate::monitor::build(&spec(config), &NoModels).unwrap();
-    m.tests().slots().iter().map(|s| s.name.to_string()).collect()
+    m.tests()
+        .slots()
+        .iter()
+        .map(|s| s.name.to_string())
+        .collect()
 }
 
 #[test]
@@ -293,8 +292,16 @@ fn every_new_field_is_refused_at_its_exact_path() {
         ("stuck", json!({"kk": 3}), "channels[0].stuck"),
         ("stuck", json!("yes"), "channels[0].stuck"),
         ("drift", json!({"windows": []}), "channels[0].drift.windows"),
-        ("drift", json!({"windows": [30, 1]}), "channels[0].drift.windows[1]"),
-        ("drift", json!({"windows": [30, 5000]}), "channels[0].drift.windows[1]"),
+        (
+            "drift",
+            json!({"windows": [30, 1]}),
+            "channels[0].drift.windows[1]",
+        ),
+        (
+            "drift",
+            json!({"windows": [30, 5000]}),
+            "channels[0].drift.windows[1]",
+        ),
         ("drift", json!({"window": 30}), "channels[0].drift"),
         ("drift", json!(3), "channels[0].drift"),
         ("guard", json!(1_000_000), "channels[0].guard"),
@@ -435,7 +442,10 @@ fn nothing_is_learned_while_flagged_nor_during_the_guard_and_a_long_freeze_relea
     let first_frozen = learned.iter().find(|(_, l)| !l).map(|&(k, _)| k);
     assert_eq!(first_frozen, Some(300), "{learned:?}");
     let frozen_run = learned.iter().filter(|(_, l)| !l).count();
-    assert!(frozen_run >= 4, "flagged epoch(s) plus a guard of 3: {learned:?}");
+    assert!(
+        frozen_run >= 4,
+        "flagged epoch(s) plus a guard of 3: {learned:?}"
+    );
     assert!(learned.last().unwrap().1, "learning again by k = 329");
     // A step that stays flagged: frozen for good with max_freeze 0, relearned after 20
     // epochs otherwise (so the flag then clears).

@@ -417,8 +417,7 @@ pub fn monte_carlo(
 ) -> Result<(Vec<CaseResult>, Option<Vec<ChannelTrace>>), ExperimentError> {
     let threads = p.threads.clamp(1, 8);
     type Run = Result<Vec<Vec<ChannelTrace>>, ExperimentError>;
-    let mut per_run: Vec<Option<Run>> =
-        (0..p.runs).map(|_| None).collect();
+    let mut per_run: Vec<Option<Run>> = (0..p.runs).map(|_| None).collect();
     std::thread::scope(|s| {
         let chunks: Vec<_> = per_run
             .chunks_mut(p.runs.div_ceil(threads).max(1))
@@ -525,7 +524,12 @@ pub fn eq18_mdr(threshold: f64, shift_m: f64, sigma_m: f64) -> f64 {
 }
 
 /// Eq. 18 averaged over a fault's epochs: `shift(k)` on epoch k of `epochs`.
-pub fn eq18_mdr_mean(threshold: f64, sigma_m: f64, epochs: usize, shift: impl Fn(usize) -> f64) -> f64 {
+pub fn eq18_mdr_mean(
+    threshold: f64,
+    sigma_m: f64,
+    epochs: usize,
+    shift: impl Fn(usize) -> f64,
+) -> f64 {
     (0..epochs)
         .map(|k| eq18_mdr(threshold, shift(k), sigma_m))
         .sum::<f64>()
@@ -551,7 +555,14 @@ fn render_analytic(s: &mut String, r: &Seed000Result) {
     let _ = writeln!(
         s,
         "{:<12} {:<22} {:>8} {:>14} {:>14} {:>9} {:>13} {:>13}",
-        "fault", "method", "paper", "σ at 22.338", "σ at 9.5495", "our σ_r", "eq.18 ours", "ours (MC, BM)"
+        "fault",
+        "method",
+        "paper",
+        "σ at 22.338",
+        "σ at 9.5495",
+        "our σ_r",
+        "eq.18 ours",
+        "ours (MC, BM)"
     );
     for c in r.cases.iter().filter(|c| c.variance == VARIANCES[0].0) {
         let (sigma_paper, sigma_t1, analytic) = match ads_gnss::table2_faults()

@@ -312,7 +312,10 @@ fn first_flag(trace: &[(f64, Health)], onset: usize) -> Option<usize> {
 
 /// Part 2 under one configuration: the fault-free record and every fault mode through
 /// the channel monitor with the online predictor, each over `p.seeds` noise draws.
-pub fn faults_case(p: &Seed001Params, case: &Seed001Case) -> Result<Vec<FaultRow>, ExperimentError> {
+pub fn faults_case(
+    p: &Seed001Params,
+    case: &Seed001Case,
+) -> Result<Vec<FaultRow>, ExperimentError> {
     let config = case_config(p, case)?;
     let mut modes: Vec<(&'static str, Option<FaultKind>)> = vec![("none", None)];
     modes.extend(imu_channel::fault_modes().map(|(n, k)| (n, Some(k))));
@@ -324,10 +327,14 @@ pub fn faults_case(p: &Seed001Params, case: &Seed001Case) -> Result<Vec<FaultRow
         let (mut busy, mut epochs) = (0.0, 0usize);
         for draw in 0..p.seeds.max(1) {
             let seed = p.seed + draw as u64;
-            let run =
-                imu_channel::simulate_with_lead_in(seed, p.lead_in, p.samples, kind, false)?;
-            let trace =
-                run_channel_with(config.clone(), &HashMap::new(), case.policy, p.p_fa, &run.epochs())?;
+            let run = imu_channel::simulate_with_lead_in(seed, p.lead_in, p.samples, kind, false)?;
+            let trace = run_channel_with(
+                config.clone(),
+                &HashMap::new(),
+                case.policy,
+                p.p_fa,
+                &run.epochs(),
+            )?;
             let onset = run.fault_k;
             delays.push(first_flag(&trace.channel, onset).filter(|_| kind.is_some()));
             let stuck: Vec<(f64, Health)> = trace
@@ -526,7 +533,14 @@ fn render_faults(s: &mut String, r: &Seed001Result) {
     let _ = writeln!(
         s,
         "{:<16} {:<8} {:>9} {:>18} {:>18} {:>12} {:>10} {:>9}",
-        "case", "fault", "flagged", "delay mean/max", "stuck mean/max", "FAR/p_fa", "FA before", "stuck FA"
+        "case",
+        "fault",
+        "flagged",
+        "delay mean/max",
+        "stuck mean/max",
+        "FAR/p_fa",
+        "FA before",
+        "stuck FA"
     );
     for f in &r.faults {
         let stuck = if f.stuck_delays.iter().all(Option::is_none) {
@@ -574,7 +588,11 @@ pub fn plots(r: &Seed001Result) -> Vec<(String, String)> {
     .with_log_y(true);
     // The calibrated classic case, first draw (the chart's k is the record's sample).
     let lead = r.params.lead_in as f64;
-    for f in r.faults.iter().filter(|f| f.case == "BM classic" && f.fault != "none") {
+    for f in r
+        .faults
+        .iter()
+        .filter(|f| f.case == "BM classic" && f.fault != "none")
+    {
         let points = f
             .statistic
             .iter()
@@ -584,4 +602,3 @@ pub fn plots(r: &Seed001Result) -> Vec<(String, String)> {
     }
     vec![("ta_faults.svg".to_owned(), chart.to_svg())]
 }
-
