@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use super::spinner;
 
 use anyhow::{Context, bail};
+use navguard::sim::experiment::coloured;
 use navguard::sim::experiment::{ramp, seed000, seed001, seed002, seed003, seed004};
 
 /// The experiments.
@@ -25,6 +26,41 @@ pub(crate) enum ExperimentCommand {
     Seed000(Seed000Args),
     /// Seed 001: online vs batch vs global LS-SVM, IMU fault modes, outlier filter.
     Seed001(Seed001Args),
+    /// T_a's false-alarm rate on coloured residuals: successive-difference vs batch-means variance.
+    Coloured(ColouredArgs),
+}
+
+/// `navguard experiment coloured` flags.
+#[derive(Debug, clap::Args)]
+pub(crate) struct ColouredArgs {
+    /// First seed; draw i uses seed + i.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Noise draws per case.
+    #[arg(long, default_value_t = 5)]
+    pub seeds: usize,
+    /// Epochs per run.
+    #[arg(long, default_value_t = 12_000)]
+    pub epochs: usize,
+}
+
+impl Experiment for ColouredArgs {
+    type Output = coloured::ColouredResult;
+    const TITLE: &'static str = "coloured";
+
+    fn run(&self) -> anyhow::Result<Self::Output> {
+        let params = coloured::ColouredParams {
+            seed: self.seed,
+            seeds: self.seeds,
+            epochs: self.epochs,
+            ..coloured::ColouredParams::default()
+        };
+        Ok(coloured::run(params)?)
+    }
+
+    fn render(output: &Self::Output) -> String {
+        coloured::render(output)
+    }
 }
 
 /// `navguard experiment seed000` flags.
@@ -56,6 +92,12 @@ pub(crate) struct Seed001Args {
     /// Repetitions for the timings.
     #[arg(long, default_value_t = 20)]
     pub reps: usize,
+    /// Noise draws of part 2 (seeds seed, seed + 1, …).
+    #[arg(long, default_value_t = 20)]
+    pub seeds: usize,
+    /// Fault-free samples before the paper's record in part 2.
+    #[arg(long, default_value_t = 300)]
+    pub lead_in: usize,
     /// Directory for the SVG figures.
     #[arg(long, default_value = "target/experiments/seed001")]
     pub out_dir: PathBuf,
@@ -360,6 +402,8 @@ impl Experiment for Seed001Args {
             seed: self.seed,
             window: self.window,
             reps: self.reps,
+            seeds: self.seeds,
+            lead_in: self.lead_in,
             ..seed001::Seed001Params::default()
         };
         Ok(seed001::run(params)?)
@@ -417,5 +461,6 @@ pub(crate) fn run(command: ExperimentCommand) -> anyhow::Result<()> {
         ExperimentCommand::Ramp(args) => execute(&args),
         ExperimentCommand::Seed000(args) => execute(&args),
         ExperimentCommand::Seed001(args) => execute(&args),
+        ExperimentCommand::Coloured(args) => execute(&args),
     }
 }

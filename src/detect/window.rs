@@ -169,20 +169,33 @@ struct Block {
 #[derive(Debug, Clone)]
 struct Scale {
     n: usize,
+    /// Blocks kept, and blocks needed before the scale judges (the params' values, or
+    /// scaled to an equal memory by [`WindowTest::with_equal_memory`]).
+    max_blocks: usize,
+    min_blocks: usize,
     /// The block being filled: sum of inputs, sum of `r rᵀ`, inputs so far.
     partial: (DVector<f64>, DMatrix<f64>, usize),
     blocks: VecDeque<Block>,
+    /// Running `Σ m_b m_bᵀ` and `Σ sum_sq` over the kept blocks, recomputed from scratch
+    /// every `max_blocks` blocks so no round-off accumulates (a short scale of an
+    /// equal-memory test keeps hundreds of blocks and completes one every epoch).
+    sums: (DMatrix<f64>, DMatrix<f64>),
+    since_recompute: usize,
     /// `(Σ̂⁻¹, per-input covariance)` from the kept blocks, once there are enough and Σ̂
     /// is positive definite.
     estimate: Option<(DMatrix<f64>, DMatrix<f64>)>,
 }
 
 impl Scale {
-    fn new(n: usize, d: usize, max_blocks: usize) -> Self {
+    fn new(n: usize, d: usize, max_blocks: usize, min_blocks: usize) -> Self {
         Scale {
             n,
+            max_blocks,
+            min_blocks,
             partial: (DVector::zeros(d), DMatrix::zeros(d, d), 0),
             blocks: VecDeque::with_capacity(max_blocks + 1),
+            sums: (DMatrix::zeros(d, d), DMatrix::zeros(d, d)),
+            since_recompute: 0,
             estimate: None,
         }
     }
@@ -204,31 +217,41 @@ impl Scale {
             &mut self.partial,
             (DVector::zeros(d), DMatrix::zeros(d, d), 0),
         );
-        self.blocks.push_back(Block {
+        let block = Block {
             mean: sum / count as f64,
             sum_sq,
-        });
-        if self.blocks.len() > params.max_blocks {
-            self.blocks.pop_front();
+        };
+        self.sums.0 += &block.mean * block.mean.transpose();
+        self.sums.1 += &block.sum_sq;
+        self.blocks.push_back(block);
+        if self.blocks.len() > self.max_blocks
+            && let Some(old) = self.blocks.pop_front()
+        {
+            self.sums.0 -= &old.mean * old.mean.transpose();
+            self.sums.1 -= &old.sum_sq;
         }
-        self.renew(params);
+        self.since_recompute += 1;
+        if self.since_recompute >= self.max_blocks {
+            self.since_recompute = 0;
+            self.sums.0.fill(0.0);
+            self.sums.1.fill(0.0);
+            for b in &self.blocks {
+                self.sums.0 += &b.mean * b.mean.transpose();
+                self.sums.1 += &b.sum_sq;
+            }
+        }
+        self.renew();
     }
 
-    /// Recomputes Σ̂⁻¹ and the per-input covariance from the kept blocks (from scratch,
-    /// so no round-off accumulates as blocks come and go).
-    fn renew(&mut self, params: &WindowParams) {
+    /// Recomputes Σ̂⁻¹ and the per-input covariance from the kept blocks' sums.
+    fn renew(&mut self) {
         let b = self.blocks.len();
-        if b < params.min_blocks {
+        if b < self.min_blocks {
             self.estimate = None;
             return;
         }
-        let d = params.dim;
-        let mut second = DMatrix::<f64>::zeros(d, d);
-        let mut per_input = DMatrix::<f64>::zeros(d, d);
-        for block in &self.blocks {
-            second += &block.mean * block.mean.transpose();
-            per_input += &block.sum_sq;
-        }
+        let mut second = self.sums.0.clone();
+        let mut per_input = self.sums.1.clone();
         second /= b as f64;
         per_input /= (b * self.n) as f64;
         // A singular Σ̂ (no spread in some direction) leaves the scale without a variance:
@@ -280,7 +303,7 @@ impl WindowTest {
         let scales = params
             .scales
             .iter()
-            .map(|&n| Scale::new(n, params.dim, params.max_blocks))
+            .map(|&n| Scale::new(n, params.dim, params.max_blocks, params.min_blocks))
             .collect();
         WindowTest {
             known: None,
@@ -317,6 +340,37 @@ impl WindowTest {
         Ok(test)
     }
 
+    /// A test whose every scale remembers the same span of healthy epochs as the longest:
+    /// scale `n` keeps `max_blocks · L / n` blocks and judges once it has
+    /// `min_blocks · L / n` (L the longest window), so a short window's variance is not
+    /// estimated from a few dozen consecutive, correlated inputs (docs/methods.md §M20:
+    /// with window 1 and AR(1) inputs of φ = 0.9, 50 inputs carry about 5 independent
+    /// ones). Every scale then reports from the same epoch on.
+    pub fn with_equal_memory(params: WindowParams) -> Self {
+        let mut test = WindowTest::new(params);
+        let longest = test.params.longest();
+        for s in &mut test.scales {
+            let stretch = longest / s.n;
+            s.max_blocks = test.params.max_blocks * stretch;
+            s.min_blocks = test.params.min_blocks * stretch;
+        }
+        test
+    }
+
+    /// Healthy epochs the test needs before every scale judges (its warm-up).
+    pub fn warm_up_epochs(&self) -> usize {
+        self.scales
+            .iter()
+            .map(|s| s.min_blocks * s.n)
+            .max()
+            .unwrap_or(0)
+    }
+
+    /// Whether every scale has its variance (the warm-up is over).
+    pub fn is_ready(&self) -> bool {
+        self.scales.iter().all(|s| s.estimate.is_some())
+    }
+
     /// The parameters in force.
     pub fn params(&self) -> &WindowParams {
         &self.params
@@ -345,7 +399,7 @@ impl WindowTest {
     pub fn reset(&mut self) {
         self.window.clear();
         for s in &mut self.scales {
-            *s = Scale::new(s.n, self.params.dim, self.params.max_blocks);
+            *s = Scale::new(s.n, self.params.dim, s.max_blocks, s.min_blocks);
         }
     }
 
@@ -587,6 +641,55 @@ mod tests {
         assert!(first.unwrap() <= 3, "{first:?}");
         // Unhealthy epochs complete no block.
         assert!(test.blocks() <= blocks + 1);
+    }
+
+    #[test]
+    fn equal_memory_scales_span_the_same_epochs_and_report_together() {
+        let mut test = WindowTest::with_equal_memory(WindowParams {
+            dim: 1,
+            scales: vec![1, 10],
+            max_blocks: 5,
+            min_blocks: 3,
+        });
+        // Scale 10 needs 3 blocks (30 epochs); scale 1 then needs 30 blocks of one.
+        assert_eq!(test.warm_up_epochs(), 30);
+        let mut rng = StdRng::seed_from_u64(8);
+        for k in 0..29 {
+            let e: f64 = StandardNormal.sample(&mut rng);
+            test.commit(&[e], true).unwrap();
+            assert!(!test.is_ready(), "{k}");
+        }
+        assert_eq!(test.evaluate(&[0.0]).unwrap(), None);
+        test.commit(&[1.0], true).unwrap();
+        assert!(test.is_ready());
+        for _ in 0..200 {
+            let e: f64 = StandardNormal.sample(&mut rng);
+            test.commit(&[e], true).unwrap();
+        }
+        // Scale 1 keeps 5·10 blocks, scale 10 five: both span the last 50 epochs.
+        assert_eq!(test.scales[0].blocks.len(), 50);
+        assert_eq!(test.scales[1].blocks.len(), 5);
+    }
+
+    #[test]
+    fn equal_memory_keeps_a_short_window_calibrated_on_coloured_inputs() {
+        // AR(1) φ = 0.9, windows 1 and 10, p_fa 0.002: the short window's variance comes
+        // from 500 inputs, not 50, so the rate stays near the nominal one.
+        let mut rng = StdRng::seed_from_u64(9);
+        let mut test = WindowTest::with_equal_memory(WindowParams::new(1, &[1, 10]));
+        let t = chi2::threshold(1, 0.002).unwrap();
+        let (mut x, mut over, mut tested) = (0.0f64, 0usize, 0usize);
+        for _ in 0..150_000 {
+            let e: f64 = StandardNormal.sample(&mut rng);
+            x = 0.9 * x + (1.0f64 - 0.81).sqrt() * e;
+            if let Some(v) = test.evaluate(&[x]).unwrap() {
+                tested += 1;
+                over += usize::from(v.value > t);
+            }
+            test.commit(&[x], true).unwrap();
+        }
+        let rate = over as f64 / tested as f64;
+        assert!((0.0008..0.004).contains(&rate), "{rate}");
     }
 
     #[test]

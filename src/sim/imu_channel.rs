@@ -46,9 +46,22 @@ pub fn fault_modes() -> [(&'static str, FaultKind); 4] {
 
 /// The true pitch rate at sample `k`, °/s.
 pub fn truth(k: usize) -> f64 {
+    truth_at(k as f64)
+}
+
+/// The true pitch rate at sample `k` of the paper's record, `k < 0` included (the
+/// lead-in of [`simulate_with_lead_in`]): before the record the amplitude grows
+/// exponentially into its k = 0 value and slope, `A(k) = 0.8 exp(k/270)`, so the
+/// oscillation keeps growing at the record's relative rate (≈ 0.37 % a sample) rather
+/// than changing regime at k = 0.
+pub fn truth_at(k: f64) -> f64 {
     use std::f64::consts::TAU;
-    let k = k as f64;
-    (0.8 + 0.4 * k / 135.0) * (3.0 * (TAU * k / 40.0 + 0.5).sin() + (TAU * k / 20.0 + 0.5).sin())
+    let amplitude = if k >= 0.0 {
+        0.8 + 0.4 * k / 135.0
+    } else {
+        0.8 * (k / 270.0).exp()
+    };
+    amplitude * (3.0 * (TAU * k / 40.0 + 0.5).sin() + (TAU * k / 20.0 + 0.5).sin())
 }
 
 /// One gyro record.
@@ -60,6 +73,8 @@ pub struct ImuChannelRun {
     pub measured: Vec<f64>,
     /// Indices of injected spikes.
     pub spikes: Vec<usize>,
+    /// Index of the fault onset in this record (`FAULT_K` plus the lead-in).
+    pub fault_k: usize,
 }
 
 impl ImuChannelRun {
@@ -98,22 +113,40 @@ pub fn simulate(
     fault: Option<FaultKind>,
     spikes: bool,
 ) -> Result<ImuChannelRun, SimError> {
+    simulate_with_lead_in(seed, 0, samples, fault, spikes)
+}
+
+/// [`simulate`] with `lead_in` fault-free samples before the paper's record (the same
+/// oscillation at its starting amplitude), so a monitor that needs a healthy history
+/// has one before k = 80: sample `lead_in + k` is the record's sample k, and the fault
+/// starts at `lead_in + FAULT_K`. Spikes stay on the record's own indices (shifted).
+pub fn simulate_with_lead_in(
+    seed: u64,
+    lead_in: usize,
+    samples: usize,
+    fault: Option<FaultKind>,
+    spikes: bool,
+) -> Result<ImuChannelRun, SimError> {
     if samples == 0 {
         return Err(SimError::param("samples", "must be ≥ 1"));
     }
     // The gyro is an inertial sensor: the INS stream.
     let mut rng = rng::stream(seed, Stream::Ins);
     let noise = Normal::new(0.0, NOISE_DPS).map_err(|e| SimError::param("noise", e.to_string()))?;
-    let truth: Vec<f64> = (0..samples).map(truth).collect();
+    let total = lead_in + samples;
+    let truth: Vec<f64> = (0..total)
+        .map(|k| truth_at(k as f64 - lead_in as f64))
+        .collect();
     let mut measured: Vec<f64> = truth.iter().map(|&q| q + noise.sample(&mut rng)).collect();
+    let fault_k = lead_in + FAULT_K;
     if let Some(kind) = fault {
-        let held = measured.get(FAULT_K).copied().unwrap_or(0.0);
-        for (k, v) in measured.iter_mut().enumerate().skip(FAULT_K) {
-            *v = apply_fault(kind, *v, held, (k - FAULT_K) as f64);
+        let held = measured.get(fault_k).copied().unwrap_or(0.0);
+        for (k, v) in measured.iter_mut().enumerate().skip(fault_k) {
+            *v = apply_fault(kind, *v, held, (k - fault_k) as f64);
         }
     }
     let spike_at: Vec<usize> = if spikes {
-        (20..samples).step_by(15).collect()
+        (lead_in + 20..total).step_by(15).collect()
     } else {
         Vec::new()
     };
@@ -124,6 +157,7 @@ pub fn simulate(
         truth,
         measured,
         spikes: spike_at,
+        fault_k,
     })
 }
 
@@ -160,5 +194,18 @@ mod tests {
             .fold(0.0, f64::max);
         assert!(quiet < 5.0 * NOISE_DPS, "{quiet}");
         assert!(simulate(2, 0, None, false).is_err());
+    }
+
+    #[test]
+    fn a_lead_in_prepends_healthy_samples_and_shifts_the_onset() {
+        let run = simulate_with_lead_in(3, 200, SAMPLES, Some(FaultKind::Failure), false).unwrap();
+        assert_eq!(run.measured.len(), 200 + SAMPLES);
+        assert_eq!(run.fault_k, 200 + FAULT_K);
+        assert_ne!(run.measured[run.fault_k - 1], 0.0);
+        assert_eq!(run.measured[run.fault_k], 0.0);
+        // The record's truth is the paper's, shifted; the lead-in grows into it.
+        assert!((run.truth[200 + 50] - truth(50)).abs() < 1e-12);
+        assert!((run.truth[0] - truth_at(-200.0)).abs() < 1e-12);
+        assert_eq!(simulate(3, SAMPLES, None, false).unwrap().fault_k, FAULT_K);
     }
 }

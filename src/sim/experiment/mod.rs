@@ -15,9 +15,11 @@
 //! - [`seed001`]: seed 001's online vs batch vs global LS-SVM, IMU fault modes and
 //!   outlier filter on the `imu-channel` scenario.
 //! - [`ramp`]: docs/methods.md §M19's slow GNSS drift benchmark.
+//! - [`coloured`]: T_a's false-alarm rate on coloured residuals, old and calibrated variance.
 //! - [`scorecard`]: the per-detector figures every experiment ends with.
 //! - [`plot`]: the SVG line charts.
 
+pub mod coloured;
 pub mod plot;
 pub mod ramp;
 pub mod scorecard;

@@ -21,7 +21,7 @@
 //!   over runs; the paper: its plain method stays in false alarm ≈ 20 s);
 //! - the docs/methods.md §M19 scorecard of the pooled trace (runs laid end to end).
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write as _;
 use std::sync::Arc;
 use std::time::Instant;
@@ -35,7 +35,9 @@ use crate::detect::{Health, PolicyConfig, ThresholdSpec, chi2};
 use crate::epoch::Epoch;
 use crate::learn::{AnyModel, Dataset, LearnError, ModelKind, ModelParams, NoProgress, train};
 use crate::monitor::channel::embed_series;
-use crate::monitor::channel::{ChannelConfigWire, ChannelWire, ModelIds, PredictorWire};
+use crate::monitor::channel::{
+    ChannelConfigWire, ChannelWire, ModelIds, PredictorWire, VarianceKind,
+};
 use crate::monitor::{self, MonitorKind, MonitorSpec, Outputs};
 use crate::sim::ads_gnss::{self, AdsGnssParams, FAULT_END_S, FAULT_START_S};
 use crate::sim::faults::FaultKind;
@@ -179,19 +181,42 @@ pub fn prediction(p: &Seed000Params) -> Result<PredictionResult, ExperimentError
     Ok(r)
 }
 
-/// One monitored flight: the `dh` test's samples `(t, T_a, health)` and the step time.
+/// One monitored flight: the main test's samples `(t, T_a, health)`, the channel's worst
+/// health over all its tests, and the step time.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ChannelTrace {
-    /// `(t, statistic, health)` on every epoch the test ran.
+    /// `(t, statistic, health)` of the first channel's main test on every epoch it ran.
     pub samples: Vec<(f64, f64, Health)>,
+    /// `(t, health)` of the first channel on the same epochs: the worst health over its
+    /// main, stuck and drift tests (a test that did not run keeps its last health).
+    pub channel: Vec<(f64, Health)>,
+    /// `(t, statistic, health)` per test name (every test of the monitor that ran).
+    pub tests: BTreeMap<String, Vec<(f64, f64, Health)>>,
+    /// The first channel's residual (first component) on the epochs of `samples`.
+    pub residuals: Vec<f64>,
     /// Total wall time of the monitor's steps, s.
     pub busy_s: f64,
     /// Epochs stepped.
     pub epochs: usize,
 }
 
-/// One scalar channel `name` with T_a over `n` differences, no outlier filter
-/// and the monitor's default warm-up.
+impl ChannelTrace {
+    /// `(t, health)` of the main test.
+    pub fn main_health(&self) -> Vec<(f64, Health)> {
+        self.samples.iter().map(|&(t, _, h)| (t, h)).collect()
+    }
+}
+
+fn severity(h: Health) -> u8 {
+    match h {
+        Health::Healthy => 0,
+        Health::Suspect => 1,
+        Health::Isolated => 2,
+    }
+}
+
+/// One scalar channel `name` with T_a over windows 1 and `n` (batch means), no outlier
+/// filter and every other field at its default.
 pub fn scalar_channel(
     name: &str,
     embedding: usize,
@@ -199,48 +224,93 @@ pub fn scalar_channel(
     predictor: PredictorWire,
 ) -> ChannelWire {
     ChannelWire {
-        name: name.to_owned(),
-        dim: 1,
         embedding,
-        predictor,
-        outlier_filter: None,
         n: Some(n),
-        min_differences: None,
+        ..ChannelWire::new(name, predictor)
     }
 }
 
-/// Runs `epochs` through a `channel` monitor built from `config` (models from `models`).
+/// Runs `epochs` through a `channel` monitor built from `config` (models from `models`)
+/// under the classic policy.
 pub fn run_channel(
     config: ChannelConfigWire,
     models: &HashMap<String, Arc<AnyModel>>,
     p_fa: f64,
     epochs: &[Epoch],
 ) -> Result<ChannelTrace, ExperimentError> {
+    run_channel_with(config, models, PolicyConfig::Classic, p_fa, epochs)
+}
+
+/// Runs `epochs` through a `channel` monitor built from `config` under `policy`.
+pub fn run_channel_with(
+    config: ChannelConfigWire,
+    models: &HashMap<String, Arc<AnyModel>>,
+    policy: PolicyConfig,
+    p_fa: f64,
+    epochs: &[Epoch],
+) -> Result<ChannelTrace, ExperimentError> {
+    let first = config
+        .channels
+        .first()
+        .map(|c| c.name.clone())
+        .unwrap_or_default();
     let spec = MonitorSpec {
         kind: MonitorKind::Channel,
         config: monitor::MonitorConfig::Channel(config),
-        policy: PolicyConfig::Classic,
+        policy,
         threshold: ThresholdSpec::PFa(p_fa),
     };
     let mut monitor = monitor::build(&spec, models)?;
+    // The first channel's tests: its main test and `<name>.…`.
+    let own: Vec<usize> = monitor
+        .tests()
+        .slots()
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| *s.name == *first || s.name.starts_with(&format!("{first}.")))
+        .map(|(i, _)| i)
+        .collect();
     let mut trace = ChannelTrace {
         samples: Vec::with_capacity(epochs.len()),
+        channel: Vec::with_capacity(epochs.len()),
+        tests: BTreeMap::new(),
+        residuals: Vec::with_capacity(epochs.len()),
         busy_s: 0.0,
         epochs: epochs.len(),
     };
-    let started = Instant::now();
+    let mut busy = 0.0;
     for e in epochs {
+        let started = Instant::now();
         let report = monitor
             .step(e)
             .map_err(|source| ExperimentError::Step { t: e.t, source })?;
-        if let Some(o) = report.tests.first() {
+        busy += started.elapsed().as_secs_f64();
+        for o in &report.tests {
+            trace.tests.entry(o.name.to_string()).or_default().push((
+                e.t,
+                o.statistic.value,
+                o.decision.health,
+            ));
+        }
+        // Test 0 is the first channel's main test (its stuck and drift tests follow).
+        if let Some(o) = report.tests.iter().find(|o| o.index == 0) {
             trace
                 .samples
                 .push((e.t, o.statistic.value, o.decision.health));
+            let slots = monitor.tests().slots();
+            let worst = own
+                .iter()
+                .map(|&i| slots[i].policy.health())
+                .max_by_key(|&h| severity(h))
+                .unwrap_or(Health::Healthy);
+            trace.channel.push((e.t, worst));
+            if let Outputs::Channel { residual, .. } = &report.outputs {
+                let r = residual.get(first.as_str()).and_then(|r| r.first());
+                trace.residuals.push(r.copied().unwrap_or(f64::NAN));
+            }
         }
-        debug_assert!(matches!(report.outputs, Outputs::Channel { .. }));
     }
-    trace.busy_s = started.elapsed().as_secs_f64();
+    trace.busy_s = busy;
     Ok(trace)
 }
 
@@ -249,8 +319,16 @@ fn run_seed(base: u64, r: usize) -> u64 {
     base.wrapping_mul(1_000_003).wrapping_add(r as u64)
 }
 
-/// One run: per fault case, per method, the trace.
-fn one_run(p: &Seed000Params, r: usize) -> Result<Vec<[ChannelTrace; 2]>, ExperimentError> {
+/// The variances compared, in table order: the calibrated batch means (the monitor's
+/// default) and seed 000 eq. 16's successive differences.
+pub const VARIANCES: [(&str, VarianceKind); 2] = [
+    ("BM", VarianceKind::BatchMeans),
+    ("SD", VarianceKind::SuccessiveDifference),
+];
+
+/// One run: per fault case, per method then variance ([`METHODS`] × [`VARIANCES`],
+/// method-major), the trace.
+fn one_run(p: &Seed000Params, r: usize) -> Result<Vec<Vec<ChannelTrace>>, ExperimentError> {
     let seed = run_seed(p.seed, r);
     let training = ads_gnss::simulate(&AdsGnssParams {
         seed: seed ^ 0x5EED_0000_7EA1_0000,
@@ -271,9 +349,11 @@ fn one_run(p: &Seed000Params, r: usize) -> Result<Vec<[ChannelTrace; 2]>, Experi
             ..Default::default()
         })?;
         let epochs = flight.epochs();
-        let trace = |id: &str| {
+        let trace = |id: &str, variance: VarianceKind| {
             let channel = ChannelWire {
+                // The successive-difference warm-up (ignored under batch means).
                 min_differences: Some(30),
+                variance: Some(variance),
                 ..scalar_channel(
                     ads_gnss::CHANNEL,
                     p.embedding,
@@ -286,7 +366,13 @@ fn one_run(p: &Seed000Params, r: usize) -> Result<Vec<[ChannelTrace; 2]>, Experi
             };
             run_channel(config, &models, p.p_fa, &epochs)
         };
-        out.push([trace("lw")?, trace("plain")?]);
+        let mut traces = Vec::with_capacity(4);
+        for id in ["lw", "plain"] {
+            for (_, variance) in VARIANCES {
+                traces.push(trace(id, variance)?);
+            }
+        }
+        out.push(traces);
     }
     Ok(out)
 }
@@ -298,6 +384,10 @@ pub struct CaseResult {
     pub fault: &'static str,
     /// Method label.
     pub method: &'static str,
+    /// Variance label (`BM` or `SD`, [`VARIANCES`]).
+    pub variance: &'static str,
+    /// RMS of the residual on the healthy epochs before the fault (t < 400 s), all runs, m.
+    pub residual_rms: f64,
     /// The paper's missed-detection rate for this cell.
     pub paper_mdr: f64,
     /// Pooled scorecard (runs laid end to end); its `missed_detection_rate` is the table's.
@@ -315,8 +405,8 @@ pub struct Seed000Result {
     pub prediction: PredictionResult,
     /// Part (b): per fault, improved then plain.
     pub cases: Vec<CaseResult>,
-    /// Run 0's 1 m/s-ramp traces (improved, plain), for the T_a figure.
-    pub example: Option<[ChannelTrace; 2]>,
+    /// Run 0's 1 m/s-ramp traces ([`METHODS`] × [`VARIANCES`]), for the T_a figure.
+    pub example: Option<Vec<ChannelTrace>>,
     /// The T_a threshold, dof 1.
     pub threshold: f64,
 }
@@ -324,10 +414,10 @@ pub struct Seed000Result {
 /// Runs the Monte Carlo part only.
 pub fn monte_carlo(
     p: &Seed000Params,
-) -> Result<(Vec<CaseResult>, Option<[ChannelTrace; 2]>), ExperimentError> {
+) -> Result<(Vec<CaseResult>, Option<Vec<ChannelTrace>>), ExperimentError> {
     let threads = p.threads.clamp(1, 8);
-    let mut per_run: Vec<Option<Result<Vec<[ChannelTrace; 2]>, ExperimentError>>> =
-        (0..p.runs).map(|_| None).collect();
+    type Run = Result<Vec<Vec<ChannelTrace>>, ExperimentError>;
+    let mut per_run: Vec<Option<Run>> = (0..p.runs).map(|_| None).collect();
     std::thread::scope(|s| {
         let chunks: Vec<_> = per_run
             .chunks_mut(p.runs.div_ceil(threads).max(1))
@@ -345,7 +435,7 @@ pub fn monte_carlo(
             let _ = h.join();
         }
     });
-    let runs: Vec<Vec<[ChannelTrace; 2]>> = per_run
+    let runs: Vec<Vec<Vec<ChannelTrace>>> = per_run
         .into_iter()
         .map(|r| r.unwrap_or_else(|| Err(LearnError::Numerical("worker panicked".into()).into())))
         .collect::<Result<_, _>>()?;
@@ -353,35 +443,48 @@ pub fn monte_carlo(
     let mut cases = Vec::new();
     for (f, (label, _)) in ads_gnss::table2_faults().iter().enumerate() {
         for (m, method) in METHODS.iter().enumerate() {
-            let mut trace = Vec::new();
-            let mut windows = Vec::new();
-            let (mut busy, mut epochs) = (0.0, 0usize);
-            for (r, run) in runs.iter().enumerate() {
-                let off = r as f64 * span;
-                let tr = &run[f][m];
-                trace.extend(tr.samples.iter().map(|&(t, _, h)| (t + off, h)));
-                windows.push(FaultWindow {
-                    start: FAULT_START_S + off,
-                    end: FAULT_END_S + off,
+            for (v, (variance, _)) in VARIANCES.iter().enumerate() {
+                let col = m * VARIANCES.len() + v;
+                let mut trace = Vec::new();
+                let mut windows = Vec::new();
+                let (mut busy, mut epochs) = (0.0, 0usize);
+                let (mut sq, mut count) = (0.0, 0usize);
+                for (r, run) in runs.iter().enumerate() {
+                    let off = r as f64 * span;
+                    let tr = &run[f][col];
+                    trace.extend(tr.channel.iter().map(|&(t, h)| (t + off, h)));
+                    windows.push(FaultWindow {
+                        start: FAULT_START_S + off,
+                        end: FAULT_END_S + off,
+                    });
+                    for (&(t, _, h), &res) in tr.samples.iter().zip(&tr.residuals) {
+                        if t < FAULT_START_S && h == Health::Healthy && res.is_finite() {
+                            sq += res * res;
+                            count += 1;
+                        }
+                    }
+                    busy += tr.busy_s;
+                    epochs += tr.epochs;
+                }
+                let card = scorecard::score(
+                    ads_gnss::CHANNEL,
+                    &format!("{} {variance}", if m == 0 { "LW" } else { "plain" }),
+                    &trace,
+                    &windows,
+                    Some(busy / epochs.max(1) as f64),
+                )
+                .with_p_fa(p.p_fa);
+                let paper = PAPER_TABLE2[f];
+                cases.push(CaseResult {
+                    fault: label,
+                    method,
+                    variance,
+                    residual_rms: (sq / count.max(1) as f64).sqrt(),
+                    paper_mdr: if m == 0 { paper.0 } else { paper.1 },
+                    card,
+                    runs: runs.len(),
                 });
-                busy += tr.busy_s;
-                epochs += tr.epochs;
             }
-            let card = scorecard::score(
-                ads_gnss::CHANNEL,
-                &format!("{} p_fa={}", if m == 0 { "LW" } else { "plain" }, p.p_fa),
-                &trace,
-                &windows,
-                Some(busy / epochs.max(1) as f64),
-            );
-            let paper = PAPER_TABLE2[f];
-            cases.push(CaseResult {
-                fault: label,
-                method,
-                paper_mdr: if m == 0 { paper.0 } else { paper.1 },
-                card,
-                runs: runs.len(),
-            });
         }
     }
     let example = runs
@@ -407,6 +510,98 @@ pub fn run(params: Seed000Params) -> Result<Seed000Result, ExperimentError> {
 
 fn opt(v: Option<f64>, digits: usize) -> String {
     v.map_or_else(|| "—".to_owned(), |v| format!("{v:.digits$}"))
+}
+
+/// The paper's detection threshold in §4 ("T_D = 22.3380" at p_fa = 0.002), which is not
+/// Table 1's χ²(1) value 9.5495.
+pub const PAPER_T_D: f64 = 22.338;
+
+/// Eq. 18's missed-detection probability of one epoch's χ²(1) test at `threshold` when
+/// the residual is shifted by `shift_m` on a noise of σ `sigma_m`: `F_χ²(1, λ)(T_D)`
+/// with `λ = (shift/σ)²`.
+pub fn eq18_mdr(threshold: f64, shift_m: f64, sigma_m: f64) -> f64 {
+    chi2::missed_detection(1, threshold, (shift_m / sigma_m).powi(2)).unwrap_or(f64::NAN)
+}
+
+/// Eq. 18 averaged over a fault's epochs: `shift(k)` on epoch k of `epochs`.
+pub fn eq18_mdr_mean(
+    threshold: f64,
+    sigma_m: f64,
+    epochs: usize,
+    shift: impl Fn(usize) -> f64,
+) -> f64 {
+    (0..epochs)
+        .map(|k| eq18_mdr(threshold, shift(k), sigma_m))
+        .sum::<f64>()
+        / epochs.max(1) as f64
+}
+
+/// The residual σ for which eq. 18 at `threshold` gives `p_md` for a shift `shift_m`.
+pub fn eq18_sigma(threshold: f64, shift_m: f64, p_md: f64) -> f64 {
+    chi2::noncentrality_for_missed_detection(1, threshold, p_md)
+        .map_or(f64::NAN, |lambda| shift_m / lambda.sqrt())
+}
+
+/// Eq. 18 beside Table 2: the σ each paper row implies (at the paper's T_D and at Table
+/// 1's), and the analytic MDR of a one-epoch test at our residual σ.
+fn render_analytic(s: &mut String, r: &Seed000Result) {
+    let ours = r.threshold;
+    let _ = writeln!(
+        s,
+        "\nEq. 18 (P_MD = F_χ²(1, λ)(T_D), λ = (shift/σ)²) beside Table 2: the residual σ each paper row implies \
+         at the paper's T_D = {PAPER_T_D} and at Table 1's χ²(1) T_D = {ours:.4}, and the analytic epoch-wise MDR of a \
+         one-epoch χ²(1) test at our residual σ (ramps: eq. 18 averaged over the 200 fault epochs)"
+    );
+    let _ = writeln!(
+        s,
+        "{:<12} {:<22} {:>8} {:>14} {:>14} {:>9} {:>13} {:>13}",
+        "fault",
+        "method",
+        "paper",
+        "σ at 22.338",
+        "σ at 9.5495",
+        "our σ_r",
+        "eq.18 ours",
+        "ours (MC, BM)"
+    );
+    for c in r.cases.iter().filter(|c| c.variance == VARIANCES[0].0) {
+        let (sigma_paper, sigma_t1, analytic) = match ads_gnss::table2_faults()
+            .iter()
+            .find(|(l, _)| *l == c.fault)
+            .map(|(_, k)| *k)
+        {
+            Some(FaultKind::Step { value }) => (
+                eq18_sigma(PAPER_T_D, value, c.paper_mdr),
+                eq18_sigma(ours, value, c.paper_mdr),
+                eq18_mdr(ours, value, c.residual_rms),
+            ),
+            Some(FaultKind::Ramp { rate }) => (
+                f64::NAN,
+                f64::NAN,
+                eq18_mdr_mean(ours, c.residual_rms, 200, |k| rate * k as f64),
+            ),
+            _ => (f64::NAN, f64::NAN, f64::NAN),
+        };
+        let num = |v: f64, d: usize| {
+            if v.is_finite() {
+                format!("{v:.d$}")
+            } else {
+                "—".to_owned()
+            }
+        };
+        let _ = writeln!(
+            s,
+            "{:<12} {:<22} {:>8.4} {:>14} {:>14} {:>9.2} {:>13} {:>13}",
+            c.fault,
+            c.method,
+            c.paper_mdr,
+            num(sigma_paper, 2),
+            num(sigma_t1, 2),
+            c.residual_rms,
+            num(analytic, 4),
+            opt(c.card.missed_detection_rate, 4),
+        );
+    }
 }
 
 /// The text report: part (a), Table 2 beside the paper, delays and tails, scorecard.
@@ -435,21 +630,25 @@ pub fn render(r: &Seed000Result) -> String {
     let _ = writeln!(
         s,
         "(b) Monte Carlo, {} runs per case; missed-detection rate = fault epochs (400 ≤ t < 600 s) \
-         whose test is healthy / all fault epochs, pooled over runs",
+         on which the channel (T_a and dh.stuck) is healthy / all fault epochs, pooled over runs; \
+         BM = batch-means T_a (windows 1 and n, the default), SD = seed 000 eq. 16's successive differences",
         r.cases.first().map_or(0, |c| c.runs)
     );
     let _ = writeln!(
         s,
-        "{:<12} {:<22} {:>9} {:>9} {:>9} {:>11} {:>10} {:>10} {:>9}",
+        "{:<12} {:<22} {:<3} {:>8} {:>8} {:>9} {:>9} {:>11} {:>10} {:>10} {:>9} {:>9}",
         "fault",
         "method",
+        "var",
         "MDR",
         "paper",
+        "FAR/p_fa",
         "detected",
         "delay mean",
         "delay max",
         "tail mean",
-        "tail max"
+        "tail max",
+        "σ_r m"
     );
     for c in &r.cases {
         let tails: Vec<f64> = c.card.recovery_s.iter().flatten().copied().collect();
@@ -462,25 +661,31 @@ pub fn render(r: &Seed000Result) -> String {
         };
         let _ = writeln!(
             s,
-            "{:<12} {:<22} {:>9} {:>9.4} {:>9} {:>11} {:>10} {:>10} {:>9}",
+            "{:<12} {:<22} {:<3} {:>8} {:>8.4} {:>9} {:>9} {:>11} {:>10} {:>10} {:>9} {:>9.2}",
             c.fault,
             c.method,
+            c.variance,
             opt(c.card.missed_detection_rate, 4),
             c.paper_mdr,
+            c.card
+                .far_over_p_fa()
+                .map_or_else(|| "—".to_owned(), |v| format!("{v:.2}×")),
             format!("{}/{}", c.card.detected, c.card.faults),
             opt(c.card.mean_delay_s, 1),
             opt(c.card.max_delay_s, 0),
             opt(tail_mean, 1),
             tail_max,
+            c.residual_rms,
         );
     }
+    render_analytic(&mut s, r);
     let _ = writeln!(
         s,
         "\n(delays and tails in s; tail = time in false alarm after the fault ends at 600 s; the paper: plain ≈ {PAPER_PLAIN_TAIL_S} s)\n"
     );
     let _ = writeln!(
         s,
-        "Scorecard (docs/methods.md §M19), pooled over runs (recover s: the longest run; min_differences 30):"
+        "Scorecard (docs/methods.md §M19), pooled over runs (recover s: the longest run; SD: min_differences 30):"
     );
     for (f, _) in ads_gnss::table2_faults() {
         let cards: Vec<Scorecard> = r
@@ -527,13 +732,18 @@ pub fn plots(r: &Seed000Result) -> Vec<(String, String)> {
         )
         .with_threshold(r.threshold, format!("T_D = {:.2}", r.threshold))
         .with_log_y(true);
-        for (m, tr) in ex.iter().enumerate() {
+        for (i, tr) in ex.iter().enumerate() {
             let points = tr
                 .samples
                 .iter()
                 .map(|&(t, v, _)| (t, v.max(1e-3)))
                 .collect();
-            chart = chart.with_series(Series::new(METHODS[m], points));
+            let label = format!(
+                "{} {}",
+                METHODS[i / VARIANCES.len()],
+                VARIANCES[i % VARIANCES.len()].0
+            );
+            chart = chart.with_series(Series::new(label, points));
         }
         out.push(("fig5_ta_ramp_1mps.svg".to_owned(), chart.to_svg()));
     }

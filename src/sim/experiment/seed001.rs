@@ -21,13 +21,16 @@ use serde_json::json;
 
 use super::ExperimentError;
 use super::scorecard::{self, FaultWindow, Scorecard};
-use super::seed000::{run_channel, scalar_channel};
-use crate::detect::Health;
+use super::seed000::{run_channel_with, scalar_channel};
+use crate::detect::{Health, PolicyConfig};
 use crate::learn::lssvm::LsSvmModel;
 use crate::learn::online::{OnlineLsSvm, OnlineParams};
 use crate::learn::outlier::OutlierFilter;
 use crate::learn::{Dataset, LearnError, ModelKind, ModelParams};
-use crate::monitor::channel::{ChannelConfigWire, PredictorWire};
+use crate::monitor::channel::{
+    ChannelConfigWire, DEFAULT_GUARD, DEFAULT_MAX_FREEZE, PredictorWire, Toggle, VarianceKind,
+};
+use crate::sim::faults::FaultKind;
 use crate::sim::imu_channel::{self, FAULT_K, SAMPLES};
 
 /// What to run.
@@ -55,6 +58,12 @@ pub struct Seed001Params {
     pub n: usize,
     /// Outlier filter factor c.
     pub c: f64,
+    /// Fault-free samples before the paper's record in part 2 (the calibrated tests need
+    /// a healthy history: the online window fills at sample m + N = 45, the batch-means
+    /// variance then takes 100 healthy residuals and the stuck test 50 differences).
+    pub lead_in: usize,
+    /// Noise draws in part 2 (seeds `seed`, `seed + 1`, …).
+    pub seeds: usize,
 }
 
 impl Default for Seed001Params {
@@ -70,6 +79,8 @@ impl Default for Seed001Params {
             p_fa: 0.002,
             n: 1,
             c: 3.0,
+            lead_in: 300,
+            seeds: 20,
         }
     }
 }
@@ -85,18 +96,81 @@ pub struct PredictorRow {
     pub time_s: f64,
 }
 
-/// One fault mode's figures in part 2.
+/// One configuration of the channel in part 2.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Seed001Case {
+    /// Label in the tables.
+    pub label: &'static str,
+    /// T_a's variance.
+    pub variance: VarianceKind,
+    /// T_a's (long) window.
+    pub n: usize,
+    /// Whether the `gyro.stuck` test runs.
+    pub stuck: bool,
+    /// Guard after a non-healthy epoch, epochs.
+    pub guard: usize,
+    /// Decision policy.
+    pub policy: PolicyConfig,
+    /// Longest freeze of the online predictor, epochs (0: never relearn).
+    pub max_freeze: usize,
+}
+
+/// Part 2's configurations: the paper's (each residual against a threshold, the
+/// successive-difference variance, learning whenever the test passes), then the
+/// calibrated monitor's defaults (windows 1 and 10 by batch means, the stuck test, guard
+/// 10) under the classic and the counters policy, and counters without the guard.
+pub fn cases(p: &Seed001Params) -> Vec<Seed001Case> {
+    let (classic, counters) = (PolicyConfig::Classic, PolicyConfig::counters_default());
+    let f = DEFAULT_MAX_FREEZE;
+    let calibrated = |label, guard, policy, max_freeze| Seed001Case {
+        label,
+        variance: VarianceKind::BatchMeans,
+        n: crate::detect::ta::DEFAULT_N,
+        stuck: true,
+        guard,
+        policy,
+        max_freeze,
+    };
+    vec![
+        Seed001Case {
+            label: "paper: SD n=1",
+            variance: VarianceKind::SuccessiveDifference,
+            n: p.n,
+            stuck: false,
+            guard: 0,
+            policy: PolicyConfig::Classic,
+            max_freeze: 0,
+        },
+        calibrated("BM classic", DEFAULT_GUARD, classic, f),
+        calibrated("BM counters", DEFAULT_GUARD, counters, f),
+        calibrated("BM counters g10", 10, counters, f),
+        calibrated("BM counters f∞", DEFAULT_GUARD, counters, 0),
+    ]
+}
+
+/// One fault mode's figures in part 2 under one configuration, over every noise draw.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FaultRow {
-    /// Fault mode.
+    /// Fault mode (`none` for the fault-free record).
     pub fault: &'static str,
-    /// First flagged sample at or after k = 80, minus 80.
+    /// The configuration's label.
+    pub case: &'static str,
+    /// First flagged sample at or after the onset, minus the onset, on the first draw.
     pub delay_samples: Option<usize>,
-    /// Flagged samples before the fault.
+    /// The same per draw.
+    pub delays: Vec<Option<usize>>,
+    /// First sample the `gyro.stuck` test flags at or after the onset, minus the onset,
+    /// per draw (`None`: never, or no stuck test).
+    pub stuck_delays: Vec<Option<usize>>,
+    /// Flagged samples before the onset (lead-in included), all draws.
     pub false_alarms: usize,
-    /// The scorecard (t = k).
+    /// Samples the `gyro.stuck` test flags before the onset (the whole record when
+    /// fault-free), all draws.
+    pub stuck_false_alarms: usize,
+    /// The channel's scorecard (flagged = any of its tests not healthy), draws laid end
+    /// to end; `t` = sample index.
     pub card: Scorecard,
-    /// `(k, T_a)` of the run.
+    /// `(k, T_a)` of the first draw.
     pub statistic: Vec<(f64, f64)>,
 }
 
@@ -107,7 +181,7 @@ pub struct Seed001Result {
     pub params: Seed001Params,
     /// Part 1: online, batch re-solve, global.
     pub predictors: Vec<PredictorRow>,
-    /// Part 2.
+    /// Part 2: per case (in [`cases`] order), the fault-free record then every fault.
     pub faults: Vec<FaultRow>,
     /// Part 3: RMSE with spikes, without and with the filter, °/s.
     pub outlier_rmse: (f64, f64),
@@ -211,51 +285,116 @@ pub fn predictors(p: &Seed001Params) -> Result<Vec<PredictorRow>, ExperimentErro
     ])
 }
 
-/// Part 2: every fault mode through the channel monitor with the online predictor.
-pub fn faults(p: &Seed001Params) -> Result<Vec<FaultRow>, ExperimentError> {
-    let config = ChannelConfigWire {
-        channels: vec![scalar_channel(
-            imu_channel::CHANNEL,
-            p.embedding,
-            p.n,
-            PredictorWire::Online(online_params(p)?),
-        )],
-    };
+/// The channel of part 2 under `case`.
+fn case_config(p: &Seed001Params, case: &Seed001Case) -> Result<ChannelConfigWire, LearnError> {
+    let mut channel = scalar_channel(
+        imu_channel::CHANNEL,
+        p.embedding,
+        case.n,
+        PredictorWire::Online(online_params(p)?),
+    );
+    channel.variance = Some(case.variance);
+    channel.stuck = Some(Toggle::On(case.stuck));
+    channel.guard = Some(case.guard);
+    channel.max_freeze = Some(case.max_freeze);
+    Ok(ChannelConfigWire {
+        channels: vec![channel],
+    })
+}
+
+/// First flagged sample at or after `onset`, minus `onset`.
+fn first_flag(trace: &[(f64, Health)], onset: usize) -> Option<usize> {
+    trace
+        .iter()
+        .find(|&&(t, h)| t >= onset as f64 && h != Health::Healthy)
+        .map(|&(t, _)| t as usize - onset)
+}
+
+/// Part 2 under one configuration: the fault-free record and every fault mode through
+/// the channel monitor with the online predictor, each over `p.seeds` noise draws.
+pub fn faults_case(
+    p: &Seed001Params,
+    case: &Seed001Case,
+) -> Result<Vec<FaultRow>, ExperimentError> {
+    let config = case_config(p, case)?;
+    let mut modes: Vec<(&'static str, Option<FaultKind>)> = vec![("none", None)];
+    modes.extend(imu_channel::fault_modes().map(|(n, k)| (n, Some(k))));
     let mut rows = Vec::new();
-    for (name, kind) in imu_channel::fault_modes() {
-        let run = imu_channel::simulate(p.seed, p.samples, Some(kind), false)?;
-        let trace = run_channel(config.clone(), &HashMap::new(), p.p_fa, &run.epochs())?;
-        let flagged = |&&(_, _, h): &&(f64, f64, Health)| h != Health::Healthy;
-        let delay_samples = trace
-            .samples
-            .iter()
-            .filter(|s| s.0 >= FAULT_K as f64)
-            .find(flagged)
-            .map(|s| s.0 as usize - FAULT_K);
-        let false_alarms = trace
-            .samples
-            .iter()
-            .filter(|s| s.0 < FAULT_K as f64)
-            .filter(flagged)
-            .count();
-        let health: Vec<(f64, Health)> = trace.samples.iter().map(|&(t, _, h)| (t, h)).collect();
+    for (name, kind) in modes {
+        let (mut delays, mut stuck_delays, mut false_alarms) = (Vec::new(), Vec::new(), 0);
+        let mut stuck_false_alarms = 0;
+        let (mut pooled, mut windows, mut statistic) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut busy, mut epochs) = (0.0, 0usize);
+        for draw in 0..p.seeds.max(1) {
+            let seed = p.seed + draw as u64;
+            let run = imu_channel::simulate_with_lead_in(seed, p.lead_in, p.samples, kind, false)?;
+            let trace = run_channel_with(
+                config.clone(),
+                &HashMap::new(),
+                case.policy,
+                p.p_fa,
+                &run.epochs(),
+            )?;
+            let onset = run.fault_k;
+            delays.push(first_flag(&trace.channel, onset).filter(|_| kind.is_some()));
+            let stuck: Vec<(f64, Health)> = trace
+                .tests
+                .get(&format!("{}.stuck", imu_channel::CHANNEL))
+                .map(|v| v.iter().map(|&(t, _, h)| (t, h)).collect())
+                .unwrap_or_default();
+            stuck_delays.push(first_flag(&stuck, onset).filter(|_| kind.is_some()));
+            let onset_or_end = if kind.is_some() { onset } else { usize::MAX };
+            stuck_false_alarms += stuck
+                .iter()
+                .filter(|&&(t, h)| t < onset_or_end as f64 && h != Health::Healthy)
+                .count();
+            false_alarms += trace
+                .channel
+                .iter()
+                .filter(|&&(t, h)| t < onset as f64 && h != Health::Healthy)
+                .count();
+            let off = (draw * (run.measured.len() + 100)) as f64;
+            pooled.extend(trace.channel.iter().map(|&(t, h)| (t + off, h)));
+            if kind.is_some() {
+                windows.push(FaultWindow {
+                    start: onset as f64 + off,
+                    end: run.measured.len() as f64 + off,
+                });
+            }
+            if draw == 0 {
+                statistic = trace.samples.iter().map(|&(t, v, _)| (t, v)).collect();
+            }
+            busy += trace.busy_s;
+            epochs += trace.epochs;
+        }
         let card = scorecard::score(
             imu_channel::CHANNEL,
-            name,
-            &health,
-            &[FaultWindow {
-                start: FAULT_K as f64,
-                end: f64::INFINITY,
-            }],
-            Some(trace.busy_s / trace.epochs.max(1) as f64),
-        );
+            case.label,
+            &pooled,
+            &windows,
+            Some(busy / epochs.max(1) as f64),
+        )
+        .with_p_fa(p.p_fa);
         rows.push(FaultRow {
             fault: name,
-            delay_samples,
+            case: case.label,
+            delay_samples: delays.first().copied().flatten(),
+            delays,
+            stuck_delays,
             false_alarms,
+            stuck_false_alarms,
             card,
-            statistic: trace.samples.iter().map(|&(t, v, _)| (t, v)).collect(),
+            statistic,
         });
+    }
+    Ok(rows)
+}
+
+/// Part 2: every configuration of [`cases`].
+pub fn faults(p: &Seed001Params) -> Result<Vec<FaultRow>, ExperimentError> {
+    let mut rows = Vec::new();
+    for case in cases(p) {
+        rows.extend(faults_case(p, &case)?);
     }
     Ok(rows)
 }
@@ -312,8 +451,8 @@ pub fn render(r: &Seed001Result) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "Seed 001 — imu-channel, {} samples, embedding {}, window N = {}, γ = {}, σ² = {} (raw °/s), T_a n = {}, p_fa = {}\n",
-        p.samples, p.embedding, p.window, p.gamma, p.sigma2, p.n, p.p_fa
+        "Seed 001 — imu-channel, {} samples, embedding {}, window N = {}, γ = {}, σ² = {} (raw °/s), p_fa = {}\n",
+        p.samples, p.embedding, p.window, p.gamma, p.sigma2, p.p_fa
     );
     let _ = writeln!(
         s,
@@ -334,21 +473,7 @@ pub fn render(r: &Seed001Result) -> String {
             row.time_s * 1e6
         );
     }
-    let _ = writeln!(
-        s,
-        "\n2. Faults from k = {FAULT_K} (online predictor, T_a, classic policy)"
-    );
-    let _ = writeln!(
-        s,
-        "{:<10} {:>16} {:>22}",
-        "fault", "delay, samples", "false alarms before 80"
-    );
-    for f in &r.faults {
-        let delay = f
-            .delay_samples
-            .map_or_else(|| "missed".to_owned(), |d| d.to_string());
-        let _ = writeln!(s, "{:<10} {:>16} {:>22}", f.fault, delay, f.false_alarms);
-    }
+    render_faults(&mut s, r);
     let _ = writeln!(
         s,
         "\n3. Outliers: {} spikes of ±{} °/s; online RMSE against the true rate: {:.4} without the filter, {:.4} with it ({} values replaced)\n",
@@ -358,10 +483,96 @@ pub fn render(r: &Seed001Result) -> String {
         r.outlier_rmse.1,
         r.replaced
     );
-    let _ = writeln!(s, "Scorecard (docs/methods.md §M19), t = sample index:");
-    let cards: Vec<Scorecard> = r.faults.iter().map(|f| f.card.clone()).collect();
+    let _ = writeln!(
+        s,
+        "Scorecard (docs/methods.md §M19) of the channel (any of its tests), draws pooled, t = sample index:"
+    );
+    let cards: Vec<Scorecard> = r
+        .faults
+        .iter()
+        .map(|f| {
+            let mut card = f.card.clone();
+            card.detector = f.fault.to_owned();
+            card.recovery_s.clear();
+            card
+        })
+        .collect();
     s.push_str(&scorecard::render(&cards));
     s
+}
+
+fn delays_text(delays: &[Option<usize>]) -> String {
+    let hit: Vec<usize> = delays.iter().flatten().copied().collect();
+    if hit.is_empty() {
+        return "missed".to_owned();
+    }
+    let mean = hit.iter().sum::<usize>() as f64 / hit.len() as f64;
+    let max = hit.iter().max().copied().unwrap_or(0);
+    let missed = delays.len() - hit.len();
+    if missed > 0 {
+        format!("{mean:.1}/{max} ({missed} missed)")
+    } else {
+        format!("{mean:.1}/{max}")
+    }
+}
+
+/// Part 2's table: per configuration and fault, the share of fault epochs flagged, the
+/// delays, the false alarms before the onset.
+fn render_faults(s: &mut String, r: &Seed001Result) {
+    let p = &r.params;
+    let _ = writeln!(
+        s,
+        "\n2. Faults from k = {FAULT_K} of the record, after a lead-in of {} fault-free samples (onset at sample {}), {} noise draws (seeds {}…{}); \
+         online predictor; flagged = any test of the channel (gyro, gyro.stuck) not healthy",
+        p.lead_in,
+        p.lead_in + FAULT_K,
+        p.seeds.max(1),
+        p.seed,
+        p.seed + p.seeds.max(1) as u64 - 1
+    );
+    let _ = writeln!(
+        s,
+        "{:<16} {:<8} {:>9} {:>18} {:>18} {:>12} {:>10} {:>9}",
+        "case",
+        "fault",
+        "flagged",
+        "delay mean/max",
+        "stuck mean/max",
+        "FAR/p_fa",
+        "FA before",
+        "stuck FA"
+    );
+    for f in &r.faults {
+        let stuck = if f.stuck_delays.iter().all(Option::is_none) {
+            "—".to_owned()
+        } else {
+            delays_text(&f.stuck_delays)
+        };
+        let (tpr, delay) = if f.fault == "none" {
+            ("—".to_owned(), "—".to_owned())
+        } else {
+            (
+                f.card
+                    .true_positive_rate
+                    .map_or_else(|| "—".to_owned(), |v| format!("{:.1} %", 100.0 * v)),
+                delays_text(&f.delays),
+            )
+        };
+        let _ = writeln!(
+            s,
+            "{:<16} {:<8} {:>9} {:>18} {:>18} {:>12} {:>10} {:>9}",
+            f.case,
+            f.fault,
+            tpr,
+            delay,
+            stuck,
+            f.card
+                .far_over_p_fa()
+                .map_or_else(|| "—".to_owned(), |v| format!("{v:.2}×")),
+            f.false_alarms,
+            f.stuck_false_alarms,
+        );
+    }
 }
 
 /// The figure: T_a against the sample index for each fault mode.
@@ -375,8 +586,18 @@ pub fn plots(r: &Seed001Result) -> Vec<(String, String)> {
     )
     .with_threshold(threshold, format!("T_D = {threshold:.2}"))
     .with_log_y(true);
-    for f in &r.faults {
-        let points = f.statistic.iter().map(|&(k, v)| (k, v.max(1e-3))).collect();
+    // The calibrated classic case, first draw (the chart's k is the record's sample).
+    let lead = r.params.lead_in as f64;
+    for f in r
+        .faults
+        .iter()
+        .filter(|f| f.case == "BM classic" && f.fault != "none")
+    {
+        let points = f
+            .statistic
+            .iter()
+            .map(|&(k, v)| (k - lead, v.max(1e-3)))
+            .collect();
         chart = chart.with_series(Series::new(f.fault, points));
     }
     vec![("ta_faults.svg".to_owned(), chart.to_svg())]
