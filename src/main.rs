@@ -87,7 +87,8 @@ impl ServeArgs {
         ServiceConfig {
             bind: self.bind,
             db_path: self.db,
-            token: self.token.filter(|t| !t.is_empty()),
+            // A blank token is refused at start rather than read as "no token".
+            token: self.token,
             limits: Limits {
                 max_frame_bytes: self.max_frame_bytes,
                 max_batch_epochs: self.max_batch_epochs,
