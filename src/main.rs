@@ -6,6 +6,7 @@ mod cli;
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
+use std::time::Duration;
 
 use anyhow::Context;
 use clap::{Args, Parser, Subcommand};
@@ -80,6 +81,18 @@ struct ServeArgs {
     /// Training jobs running or queued before POST /api/v1/models answers 503.
     #[arg(long, env = "NAVGUARD_MAX_QUEUED_TRAININGS", default_value_t = Limits::default().max_queued_trainings)]
     max_queued_trainings: usize,
+    /// Open connections (WebSockets included); one more gets 503 too_many_connections.
+    #[arg(long, env = "NAVGUARD_MAX_CONNECTIONS", default_value_t = Limits::default().max_connections as u64,
+          value_parser = clap::value_parser!(u64).range(1..=1 << 20))]
+    max_connections: u64,
+    /// Milliseconds a client has to send a request's line and headers (from connecting, or between requests).
+    #[arg(long, env = "NAVGUARD_HEADER_TIMEOUT_MS", default_value_t = Limits::default().header_timeout.as_millis() as u64,
+          value_parser = clap::value_parser!(u64).range(1..))]
+    header_timeout_ms: u64,
+    /// Milliseconds a request body may stall before the request fails and its connection closes.
+    #[arg(long, env = "NAVGUARD_IDLE_TIMEOUT_MS", default_value_t = Limits::default().idle_timeout.as_millis() as u64,
+          value_parser = clap::value_parser!(u64).range(1..))]
+    idle_timeout_ms: u64,
 }
 
 impl ServeArgs {
@@ -101,6 +114,9 @@ impl ServeArgs {
                 max_lssvm_samples: self.max_lssvm_samples,
                 max_concurrent_trainings: self.training_jobs,
                 max_queued_trainings: self.max_queued_trainings,
+                max_connections: self.max_connections as usize,
+                header_timeout: Duration::from_millis(self.header_timeout_ms),
+                idle_timeout: Duration::from_millis(self.idle_timeout_ms),
             },
         }
     }

@@ -2,6 +2,7 @@
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
+use std::time::Duration;
 
 /// Limits on what a client may send (docs/architecture.md §A5). Over a limit: 413 or an `error` event.
 #[derive(Debug, Clone)]
@@ -31,6 +32,19 @@ pub struct Limits {
     pub max_concurrent_trainings: usize,
     /// Training jobs running or queued at once; one more gets 503 (default 16).
     pub max_queued_trainings: usize,
+    /// Open TCP connections, WebSockets included; one more is answered 503
+    /// `too_many_connections` and closed (default 16,384: the 10,000-session
+    /// load with an ingest and an events socket each is 20,000 sockets only if
+    /// every session is observed, and a typical process may open 20,000 files;
+    /// 16,384 leaves room for the store, the listener and REST callers).
+    pub max_connections: usize,
+    /// Time a client has to send a complete request head (request line and
+    /// headers) once its first byte has arrived, and between two requests on a
+    /// kept-alive connection (default 10 s; docs/architecture.md §A12).
+    pub header_timeout: Duration,
+    /// Time a new connection may stay silent before its first request starts:
+    /// the server closes a connection that sends nothing (default 30 s).
+    pub idle_timeout: Duration,
 }
 
 impl Default for Limits {
@@ -47,6 +61,9 @@ impl Default for Limits {
             max_lssvm_samples: 5_000,
             max_concurrent_trainings: 1,
             max_queued_trainings: 16,
+            max_connections: 16_384,
+            header_timeout: Duration::from_secs(10),
+            idle_timeout: Duration::from_secs(30),
         }
     }
 }

@@ -10,6 +10,7 @@ pub mod events;
 pub mod extract;
 pub mod ingest;
 pub mod metrics;
+mod serve;
 pub mod session;
 pub mod store;
 pub mod train;
@@ -123,14 +124,13 @@ pub async fn start(config: ServiceConfig) -> Result<Server, StartError> {
         .local_addr()
         .map_err(|e| StartError::Bind(state.config.bind, e))?;
     let router = app(state.clone());
-    let mut stop = state.shutdown.clone();
-    let task = tokio::spawn(async move {
-        axum::serve(listener, router)
-            .with_graceful_shutdown(async move {
-                let _ = stop.wait_for(|s| *s).await;
-            })
-            .await
-    });
+    let edge = serve::EdgeLimits::from(&state.config.limits);
+    let task = tokio::spawn(serve::serve(
+        listener,
+        router,
+        edge,
+        state.shutdown.clone(),
+    ));
     tracing::info!(%addr, "navguard listening");
     Ok(Server {
         addr,
