@@ -33,17 +33,17 @@ pub struct Limits {
     /// Training jobs running or queued at once; one more gets 503 (default 16).
     pub max_queued_trainings: usize,
     /// Open TCP connections, WebSockets included; one more is answered 503
-    /// `too_many_connections` and closed (default 16,384: the 10,000-session
-    /// load with an ingest and an events socket each is 20,000 sockets only if
-    /// every session is observed, and a typical process may open 20,000 files;
-    /// 16,384 leaves room for the store, the listener and REST callers).
+    /// `too_many_connections` and closed (default 16,384: room for 10,000
+    /// sessions' ingest sockets plus 6,000 observers and REST callers; each
+    /// connection is a file descriptor, so `ulimit -n` must be higher, which
+    /// the server checks at start, docs/architecture.md §A12).
     pub max_connections: usize,
     /// Time a client has to send a complete request head (request line and
-    /// headers) once its first byte has arrived, and between two requests on a
-    /// kept-alive connection (default 10 s; docs/architecture.md §A12).
+    /// headers) from connecting, and between two requests on a kept-alive
+    /// connection; a silent or trickling connection is closed (default 10 s).
     pub header_timeout: Duration,
-    /// Time a new connection may stay silent before its first request starts:
-    /// the server closes a connection that sends nothing (default 30 s).
+    /// Longest pause within a request body; the request then fails (400) and
+    /// its connection closes (default 30 s).
     pub idle_timeout: Duration,
 }
 
