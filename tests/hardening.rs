@@ -118,7 +118,9 @@ async fn slow_and_silent_connections_are_closed_while_healthz_answers() {
     let (status, body) = raw_get(addr, "/healthz").await.expect("healthz answers");
     assert_eq!(status, 200, "{body}");
     for attacker in attackers {
-        attacker.await.expect("every slow connection is closed by the server");
+        attacker
+            .await
+            .expect("every slow connection is closed by the server");
     }
     assert_eq!(raw_get(addr, "/healthz").await.unwrap().0, 200);
     server.shutdown().await;
@@ -270,7 +272,13 @@ async fn the_query_token_opens_only_real_handshakes_of_the_socket_routes() {
     let resp = c
         .post(format!("{base}/api/v1/sessions"))
         .bearer_auth("s3cret")
-        .json(&cv_session("tok", &MODEL, json!({"kind": "classic"}), json!({}), false))
+        .json(&cv_session(
+            "tok",
+            &MODEL,
+            json!({"kind": "classic"}),
+            json!({}),
+            false,
+        ))
         .send()
         .await
         .unwrap();
@@ -392,12 +400,21 @@ async fn the_token_never_reaches_the_debug_log() {
     let resp = c
         .post(format!("{base}/api/v1/sessions"))
         .bearer_auth(token)
-        .json(&cv_session("log", &MODEL, json!({"kind": "classic"}), json!({}), false))
+        .json(&cv_session(
+            "log",
+            &MODEL,
+            json!({"kind": "classic"}),
+            json!({}),
+            false,
+        ))
         .send()
         .await
         .unwrap();
     assert_eq!(resp.status(), 201);
-    let url = format!("ws://{}/api/v1/sessions/log/events?token={token}", server.addr);
+    let url = format!(
+        "ws://{}/api/v1/sessions/log/events?token={token}",
+        server.addr
+    );
     let mut socket = connect(&url).await;
     assert_eq!(recv(&mut socket).await["type"], "stats");
     drop(socket);
@@ -420,8 +437,14 @@ async fn the_token_never_reaches_the_debug_log() {
         text.contains("uri=/api/v1/sessions/log/events?token=REDACTED"),
         "the request span names the socket route: {text}"
     );
-    assert!(text.contains("uri=/api/v1/alarms?limit=2&token=REDACTED"), "{text}");
-    assert!(!text.contains(token), "the token leaked into the log: {text}");
+    assert!(
+        text.contains("uri=/api/v1/alarms?limit=2&token=REDACTED"),
+        "{text}"
+    );
+    assert!(
+        !text.contains(token),
+        "the token leaked into the log: {text}"
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -478,7 +501,11 @@ async fn messages_over_the_hard_cap_get_close_1009() {
     .await;
     let mut socket = ingest(&server, "cap").await;
     // Between the limit and 16 × the limit: an error event, and the socket stays.
-    send_text(&mut socket, &format!("[{}]", vec!["{\"t\":0}"; 1000].join(","))).await;
+    send_text(
+        &mut socket,
+        &format!("[{}]", vec!["{\"t\":0}"; 1000].join(",")),
+    )
+    .await;
     let (error, _) = recv_until(&mut socket, |v| v["type"] == "error").await;
     assert_eq!(error["code"], "frame_too_large");
     // Beyond 16 × 1024 bytes: close 1009 before the connection goes.
@@ -502,4 +529,3 @@ const MODEL: CvModel = CvModel {
     sigma: 1.0,
     p0: 10.0,
 };
-

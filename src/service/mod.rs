@@ -125,12 +125,7 @@ pub async fn start(config: ServiceConfig) -> Result<Server, StartError> {
         .map_err(|e| StartError::Bind(state.config.bind, e))?;
     let router = app(state.clone());
     let edge = serve::EdgeLimits::from(&state.config.limits);
-    let task = tokio::spawn(serve::serve(
-        listener,
-        router,
-        edge,
-        state.shutdown.clone(),
-    ));
+    let task = tokio::spawn(serve::serve(listener, router, edge, state.shutdown.clone()));
     tracing::info!(%addr, "navguard listening");
     Ok(Server {
         addr,

@@ -665,7 +665,10 @@ mod batch_tests {
         assert_eq!(code(r#"[{"t":0}] x"#), FrameErrorCode::MalformedJson);
         assert_eq!(code(r#"[{"t":0,"lidar":1}]"#), FrameErrorCode::UnknownInput);
         assert_eq!(code(r#"[{"t":0,"z":[NaN]}]"#), FrameErrorCode::NonFinite);
-        assert_eq!(code(r#"[{"t":0,"dvl":{"vel_b":[1]}}]"#), FrameErrorCode::WrongLength);
+        assert_eq!(
+            code(r#"[{"t":0,"dvl":{"vel_b":[1]}}]"#),
+            FrameErrorCode::WrongLength
+        );
         assert_eq!(code(r#"[{"z":[1]}]"#), FrameErrorCode::InvalidEpoch);
         // The epoch past the limit is skipped, not checked; it must still be JSON.
         assert_eq!(
