@@ -1,6 +1,6 @@
 //! Extractors whose rejections are `ApiError`s, so a bad body or query string
 //! gets the same JSON error shape as everything else (never axum's plain text),
-//! and the edge's reading of JSON numbers and `null` (docs/architecture.md §A6).
+//! and the edge's reading of JSON numbers and `null` (docs/architecture.md §A5).
 
 use axum::extract::rejection::{JsonRejection, QueryRejection};
 use axum::extract::{FromRequest, FromRequestParts, Request};
