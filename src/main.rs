@@ -6,6 +6,7 @@ mod cli;
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
+use std::time::Duration;
 
 use anyhow::Context;
 use clap::{Args, Parser, Subcommand};
@@ -103,6 +104,18 @@ struct ServeArgs {
     /// Seconds of 1 Hz statistics history kept per session for the dashboard.
     #[arg(long, env = "NAVGUARD_HISTORY_S", default_value_t = 900)]
     history_s: u32,
+    /// Open connections (WebSockets included); one more gets 503 too_many_connections.
+    #[arg(long, env = "NAVGUARD_MAX_CONNECTIONS", default_value_t = Limits::default().max_connections as u64,
+          value_parser = clap::value_parser!(u64).range(1..=1 << 20))]
+    max_connections: u64,
+    /// Milliseconds a client has to send a request's line and headers (from connecting, or between requests).
+    #[arg(long, env = "NAVGUARD_HEADER_TIMEOUT_MS", default_value_t = Limits::default().header_timeout.as_millis() as u64,
+          value_parser = clap::value_parser!(u64).range(1..))]
+    header_timeout_ms: u64,
+    /// Milliseconds a request body may stall before the request fails and its connection closes.
+    #[arg(long, env = "NAVGUARD_IDLE_TIMEOUT_MS", default_value_t = Limits::default().idle_timeout.as_millis() as u64,
+          value_parser = clap::value_parser!(u64).range(1..))]
+    idle_timeout_ms: u64,
 }
 
 impl ServeArgs {
@@ -110,7 +123,8 @@ impl ServeArgs {
         ServiceConfig {
             bind: self.bind,
             db_path: self.db,
-            token: self.token.filter(|t| !t.is_empty()),
+            // A blank token is refused at start rather than read as "no token".
+            token: self.token,
             limits: Limits {
                 max_frame_bytes: self.max_frame_bytes,
                 max_batch_epochs: self.max_batch_epochs,
@@ -125,6 +139,9 @@ impl ServeArgs {
                 max_queued_trainings: self.max_queued_trainings,
                 max_state_dim: self.max_state_dim,
                 max_measurement_dim: self.max_measurement_dim,
+                max_connections: self.max_connections as usize,
+                header_timeout: Duration::from_millis(self.header_timeout_ms),
+                idle_timeout: Duration::from_millis(self.idle_timeout_ms),
             },
             record_default: self.record,
             retention: navguard::service::store::Retention {

@@ -1189,3 +1189,186 @@ async fn federated_stats_with_a_track_match_their_schemas() {
     let _ = events.close(None).await;
     server.shutdown().await;
 }
+
+/// The spec and the server agree where they used to differ (issue 13 item 7):
+/// integral floats are integers, `null` is refused where the spec has no
+/// null, `.` and `..` are not names, the `tacan-window` window minimum, the
+/// "exactly one of" rules of the missed-detection query, and a params schema
+/// chosen by the model `kind`. Each case is checked against the spec's schema
+/// and then against the server.
+#[tokio::test]
+async fn spec_and_server_agree_on_integers_nulls_names_and_exclusive_parameters() {
+    let doc = spec();
+    let checker = Checker::new(&doc);
+    let dir = tempfile::tempdir().unwrap();
+    let c = Contract {
+        router: app(state(dir.path(), None).await),
+        doc: doc.clone(),
+    };
+    let sessions = "/api/v1/sessions";
+    let create = checker.schema("CreateSession");
+
+    // Integral floats: integers for the spec (JSON Schema) and the server.
+    let mut body = session_body("ints", false);
+    body["monitors"][0]["policy"] = json!({"kind": "counters", "n1": 10.0, "n2": 5e0});
+    checker.assert_valid(create, &body, "integral floats");
+    let created = c.call("POST", sessions, sessions, Some(&body)).await;
+    assert_eq!(created["monitors"][0]["policy"]["n1"], 10, "{created}");
+    assert_eq!(
+        created["monitors"][0]["config"],
+        linear_config(),
+        "the config is stored as sent"
+    );
+    let template = "/api/v1/sessions/{id}/monitors/{name}/threshold";
+    let uri = "/api/v1/sessions/ints/monitors/cv/threshold";
+    let update = json!({"policy": {"kind": "counters", "n1": 3.0, "n2": 97619.0}});
+    checker.assert_valid(checker.schema("ThresholdUpdate"), &update, "PUT");
+    let view = c.call("PUT", template, uri, Some(&update)).await;
+    assert_eq!(view["policy"]["n2"], 97619, "{view}");
+    let chi2 = "/api/v1/chi2/threshold";
+    let answer = c
+        .call("GET", chi2, &format!("{chi2}?dof=2.0&p_fa=0.01"), None)
+        .await;
+    assert_eq!(answer["dof"], 2, "{answer}");
+    let alarms = "/api/v1/alarms";
+    let page = c
+        .call(
+            "GET",
+            alarms,
+            &format!("{alarms}?limit=10.0&after=0.0"),
+            None,
+        )
+        .await;
+    assert!(page["alarms"].is_array(), "{page}");
+    let page = c
+        .call("GET", alarms, &format!("{alarms}?limit=1.5"), None)
+        .await;
+    assert_eq!(page["error"]["code"], "bad_request", "{page}");
+
+    // `null` where the spec has none: refused by both, naming the field.
+    for (key, value) in [("threshold", json!(null)), ("p_fa", json!(null))] {
+        let mut body = session_body("nulls", false);
+        body["monitors"][0][key] = value;
+        assert!(
+            !checker.matches(create, &body),
+            "the spec refuses {key}: null"
+        );
+        let refused = c.call("POST", sessions, sessions, Some(&body)).await;
+        assert_eq!(refused["error"]["field"], format!("monitors[0].{key}"));
+    }
+    let mut body = session_body("nulls", false);
+    body["id"] = json!(null);
+    let refused = c.call("POST", sessions, sessions, Some(&body)).await;
+    assert_eq!(refused["error"]["field"], "id", "{refused}");
+    let refused = c
+        .call("PUT", template, uri, Some(&json!({"p_fa": null})))
+        .await;
+    assert_eq!(refused["error"]["field"], "p_fa", "{refused}");
+    // Policy keys the spec forbids (`additionalProperties: false`).
+    let update = json!({"threshold": 20.0, "policy": {"kind": "classic", "n1": 4}});
+    assert!(!checker.matches(checker.schema("ThresholdUpdate"), &update));
+    let refused = c.call("PUT", template, uri, Some(&update)).await;
+    assert_eq!(refused["error"]["field"], "policy", "{refused}");
+
+    // `.` and `..`: not names for either.
+    for id in [".", ".."] {
+        assert!(!checker.matches(checker.schema("Name"), &json!(id)));
+        let refused = c
+            .call("POST", sessions, sessions, Some(&session_body(id, false)))
+            .await;
+        assert_eq!(refused["error"]["field"], "id", "{id}: {refused}");
+    }
+
+    // The tacan-window minimum is the same: 2.
+    let features = checker.schema("FeaturesRequest");
+    let ranges = json!([1000.0, 1001.0, 1002.5, 1003.0]);
+    for (window, ok) in [(json!(1), false), (json!(2), true), (json!(2.0), true)] {
+        let body = json!({"kind": "tacan-window", "ins_range_m": ranges,
+                          "tacan_range_m": ranges, "window": window});
+        assert_eq!(
+            checker.matches(features, &body),
+            ok,
+            "spec, window {window}"
+        );
+        let answer = c
+            .call("POST", "/api/v1/features", "/api/v1/features", Some(&body))
+            .await;
+        assert_eq!(
+            answer["features"].is_array(),
+            ok,
+            "server, window {window}: {answer}"
+        );
+    }
+
+    // Values whose features overflow: a 422, not `null` features (which the
+    // response schema forbids).
+    let huge = json!([1e200, -1e200, 1e200, -1e200]);
+    let body =
+        json!({"kind": "tacan-window", "ins_range_m": huge, "tacan_range_m": ranges, "window": 2});
+    let refused = c
+        .call("POST", "/api/v1/features", "/api/v1/features", Some(&body))
+        .await;
+    assert_eq!(refused["error"]["code"], "invalid", "{refused}");
+    let body = json!({"kind": "wavelet-packet", "signal": [1e200, 1e200, -1e200, 1e200], "level": 1, "wavelet": "db1"});
+    let refused = c
+        .call("POST", "/api/v1/features", "/api/v1/features", Some(&body))
+        .await;
+    assert_eq!(refused["error"]["field"], "signal", "{refused}");
+
+    // Exactly one of threshold | p_fa and of noncentrality | p_md: the spec's
+    // query object and the server agree on every combination.
+    let md = "/api/v1/chi2/missed-detection";
+    let op = operation(&doc, md, "GET");
+    let query_schema = &op["parameters"][0]["schema"];
+    for threshold in [None, Some(("threshold", 9.0)), Some(("p_fa", 0.01))] {
+        for fault in [None, Some(("noncentrality", 4.0)), Some(("p_md", 0.1))] {
+            for both in [false, true] {
+                let mut query = json!({"dof": 1});
+                let mut pairs = vec!["dof=1".to_owned()];
+                for (k, v) in threshold.into_iter().chain(fault) {
+                    query[k] = json!(v);
+                    pairs.push(format!("{k}={v}"));
+                }
+                // Both of the threshold pair (the one missing is added).
+                if both {
+                    for (k, v) in [("threshold", 9.0), ("p_fa", 0.02)] {
+                        if query.get(k).is_none() {
+                            query[k] = json!(v);
+                            pairs.push(format!("{k}={v}"));
+                        }
+                    }
+                }
+                let spec_ok = checker.matches(query_schema, &query);
+                let answer = c
+                    .call("GET", md, &format!("{md}?{}", pairs.join("&")), None)
+                    .await;
+                let server_ok = answer["p_md"].is_number();
+                assert_eq!(spec_ok, server_ok, "{query}: {answer}");
+            }
+        }
+    }
+
+    // The params schema follows `kind`: `nu` is an ocsvm parameter, not lssvm's.
+    let train = checker.schema("TrainRequest");
+    let data = json!({"x": [[0.0], [1.0], [2.0]], "y": [0.0, 1.0, 2.0]});
+    let lssvm_nu = json!({"kind": "lssvm", "params": {"nu": 0.1}, "data": data});
+    assert!(!checker.matches(train, &lssvm_nu));
+    let models = "/api/v1/models";
+    let refused = c.call("POST", models, models, Some(&lssvm_nu)).await;
+    assert_eq!(refused["error"]["field"], "params.nu", "{refused}");
+    let aliases =
+        json!({"kind": "lssvm", "params": {"reg": 1.0, "gamma": 1.0, "sigma2": 1.0}, "data": data});
+    assert!(!checker.matches(train, &aliases), "reg and its alias gamma");
+    let refused = c.call("POST", models, models, Some(&aliases)).await;
+    assert_eq!(refused["error"]["field"], "params.gamma", "{refused}");
+    let widths = json!({"kind": "svm", "params": {"sigma2": 1.0, "kernel_gamma": 1.0},
+                        "data": {"x": [[0.0], [1.0]], "y": [-1, 1]}});
+    assert!(!checker.matches(train, &widths), "sigma2 and kernel_gamma");
+    let refused = c.call("POST", models, models, Some(&widths)).await;
+    assert_eq!(refused["error"]["code"], "invalid", "{refused}");
+    let folds = json!({"kind": "lssvm", "params": {"reg": 1.0, "sigma2": 1.0},
+                       "cv": {"folds": 2.0, "seed": 1.0}, "data": data});
+    assert!(checker.matches(train, &folds));
+    let record = c.call("POST", models, models, Some(&folds)).await;
+    assert_eq!(record["status"], "training", "{record}");
+}

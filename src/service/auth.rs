@@ -1,10 +1,12 @@
 //! Bearer-token authentication for `/api` (docs/architecture.md §A5). REST takes
-//! `Authorization: Bearer TOKEN`; sockets may instead offer the subprotocol
-//! `bearer.TOKEN` (beside `navguard`) or a `token` query parameter, since
-//! browsers cannot set headers on a WebSocket.
+//! `Authorization: Bearer TOKEN`; a WebSocket handshake on the two socket routes
+//! may instead offer the subprotocol `bearer.TOKEN` (beside `navguard`) or a
+//! `token` query parameter, since browsers cannot set headers on a WebSocket.
+//! The query token is redacted wherever a request target is logged.
 
-use axum::extract::{Request, State};
-use axum::http::header::{AUTHORIZATION, SEC_WEBSOCKET_PROTOCOL, UPGRADE};
+use axum::extract::{MatchedPath, Request, State};
+use axum::http::header::{AUTHORIZATION, CONNECTION, SEC_WEBSOCKET_PROTOCOL, UPGRADE};
+use axum::http::{Method, Uri};
 use axum::middleware::Next;
 use axum::response::Response;
 
@@ -14,6 +16,36 @@ use super::error::ApiError;
 /// Compares in time independent of where the strings differ.
 fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
     a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+}
+
+/// The two socket routes, as the router matches them.
+pub const SOCKET_ROUTES: [&str; 2] = [
+    "/api/v1/sessions/{id}/ingest",
+    "/api/v1/sessions/{id}/events",
+];
+
+/// True for a real WebSocket handshake on a socket route: `GET`, `Upgrade:
+/// websocket` and `Connection: upgrade` (RFC 6455 §4.1), routed to ingest or
+/// events. Only these may carry the socket-only credentials (the `token` query
+/// parameter and the `bearer.TOKEN` subprotocol), so a query token is never a
+/// way into a REST route.
+fn is_socket_handshake(req: &Request) -> bool {
+    let headers = req.headers();
+    let upgrade = headers
+        .get(UPGRADE)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| v.trim().eq_ignore_ascii_case("websocket"));
+    let connection = headers
+        .get_all(CONNECTION)
+        .iter()
+        .filter_map(|v| v.to_str().ok())
+        .flat_map(|v| v.split(','))
+        .any(|option| option.trim().eq_ignore_ascii_case("upgrade"));
+    let route = req
+        .extensions()
+        .get::<MatchedPath>()
+        .is_some_and(|p| SOCKET_ROUTES.contains(&p.as_str()));
+    req.method() == Method::GET && upgrade && connection && route
 }
 
 fn presented_tokens(req: &Request) -> Vec<String> {
@@ -26,11 +58,7 @@ fn presented_tokens(req: &Request) -> Vec<String> {
     {
         tokens.push(token.trim().to_owned());
     }
-    let is_upgrade = headers
-        .get(UPGRADE)
-        .and_then(|v| v.to_str().ok())
-        .is_some_and(|v| v.eq_ignore_ascii_case("websocket"));
-    if is_upgrade {
+    if is_socket_handshake(req) {
         if let Some(protocols) = headers
             .get(SEC_WEBSOCKET_PROTOCOL)
             .and_then(|v| v.to_str().ok())
@@ -52,6 +80,34 @@ fn presented_tokens(req: &Request) -> Vec<String> {
         }
     }
     tokens
+}
+
+/// The request target with the value of every `token` query parameter replaced
+/// by `REDACTED`, for logs and spans (the token must never reach a log line).
+pub fn redacted_uri(uri: &Uri) -> String {
+    let Some(query) = uri.query() else {
+        return uri.to_string();
+    };
+    let query: Vec<String> = query
+        .split('&')
+        .map(|pair| {
+            let key = pair.split_once('=').map_or(pair, |(k, _)| k);
+            // Any spelling the decoder would read as `token` (`%74oken`, `Token`).
+            if percent_decode(key).eq_ignore_ascii_case("token") {
+                format!("{key}=REDACTED")
+            } else {
+                pair.to_owned()
+            }
+        })
+        .collect();
+    let mut out = String::new();
+    if let (Some(scheme), Some(authority)) = (uri.scheme_str(), uri.authority()) {
+        out.push_str(&format!("{scheme}://{authority}"));
+    }
+    out.push_str(uri.path());
+    out.push('?');
+    out.push_str(&query.join("&"));
+    out
 }
 
 /// Minimal percent-decoding for a token in a query string.
@@ -109,6 +165,21 @@ mod tests {
         assert_eq!(percent_decode("bad%zz"), "bad%zz");
         assert_eq!(percent_decode("end%4"), "end%4");
         assert_eq!(percent_decode("é%é"), "é%é");
+    }
+
+    #[test]
+    fn token_query_values_are_redacted_and_the_rest_kept() {
+        let uri: Uri = "/api/v1/sessions/a/events?x=1&token=s3cret&%74oken=two&Token=3&tokens=ok"
+            .parse()
+            .unwrap();
+        assert_eq!(
+            redacted_uri(&uri),
+            "/api/v1/sessions/a/events?x=1&token=REDACTED&%74oken=REDACTED&Token=REDACTED&tokens=ok"
+        );
+        let bare: Uri = "/healthz".parse().unwrap();
+        assert_eq!(redacted_uri(&bare), "/healthz");
+        let full: Uri = "http://h:1/p?token".parse().unwrap();
+        assert_eq!(redacted_uri(&full), "http://h:1/p?token=REDACTED");
     }
 
     #[test]

@@ -2,6 +2,7 @@
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
+use std::time::Duration;
 
 use super::store::Retention;
 
@@ -40,6 +41,19 @@ pub struct Limits {
     /// Largest measurement vector of a user-defined model (`linear`'s m, a `channel`'s
     /// `dim`; default 128).
     pub max_measurement_dim: usize,
+    /// Open TCP connections, WebSockets included; one more is answered 503
+    /// `too_many_connections` and closed (default 16,384: room for 10,000
+    /// sessions' ingest sockets plus 6,000 observers and REST callers; each
+    /// connection is a file descriptor, so `ulimit -n` must be higher, which
+    /// the server checks at start, docs/architecture.md §A13).
+    pub max_connections: usize,
+    /// Time a client has to send a complete request head (request line and
+    /// headers) from connecting, and between two requests on a kept-alive
+    /// connection; a silent or trickling connection is closed (default 10 s).
+    pub header_timeout: Duration,
+    /// Longest pause within a request body; the request then fails (400) and
+    /// its connection closes (default 30 s).
+    pub idle_timeout: Duration,
 }
 
 impl Default for Limits {
@@ -58,6 +72,9 @@ impl Default for Limits {
             max_queued_trainings: 16,
             max_state_dim: 128,
             max_measurement_dim: 128,
+            max_connections: 16_384,
+            header_timeout: Duration::from_secs(10),
+            idle_timeout: Duration::from_secs(30),
         }
     }
 }

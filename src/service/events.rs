@@ -12,12 +12,16 @@ use axum::response::Response;
 
 use super::app::AppState;
 use super::error::ApiError;
-use super::ingest::{SUBPROTOCOL, upgrade_rejection};
+use super::ingest::{SUBPROTOCOL, close_if_too_big, upgrade_rejection};
 use super::session::SessionHandle;
 use super::wire;
 
 /// Minimum interval between two `stats` messages on one socket (≤ 20/s).
 const STATS_INTERVAL: Duration = Duration::from_millis(50);
+
+/// Largest message an observer may send (it is ignored anyway); a larger one
+/// gets close 1009 instead of costing the protocol's 64 MiB default in memory.
+const MAX_OBSERVER_MESSAGE_BYTES: usize = 64 << 10;
 
 /// `GET /api/v1/sessions/{id}/events`
 pub async fn events(
@@ -35,6 +39,8 @@ pub async fn events(
         // Observers send almost nothing; the protocol layer zero-fills its read
         // buffer before each read, so the 128 KiB default only costs (see ingest.rs).
         .read_buffer_size(8 << 10)
+        .max_message_size(MAX_OBSERVER_MESSAGE_BYTES)
+        .max_frame_size(MAX_OBSERVER_MESSAGE_BYTES)
         .on_upgrade(move |socket| async move {
             state.metrics.event_sockets.fetch_add(1, Ordering::Relaxed);
             run(socket, state.clone(), handle).await;
@@ -79,7 +85,11 @@ async fn run(mut socket: WebSocket, state: AppState, handle: SessionHandle) {
                 }
             }
             incoming = socket.recv() => match incoming {
-                Some(Ok(Message::Close(_))) | None | Some(Err(_)) => break,
+                Some(Ok(Message::Close(_))) | None => break,
+                Some(Err(e)) => {
+                    close_if_too_big(&mut socket, e).await;
+                    break;
+                }
                 Some(Ok(_)) => {} // observers have nothing to say; ignore
             },
         }

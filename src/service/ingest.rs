@@ -24,7 +24,8 @@ pub const SUBPROTOCOL: &str = "navguard";
 
 /// Hard cap on a WebSocket message, as a multiple of the frame limit. Frames
 /// between the limit and the cap get an `error` event and the socket stays
-/// open; beyond the cap the connection is closed (1009) by the protocol layer.
+/// open; beyond the cap the protocol layer stops reading and the server sends
+/// close 1009 (message too big) before closing.
 const HARD_CAP_FACTOR: usize = 16;
 
 /// The socket's read buffer. The protocol layer zero-fills the whole buffer
@@ -161,7 +162,9 @@ async fn run(mut socket: WebSocket, state: AppState, handle: SessionHandle, link
                     Some(Ok(Message::Close(_))) | None => break,
                     Some(Ok(_)) => continue, // ping/pong are answered by the protocol layer
                     Some(Err(e)) => {
-                        tracing::debug!(session = %handle.id(), error = %e, "ingest socket error");
+                        if !close_if_too_big(&mut socket, e).await {
+                            tracing::debug!(session = %handle.id(), "ingest socket error");
+                        }
                         break;
                     }
                 };
@@ -175,6 +178,29 @@ async fn run(mut socket: WebSocket, state: AppState, handle: SessionHandle, link
         }
     }
     handle.detach(stream).await;
+}
+
+/// On a socket error: when it is a message over the size cap, sends close 1009
+/// (RFC 6455 §7.4.1, "message too big") so the client learns why, and says
+/// true. Any other error (a reset, a protocol violation) is logged and false.
+/// The protocol layer reads nothing more of an oversize message (its header
+/// stays pending), so the socket can only be closed after this.
+pub(crate) async fn close_if_too_big(socket: &mut WebSocket, e: axum::Error) -> bool {
+    let e = e.into_inner();
+    let too_big = matches!(
+        e.downcast_ref::<tungstenite::Error>(),
+        Some(tungstenite::Error::Capacity(_))
+    );
+    if too_big {
+        let close = CloseFrame {
+            code: 1009,
+            reason: Utf8Bytes::from_static("message too big for this socket"),
+        };
+        let _ = socket.send(Message::Close(Some(close))).await;
+    } else {
+        tracing::debug!(error = %e, "socket error");
+    }
+    too_big
 }
 
 async fn write_queued(

@@ -11,6 +11,7 @@ pub mod events;
 pub mod extract;
 pub mod ingest;
 pub mod metrics;
+mod serve;
 pub mod session;
 pub mod store;
 pub mod train;
@@ -47,6 +48,12 @@ pub enum StartError {
         "refusing to bind {0} without a token: set --token or NAVGUARD_TOKEN, or bind a loopback address"
     )]
     OpenWithoutToken(SocketAddr),
+    /// docs/architecture.md §A5: a token that is empty, only whitespace, or
+    /// padded with whitespace (which a header could never carry) protects nothing.
+    #[error(
+        "the token (--token or NAVGUARD_TOKEN) is {0}: give a non-blank token without surrounding whitespace, or none"
+    )]
+    BadToken(&'static str),
     /// The store could not be opened.
     #[error("store: {0}")]
     Store(#[from] StoreError),
@@ -70,6 +77,14 @@ pub struct Server {
 
 /// Opens the store, restarts the stored sessions, binds and serves.
 pub async fn start(config: ServiceConfig) -> Result<Server, StartError> {
+    if let Some(token) = &config.token {
+        if token.trim().is_empty() {
+            return Err(StartError::BadToken("blank"));
+        }
+        if token.trim() != token {
+            return Err(StartError::BadToken("padded with whitespace"));
+        }
+    }
     if !config.bind.ip().is_loopback() && config.token.is_none() {
         return Err(StartError::OpenWithoutToken(config.bind));
     }
@@ -111,14 +126,8 @@ pub async fn start(config: ServiceConfig) -> Result<Server, StartError> {
         .local_addr()
         .map_err(|e| StartError::Bind(state.config.bind, e))?;
     let router = app(state.clone());
-    let mut stop = state.shutdown.clone();
-    let task = tokio::spawn(async move {
-        axum::serve(listener, router)
-            .with_graceful_shutdown(async move {
-                let _ = stop.wait_for(|s| *s).await;
-            })
-            .await
-    });
+    let edge = serve::EdgeLimits::from(&state.config.limits);
+    let task = tokio::spawn(serve::serve(listener, router, edge, state.shutdown.clone()));
     tracing::info!(%addr, "navguard listening");
     Ok(Server {
         addr,

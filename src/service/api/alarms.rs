@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::service::app::AppState;
 use crate::service::error::ApiError;
-use crate::service::extract::ApiQuery;
+use crate::service::extract::{ApiQuery, query_integer_opt};
 use crate::service::store::AlarmQuery;
 use crate::service::wire::{AlarmRecord, Severity};
 
@@ -20,15 +20,20 @@ pub struct AlarmsQuery {
     session: Option<String>,
     monitor: Option<String>,
     /// Raised at or after, Unix ms.
+    #[serde(default, deserialize_with = "query_integer_opt")]
     since: Option<i64>,
     /// Raised before, Unix ms.
+    #[serde(default, deserialize_with = "query_integer_opt")]
     until: Option<i64>,
     /// Only ids below this (the `next_before` of the previous page).
+    #[serde(default, deserialize_with = "query_integer_opt")]
     before: Option<i64>,
     /// Only ids above this (catch up after a reconnect: the newest id seen).
+    #[serde(default, deserialize_with = "query_integer_opt")]
     after: Option<i64>,
     /// Only `alarm` or only `warning` entries (default both).
     severity: Option<Severity>,
+    #[serde(default, deserialize_with = "query_integer_opt")]
     limit: Option<i64>,
 }
 

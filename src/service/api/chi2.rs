@@ -5,11 +5,12 @@ use serde::{Deserialize, Serialize};
 
 use crate::detect::chi2;
 use crate::service::error::ApiError;
-use crate::service::extract::ApiQuery;
+use crate::service::extract::{ApiQuery, query_integer};
 
 /// Query of `GET /api/v1/chi2/threshold`.
 #[derive(Debug, Deserialize)]
 pub struct ThresholdQuery {
+    #[serde(deserialize_with = "query_integer")]
     dof: u32,
     p_fa: f64,
 }
@@ -46,6 +47,7 @@ pub async fn threshold(
 /// non-centrality that reaches it).
 #[derive(Debug, Deserialize)]
 pub struct MissedDetectionQuery {
+    #[serde(deserialize_with = "query_integer")]
     dof: u32,
     threshold: Option<f64>,
     p_fa: Option<f64>,

@@ -74,7 +74,33 @@ pub async fn compute(
             ));
         }
     };
+    finite_features(&features, kind.as_deref())?;
     Ok(Json(FeaturesResponse { features }))
+}
+
+/// Refuses input so large that a feature overflows (squares of 1e200 are
+/// infinite): a 422 rather than a `null` in the answer, which JSON would carry
+/// for a non-finite number.
+fn finite_features(features: &[Vec<f64>], kind: Option<&str>) -> Result<(), ApiError> {
+    let Some(window) = features
+        .iter()
+        .position(|f| f.iter().any(|v| !v.is_finite()))
+    else {
+        return Ok(());
+    };
+    Err(match kind {
+        Some("wavelet-packet") => ApiError::invalid(
+            "signal",
+            "its energies overflow: the values are too large for finite energies",
+        ),
+        _ => ApiError::Invalid {
+            field: None,
+            message: format!(
+                "the features of window {window} (samples {window}.. of ins_range_m and \
+                 tacan_range_m) overflow: the ranges are too large for finite features"
+            ),
+        },
+    })
 }
 
 fn required(body: &mut Map<String, Value>, key: &str) -> Result<Value, ApiError> {

@@ -17,6 +17,7 @@ use crate::learn::{self, Dataset, LearnError, ModelKind, ModelParams, Prediction
 use crate::service::app::AppState;
 use crate::service::config::Limits;
 use crate::service::error::ApiError;
+use crate::service::extract::{integral_numbers, refuse_nulls_at};
 use crate::service::train::{ModelRecord, TrainJob, error_field};
 
 /// Longest model `name`, characters.
@@ -118,7 +119,7 @@ pub(crate) fn json_body(
         }
         _ => ApiError::BadRequest(rejection.body_text()),
     })?;
-    serde_json::from_slice(&bytes).map_err(|e| {
+    let mut value: Value = serde_json::from_slice(&bytes).map_err(|e| {
         let message = e.to_string();
         if message.contains("number out of range") || (e.is_syntax() && has_non_finite(&bytes)) {
             ApiError::Invalid {
@@ -130,7 +131,10 @@ pub(crate) fn json_body(
         } else {
             ApiError::BadRequest(format!("invalid JSON: {message}"))
         }
-    })
+    })?;
+    // `folds: 5.0` and `level: 2.0` are integers as the contract counts them.
+    integral_numbers(&mut value);
+    Ok(value)
 }
 
 /// True if `text` holds a `NaN` or `Infinity` token outside strings (what
@@ -257,6 +261,12 @@ fn parse_train(body: Value, limits: &Limits) -> Result<TrainJob, ApiError> {
     let mut body = object(body, "", &["kind", "params", "data", "cv", "name"])?;
     let kind = parse_kind(body.remove("kind"))?;
     let name = parse_name(body.remove("name"))?;
+    // `params` and `cv` may be null (the contract says so), their fields not.
+    for key in ["params", "cv"] {
+        if let Some(part) = body.get(key).filter(|v| v.is_object()) {
+            refuse_nulls_at(part, key)?;
+        }
+    }
     let params = ModelParams::from_json(kind, &body.remove("params").unwrap_or(Value::Null))
         .map_err(|e| learn_error(e, true))?;
     let cv = parse_cv(kind, body.remove("cv"))?;

@@ -4,11 +4,13 @@ use axum::Json;
 use axum::extract::{Path, State};
 use axum::http::StatusCode;
 use serde::Serialize;
+use serde_json::Value;
 
 use crate::detect::{Health, ThresholdSpec};
+use crate::service::api::thresholds::check_policy_keys;
 use crate::service::app::AppState;
 use crate::service::error::ApiError;
-use crate::service::extract::ApiJson;
+use crate::service::extract::{JsonBody, from_value, integral_numbers, refuse_nulls};
 use crate::service::now_ms;
 use crate::service::session::actor;
 use crate::service::session::{SessionHandle, SessionStats, validate_session};
@@ -99,11 +101,41 @@ fn new_id() -> String {
     format!("s-{}", String::from_utf8_lossy(&s))
 }
 
+/// The create body: `null` refused and integral floats read as integers
+/// (`n1: 10.0`) as for every session body, except inside each monitor's
+/// `config`, which is stored exactly as sent (docs/architecture.md §A4) and
+/// read the same way when the monitor is built (`session::spec`).
+fn parse_create(mut body: Value) -> Result<CreateSession, ApiError> {
+    refuse_nulls(&body)?;
+    if let Some(monitors) = body.get("monitors").and_then(Value::as_array) {
+        for (i, monitor) in monitors.iter().enumerate() {
+            check_policy_keys(monitor.get("policy"), &format!("monitors[{i}].policy"))?;
+        }
+    }
+    let mut configs = Vec::new();
+    if let Some(monitors) = body.get_mut("monitors").and_then(Value::as_array_mut) {
+        for monitor in monitors.iter_mut().filter_map(Value::as_object_mut) {
+            configs.push(monitor.remove("config"));
+        }
+    }
+    integral_numbers(&mut body);
+    if let Some(monitors) = body.get_mut("monitors").and_then(Value::as_array_mut) {
+        let objects = monitors.iter_mut().filter_map(Value::as_object_mut);
+        for (monitor, config) in objects.zip(configs) {
+            if let Some(config) = config {
+                monitor.insert("config".into(), config);
+            }
+        }
+    }
+    from_value(body)
+}
+
 /// `POST /api/v1/sessions` → 201 with the session view.
 pub async fn create(
     State(state): State<AppState>,
-    ApiJson(req): ApiJson<CreateSession>,
+    JsonBody(body): JsonBody,
 ) -> Result<(StatusCode, Json<SessionView>), ApiError> {
+    let req = parse_create(body)?;
     validate_session(&req, &state.config.limits)?;
     let mut monitors = req.monitors;
     // State the default threshold explicitly so every view shows what is in force.

@@ -3,10 +3,11 @@
 
 use axum::Json;
 use axum::extract::{Path, State};
+use serde_json::Value;
 
 use crate::service::app::AppState;
 use crate::service::error::ApiError;
-use crate::service::extract::ApiJson;
+use crate::service::extract::{JsonBody, from_value, integral_numbers, refuse_nulls};
 use crate::service::wire::{ThresholdUpdate, ThresholdView};
 
 /// `GET …/threshold`
@@ -21,12 +22,45 @@ pub async fn get(
     Ok(Json(handle.threshold(&name).await?))
 }
 
+/// Refuses keys a policy of its `kind` does not have (422 naming `field`):
+/// serde lets an internally tagged unit variant (`{"kind": "classic"}`)
+/// ignore extra keys, which the contract forbids (`additionalProperties`).
+pub(crate) fn check_policy_keys(policy: Option<&Value>, field: &str) -> Result<(), ApiError> {
+    let Some(Value::Object(policy)) = policy else {
+        return Ok(()); // absent, or not an object: the typed parse says so
+    };
+    let allowed: &[&str] = match policy.get("kind").and_then(Value::as_str) {
+        Some("classic") => &["kind"],
+        Some("counters") => &["kind", "n1", "n2"],
+        _ => return Ok(()),
+    };
+    match policy.keys().find(|k| !allowed.contains(&k.as_str())) {
+        Some(key) => Err(ApiError::invalid(
+            field,
+            format!(
+                "unknown field `{key}`: the {} policy has {}",
+                policy["kind"].as_str().unwrap_or_default(),
+                allowed
+                    .iter()
+                    .map(|k| format!("`{k}`"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        )),
+        None => Ok(()),
+    }
+}
+
 /// `PUT …/threshold` with `p_fa` or `threshold`, and/or `policy`.
 pub async fn put(
     State(state): State<AppState>,
     Path((id, name)): Path<(String, String)>,
-    ApiJson(update): ApiJson<ThresholdUpdate>,
+    JsonBody(mut body): JsonBody,
 ) -> Result<Json<ThresholdView>, ApiError> {
+    refuse_nulls(&body)?;
+    check_policy_keys(body.get("policy"), "policy")?;
+    integral_numbers(&mut body);
+    let update: ThresholdUpdate = from_value(body)?;
     let handle = state
         .registry
         .get(&id)

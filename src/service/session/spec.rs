@@ -5,13 +5,18 @@ use super::SessionError;
 use crate::detect::ThresholdSpec;
 use crate::monitor::{self, BuildError, ModelSource, Monitor, MonitorConfig, MonitorSpec};
 use crate::service::config::Limits;
+use crate::service::extract::integral_numbers;
 use crate::service::store::StoredSession;
 use crate::service::wire::{CreateSession, MonitorSpecWire, TestThresholdSpec};
 
-/// Ids and names: 1–64 characters of `A–Z a–z 0–9 _ - .`, so they are safe in URLs and logs.
+/// Ids and names: 1–64 characters of `A–Z a–z 0–9 _ - .`, so they are safe in
+/// URLs and logs; `.` and `..` are refused, as no client can address them (a
+/// URL path resolves them away, RFC 3986 §5.2.4).
 pub fn valid_name(s: &str) -> bool {
     !s.is_empty()
         && s.len() <= 64
+        && s != "."
+        && s != ".."
         && s.bytes()
             .all(|c| c.is_ascii_alphanumeric() || matches!(c, b'_' | b'-' | b'.'))
 }
@@ -20,7 +25,13 @@ pub fn valid_name(s: &str) -> bool {
 pub fn monitor_spec(wire: &MonitorSpecWire) -> Result<MonitorSpec, BuildError> {
     Ok(MonitorSpec {
         kind: wire.kind,
-        config: MonitorConfig::parse(wire.kind, &wire.config)?,
+        // The stored config is the client's JSON; its integral floats
+        // (`embedding: 4.0`) are integers as the contract counts them.
+        config: MonitorConfig::parse(wire.kind, &{
+            let mut config = wire.config.clone();
+            integral_numbers(&mut config);
+            config
+        })?,
         policy: wire.policy,
         threshold: ThresholdSpec::from_parts(wire.p_fa, wire.threshold)?,
     })
@@ -154,7 +165,7 @@ pub fn validate_session(req: &CreateSession, limits: &Limits) -> Result<(), Sess
     {
         return Err(SessionError::invalid(
             "id",
-            "must be 1-64 characters of A-Z a-z 0-9 _ - .",
+            "must be 1-64 characters of A-Z a-z 0-9 _ - ., and not . or ..",
         ));
     }
     if req.monitors.is_empty() {
@@ -175,7 +186,7 @@ pub fn validate_session(req: &CreateSession, limits: &Limits) -> Result<(), Sess
         if !valid_name(&m.name) {
             return Err(SessionError::invalid(
                 format!("monitors[{i}].name"),
-                "must be 1-64 characters of A-Z a-z 0-9 _ - .",
+                "must be 1-64 characters of A-Z a-z 0-9 _ - ., and not . or ..",
             ));
         }
         if req.monitors[..i].iter().any(|other| other.name == m.name) {
@@ -186,4 +197,19 @@ pub fn validate_session(req: &CreateSession, limits: &Limits) -> Result<(), Sess
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dot_and_dot_dot_are_not_names() {
+        for name in ["a", "a.b", "..a", "...", "A_-.9"] {
+            assert!(valid_name(name), "{name}");
+        }
+        for name in [".", "..", "", "a/b", "é", &"x".repeat(65)] {
+            assert!(!valid_name(name), "{name}");
+        }
+    }
 }

@@ -2,8 +2,11 @@
 //! [`Epoch`]s (degrees on the wire, radians inside), their error codes, and epochs
 //! written back as frames.
 
+use std::cell::Cell;
 use std::collections::BTreeMap;
+use std::fmt;
 
+use serde::de::{self, DeserializeSeed, Deserializer, IgnoredAny, SeqAccess, Visitor};
 use serde::{Deserialize, Serialize};
 
 use crate::epoch::Epoch;
@@ -370,12 +373,84 @@ impl TryFrom<WireEpoch> for Epoch {
     }
 }
 
+/// The epochs of a batch frame, parsed one by one so that the count limit
+/// stops the parse at the first epoch past it: memory stays proportional to the
+/// limit, not to however many tiny epochs fit in a frame (a 1 MiB frame holds
+/// 131,072 `{"t":0}`, about 48 MB once parsed).
+struct Batch<'a> {
+    max: usize,
+    /// Elements the parser has read, the one past the limit included.
+    visited: &'a Cell<usize>,
+    /// Set when the array holds more than `max` elements.
+    over: &'a Cell<bool>,
+}
+
+impl<'de> DeserializeSeed<'de> for Batch<'_> {
+    type Value = Vec<WireEpoch>;
+
+    fn deserialize<D: Deserializer<'de>>(self, deserializer: D) -> Result<Self::Value, D::Error> {
+        deserializer.deserialize_seq(self)
+    }
+}
+
+impl<'de> Visitor<'de> for Batch<'_> {
+    type Value = Vec<WireEpoch>;
+
+    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("an array of epochs")
+    }
+
+    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Self::Value, A::Error> {
+        let mut epochs = Vec::new();
+        while epochs.len() < self.max {
+            match seq.next_element::<WireEpoch>()? {
+                Some(epoch) => {
+                    self.visited.set(self.visited.get() + 1);
+                    epochs.push(epoch);
+                }
+                None => return Ok(epochs),
+            }
+        }
+        // One element more is enough to refuse: skip it without keeping it and stop.
+        if seq.next_element::<IgnoredAny>()?.is_some() {
+            self.visited.set(self.visited.get() + 1);
+            self.over.set(true);
+            return Err(de::Error::custom("batch over the epoch limit"));
+        }
+        Ok(epochs)
+    }
+}
+
+/// Parses a batch frame's array; also says how many elements were read.
+fn parse_batch(text: &str, max_batch: usize) -> (Result<Vec<WireEpoch>, FrameError>, usize) {
+    let (visited, over) = (Cell::new(0), Cell::new(false));
+    let mut deserializer = serde_json::Deserializer::from_str(text);
+    let parsed = Batch {
+        max: max_batch,
+        visited: &visited,
+        over: &over,
+    }
+    .deserialize(&mut deserializer)
+    .and_then(|epochs| deserializer.end().map(|()| epochs));
+    let result = parsed.map_err(|e| {
+        if over.get() {
+            FrameError::new(
+                FrameErrorCode::BatchTooLarge,
+                format!("batch holds more than {max_batch} epochs, the limit"),
+            )
+        } else {
+            classify(e, text)
+        }
+    });
+    (result, visited.get())
+}
+
 /// Parses an ingest frame: one epoch object or an array of them, at most
 /// `max_batch` epochs. Times must not decrease within the frame.
 pub fn parse_frame(text: &str, max_batch: usize) -> Result<Vec<Epoch>, FrameError> {
     let trimmed = text.trim_start();
     let wire: Vec<WireEpoch> = if trimmed.starts_with('[') {
-        serde_json::from_str(text).map_err(|e| classify(e, text))?
+        parse_batch(text, max_batch).0?
     } else {
         vec![serde_json::from_str(text).map_err(|e| classify(e, text))?]
     };
@@ -383,15 +458,6 @@ pub fn parse_frame(text: &str, max_batch: usize) -> Result<Vec<Epoch>, FrameErro
         return Err(FrameError::new(
             FrameErrorCode::EmptyBatch,
             "a batch must hold at least one epoch",
-        ));
-    }
-    if wire.len() > max_batch {
-        return Err(FrameError::new(
-            FrameErrorCode::BatchTooLarge,
-            format!(
-                "batch holds {} epochs, the limit is {max_batch}",
-                wire.len()
-            ),
         ));
     }
     let mut epochs = Vec::with_capacity(wire.len());
@@ -564,6 +630,59 @@ pub fn epoch_to_wire(epoch: &Epoch) -> Result<String, FrameError> {
     };
     serde_json::to_string(&out)
         .map_err(|e| FrameError::new(FrameErrorCode::InvalidEpoch, e.to_string()))
+}
+
+#[cfg(test)]
+mod batch_tests {
+    use super::*;
+
+    fn tiny_epochs(n: usize) -> String {
+        format!("[{}]", vec![r#"{"t":0}"#; n].join(","))
+    }
+
+    #[test]
+    fn a_batch_over_the_limit_stops_parsing_one_epoch_past_it() {
+        // 131,072 tiny epochs: a 1 MiB frame. The parser reads 11 and stops.
+        let text = tiny_epochs(131_072);
+        let (result, visited) = parse_batch(&text, 10);
+        assert_eq!(result.unwrap_err().code, FrameErrorCode::BatchTooLarge);
+        assert_eq!(visited, 11);
+        let e = parse_frame(&text, 10).unwrap_err();
+        assert_eq!(e.code, FrameErrorCode::BatchTooLarge);
+        assert!(e.message.contains("10"), "{}", e.message);
+    }
+
+    #[test]
+    fn a_batch_at_the_limit_parses_whole() {
+        let (result, visited) = parse_batch(&tiny_epochs(10), 10);
+        assert_eq!(result.unwrap().len(), 10);
+        assert_eq!(visited, 10);
+        assert_eq!(parse_frame(&tiny_epochs(10), 10).unwrap().len(), 10);
+    }
+
+    #[test]
+    fn batch_errors_keep_their_codes() {
+        let code = |text: &str| parse_frame(text, 3).unwrap_err().code;
+        assert_eq!(code("[]"), FrameErrorCode::EmptyBatch);
+        assert_eq!(code(r#"[{"t":0},"#), FrameErrorCode::MalformedJson);
+        assert_eq!(code(r#"[{"t":0}] x"#), FrameErrorCode::MalformedJson);
+        assert_eq!(code(r#"[{"t":0,"lidar":1}]"#), FrameErrorCode::UnknownInput);
+        assert_eq!(code(r#"[{"t":0,"z":[NaN]}]"#), FrameErrorCode::NonFinite);
+        assert_eq!(
+            code(r#"[{"t":0,"dvl":{"vel_b":[1]}}]"#),
+            FrameErrorCode::WrongLength
+        );
+        assert_eq!(code(r#"[{"z":[1]}]"#), FrameErrorCode::InvalidEpoch);
+        // The epoch past the limit is skipped, not checked; it must still be JSON.
+        assert_eq!(
+            code(r#"[{"t":0},{"t":0},{"t":0},{"lidar":1}]"#),
+            FrameErrorCode::BatchTooLarge
+        );
+        assert_eq!(
+            code(r#"[{"t":0},{"t":0},{"t":0},{"t":"#),
+            FrameErrorCode::MalformedJson
+        );
+    }
 }
 
 #[cfg(test)]
