@@ -327,3 +327,78 @@ async fn the_history_serves_one_sample_per_second_of_the_current_stream() {
     assert_eq!(r.status(), 400);
     server.shutdown().await;
 }
+
+/// `navguard calibrate` over REST, on the session's own recording: a random walk
+/// measured with noise √2 × what the model states gets ≈ 2 × χ²₁ at the rate asked.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn calibration_over_rest_uses_the_sessions_recording() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = start(&dir.path().join("c.db"), None, Limits::default()).await;
+    let base = http(&server);
+    let body = json!({"id": "cal", "record": true, "monitors": [{
+        "name": "w", "type": "linear", "policy": {"kind": "counters"},
+        "config": {"f": [[1.0]], "h": [[1.0]], "q": [[1e-8]], "r": [[1.0]], "x0": [0.0], "p0": [[1e-8]]}
+    }]});
+    create_session(&client(), &server, &body).await;
+    let resp = reqwest::get(format!("{base}/api/v1/sessions/cal/calibration?far=1e-3"))
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), 404, "no recording yet");
+    let mut socket = ingest(&server, "cal").await;
+    let mut g = Gauss::new(3);
+    let frames: Vec<Value> = (0..20_000)
+        .map(|k| json!({"t": k as f64, "z": [2f64.sqrt() * g.normal()]}))
+        .collect();
+    for chunk in frames.chunks(500) {
+        send(&mut socket, &Value::Array(chunk.to_vec())).await;
+    }
+    // The last epoch is in once the stats count it.
+    for _ in 0..500 {
+        let s: Value = reqwest::get(format!("{base}/api/v1/sessions/cal/stats"))
+            .await
+            .unwrap()
+            .json()
+            .await
+            .unwrap();
+        if s["epochs"] == 20_000 {
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    }
+    let v: Value = reqwest::get(format!("{base}/api/v1/sessions/cal/calibration?far=1e-3"))
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(v["epochs"], 20_000, "{v}");
+    let test = &v["monitors"]["w"]["tests"][0];
+    let threshold = test["threshold"].as_f64().unwrap();
+    assert!(
+        (20.0..26.0).contains(&threshold),
+        "{threshold} vs 2 × 10.83: {v}"
+    );
+    // Its PUT body applies as it is.
+    let resp = client()
+        .put(format!("{base}/api/v1/sessions/cal/monitors/w/threshold"))
+        .json(&v["monitors"]["w"]["put"])
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), 200);
+    let resp = reqwest::get(format!("{base}/api/v1/sessions/cal/calibration?far=2"))
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), 422);
+    let resp = reqwest::get(format!("{base}/api/v1/sessions/cal/calibration?far=1e-6"))
+        .await
+        .unwrap();
+    let v: Value = resp.json().await.unwrap();
+    assert!(
+        v["monitors"]["w"]["tests"][0]["refused"]
+            .as_str()
+            .unwrap()
+            .contains("needs at least")
+    );
+    server.shutdown().await;
+}

@@ -66,6 +66,7 @@ pub const ROUTES: &[(&str, &[&str])] = &[
     ("/api/v1/sessions/{id}/stats", &["GET"]),
     ("/api/v1/sessions/{id}/history", &["GET"]),
     ("/api/v1/sessions/{id}/recording", &["GET"]),
+    ("/api/v1/sessions/{id}/calibration", &["GET"]),
     (
         "/api/v1/sessions/{id}/monitors/{name}/threshold",
         &["GET", "PUT"],
@@ -92,6 +93,7 @@ fn handlers(path: &str) -> MethodRouter<AppState> {
         "/api/v1/sessions/{id}/stats" => get(sessions::stats),
         "/api/v1/sessions/{id}/history" => get(recording::history),
         "/api/v1/sessions/{id}/recording" => get(recording::recording),
+        "/api/v1/sessions/{id}/calibration" => get(recording::calibration),
         "/api/v1/sessions/{id}/monitors/{name}/threshold" => {
             get(thresholds::get).put(thresholds::put)
         }

@@ -17,11 +17,17 @@ use axum::response::{IntoResponse, Response};
 use serde::Deserialize;
 use serde_json::value::RawValue;
 
+use std::collections::BTreeMap;
+
+use crate::epoch::Epoch;
+use crate::monitor::calibrate::{self, Proposal};
 use crate::service::app::AppState;
 use crate::service::error::ApiError;
 use crate::service::extract::ApiQuery;
 use crate::service::session::history::HistoryView;
+use crate::service::session::spec::build_monitors;
 use crate::service::store::{RecordedFrame, Store};
+use crate::service::wire::{TestThresholdSpec, parse_frame};
 
 /// Frames read from the store per chunk of the response.
 const PAGE: i64 = 500;
@@ -150,6 +156,174 @@ async fn chunk(
         lines(frame, format, &mut out);
     }
     Some((Ok(Bytes::from(out)), next))
+}
+
+/// Query of the calibration route.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CalibrationQuery {
+    /// False-alarm rate per epoch and test to calibrate for.
+    far: f64,
+    /// Confidence that the true rate at the proposal is at most `far` (default 0.95).
+    confidence: Option<f64>,
+    /// The recorded stream to replay (default the latest).
+    stream: Option<u64>,
+}
+
+/// One test's calibration in the answer.
+#[derive(Debug, serde::Serialize)]
+pub struct TestCalibrationView {
+    test: String,
+    dof: u32,
+    epochs: usize,
+    chi2_threshold: f64,
+    chi2_rate: f64,
+    p_fa: Option<f64>,
+    threshold: Option<f64>,
+    /// Why not calibrated, when refused.
+    refused: Option<String>,
+}
+
+/// One monitor's calibration and the `PUT …/threshold` body that applies it.
+#[derive(Debug, serde::Serialize)]
+pub struct MonitorCalibrationView {
+    tests: Vec<TestCalibrationView>,
+    put: BTreeMap<&'static str, BTreeMap<String, TestThresholdSpec>>,
+}
+
+/// What `GET …/calibration` answers.
+#[derive(Debug, serde::Serialize)]
+pub struct CalibrationView {
+    session: String,
+    stream: u64,
+    far: f64,
+    confidence: f64,
+    epochs: usize,
+    monitors: BTreeMap<String, MonitorCalibrationView>,
+}
+
+/// Every epoch of a recorded stream, as the monitors saw them.
+async fn recorded_epochs(store: &Store, id: &str, stream: u64) -> Result<Vec<Epoch>, ApiError> {
+    let mut epochs = Vec::new();
+    let mut after = 0;
+    loop {
+        let page = store.recording_page(id, stream, after, PAGE).await?;
+        let Some((last, _)) = page.last() else { break };
+        after = *last;
+        for (_, frame) in &page {
+            let parsed = parse_frame(&frame.frame, usize::MAX).map_err(|e| {
+                ApiError::Internal(format!("recorded frame unreadable: {}", e.message))
+            })?;
+            epochs.extend(parsed.into_iter().take(frame.epochs as usize));
+        }
+        if (page.len() as i64) < PAGE {
+            break;
+        }
+    }
+    Ok(epochs)
+}
+
+/// `GET /api/v1/sessions/{id}/calibration?far=&confidence=&stream=`: `navguard calibrate`
+/// over the session's own recording (docs/methods.md §M25): its recorded stream replayed
+/// through its monitors as they are configured now, with every threshold out of reach,
+/// and per test the threshold that gives `far` on that data (with the `PUT` body). The
+/// recording should be fault-free; the replay runs on the blocking pool.
+pub async fn calibration(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+    ApiQuery(q): ApiQuery<CalibrationQuery>,
+) -> Result<Json<CalibrationView>, ApiError> {
+    let confidence = q.confidence.unwrap_or(0.95);
+    if !(q.far > 0.0 && q.far < 1.0) {
+        return Err(ApiError::invalid("far", "must lie in (0, 1)"));
+    }
+    if !(confidence > 0.0 && confidence < 1.0) {
+        return Err(ApiError::invalid("confidence", "must lie in (0, 1)"));
+    }
+    let handle = state
+        .registry
+        .get(&id)
+        .ok_or_else(|| ApiError::NotFound(format!("no session '{id}'")))?;
+    let stored = handle.stored();
+    state.store.flush_recordings().await;
+    let streams = state.store.recording_streams(&id).await?;
+    let stream = match q.stream {
+        Some(s) if streams.iter().any(|x| x.stream == s) => s,
+        Some(s) => {
+            return Err(ApiError::NotFound(format!(
+                "session '{id}' has no recorded stream {s}"
+            )));
+        }
+        None => streams
+            .last()
+            .map(|s| s.stream)
+            .ok_or_else(|| ApiError::NotFound(format!("no recording for session '{id}'")))?,
+    };
+    let epochs = recorded_epochs(&state.store, &id, stream).await?;
+    let models = state.models.clone();
+    let far = q.far;
+    let answer = tokio::task::spawn_blocking(move || {
+        let monitors = build_monitors(&stored, &*models)?;
+        let mut out = BTreeMap::new();
+        for (name, mut m) in monitors {
+            let samples = calibrate::sample(&mut *m, &epochs).map_err(|e| {
+                crate::service::session::SessionError::invalid(name.clone(), e.to_string())
+            })?;
+            let mut view = MonitorCalibrationView {
+                tests: Vec::new(),
+                put: BTreeMap::from([("tests", BTreeMap::new())]),
+            };
+            for s in &samples {
+                let c = calibrate::calibrate(s, far, confidence).map_err(|e| {
+                    crate::service::session::SessionError::invalid("far", e.to_string())
+                })?;
+                let (p_fa, threshold, refused) = match c.proposal {
+                    Proposal::Calibrated {
+                        p_fa, threshold, ..
+                    } => {
+                        view.put.entry("tests").or_default().insert(
+                            c.test.clone(),
+                            TestThresholdSpec {
+                                p_fa: Some(p_fa),
+                                threshold: None,
+                            },
+                        );
+                        (Some(p_fa), Some(threshold), None)
+                    }
+                    Proposal::TooShort { needed } => (
+                        None,
+                        None,
+                        Some(format!(
+                            "too short: {} epochs, the rate asked needs at least {needed}",
+                            c.epochs
+                        )),
+                    ),
+                };
+                view.tests.push(TestCalibrationView {
+                    test: c.test,
+                    dof: c.dof,
+                    epochs: c.epochs,
+                    chi2_threshold: c.chi2_threshold,
+                    chi2_rate: c.chi2_rate,
+                    p_fa,
+                    threshold,
+                    refused,
+                });
+            }
+            out.insert(name, view);
+        }
+        Ok::<_, crate::service::session::SessionError>((out, epochs.len()))
+    })
+    .await
+    .map_err(|e| ApiError::Internal(e.to_string()))??;
+    Ok(Json(CalibrationView {
+        session: id,
+        stream,
+        far,
+        confidence,
+        epochs: answer.1,
+        monitors: answer.0,
+    }))
 }
 
 /// Query of the history route.

@@ -7,7 +7,9 @@ use serde_json::Value;
 
 use crate::service::app::AppState;
 use crate::service::error::ApiError;
-use crate::service::extract::{JsonBody, from_value, integral_numbers, refuse_nulls};
+use crate::service::extract::{
+    JsonBody, from_value, integral_numbers, refuse_nulls, refuse_nulls_at,
+};
 use crate::service::wire::{ThresholdUpdate, ThresholdView};
 
 /// `GET …/threshold`
@@ -57,7 +59,23 @@ pub async fn put(
     Path((id, name)): Path<(String, String)>,
     JsonBody(mut body): JsonBody,
 ) -> Result<Json<ThresholdView>, ApiError> {
-    refuse_nulls(&body)?;
+    // One `null` has a meaning here: `tests: {NAME: null}` returns a test to the
+    // monitor's threshold. Anywhere else it is refused.
+    match body.get("tests") {
+        Some(serde_json::Value::Object(tests)) => {
+            for (test, spec) in tests {
+                if !spec.is_null() {
+                    refuse_nulls_at(spec, &format!("tests.{test}"))?;
+                }
+            }
+            let mut rest = body.clone();
+            if let Some(o) = rest.as_object_mut() {
+                o.remove("tests");
+            }
+            refuse_nulls(&rest)?;
+        }
+        _ => refuse_nulls(&body)?,
+    }
     check_policy_keys(body.get("policy"), "policy")?;
     integral_numbers(&mut body);
     let update: ThresholdUpdate = from_value(body)?;

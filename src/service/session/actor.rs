@@ -705,7 +705,10 @@ impl Actor {
             self.monitors = slice.monitors;
             epochs = slice.epochs;
             for (k, reports) in slice.stepped.iter().enumerate() {
-                changed |= self.commit_epoch(&epochs[from + k], reports).await;
+                // An epoch no monitor could take changes nothing: it is not committed.
+                if reports.iter().any(Option::is_some) {
+                    changed |= self.commit_epoch(&epochs[from + k], reports).await;
+                }
             }
             from += slice.stepped.len();
             if slice.failure.is_none() && from < total {

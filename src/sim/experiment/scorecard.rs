@@ -17,8 +17,12 @@
 //! - A fault's detection delay is the time from its onset to the first alarming
 //!   epoch inside its window; a fault with no alarming epoch is missed.
 //! - A fault's recovery time is the time from its end to the first healthy epoch
-//!   at or after the end (before the next fault starts); `None` when the test
-//!   never recovers in the run (or the fault lasts past the run's end).
+//!   at or after the end. When the next fault starts before that, the recovery is
+//!   *censored* (merged into the next fault: counted in `recoveries_censored`, not in
+//!   `recovery_s`); `None` means the test never returned to healthy before the run
+//!   ended. A fault lasting past the run's end has no recovery at all. (Before this
+//!   distinction, seed 003's dense jumps made every card read "never" although the
+//!   test always recovered: the next jump came first.)
 //! - *Alarms* and *warnings per fault-free hour*: entries into `isolated` (the alarm
 //!   under the default alarm level, docs/architecture.md §A2) and into `suspect` (a
 //!   warning under counters) from a clear epoch, over the clear time (the sum of the
@@ -72,8 +76,11 @@ pub struct Scorecard {
     pub mean_delay_s: Option<f64>,
     /// Largest detection delay over detected faults, s.
     pub max_delay_s: Option<f64>,
-    /// Recovery time of each fault that ended inside the run (`None`: never recovered).
+    /// Recovery time of each fault that ended inside the run and was not followed by
+    /// another before it recovered (`None`: never recovered before the run ended).
     pub recovery_s: Vec<Option<f64>>,
+    /// Faults whose recovery the next fault cut short.
+    pub recoveries_censored: usize,
     /// Wall-clock time per epoch of the monitor that produced the trace, s.
     pub time_per_epoch_s: Option<f64>,
     /// Clear (fault-free, outside recovery tails) time, h.
@@ -138,6 +145,7 @@ pub fn score(
     // Recovery tails: from each fault's end to the first healthy epoch after it.
     let mut tails: Vec<FaultWindow> = Vec::new();
     let mut recovery_s = Vec::new();
+    let mut recoveries_censored = 0;
     let mut delays = Vec::new();
     for (i, f) in faults.iter().enumerate() {
         if let Some(&(t, _)) = trace.iter().find(|(t, h)| f.contains(*t) && alarms(*h)) {
@@ -159,7 +167,11 @@ pub fn score(
                 });
             }
             None => {
-                recovery_s.push(None);
+                if next_start <= t_last {
+                    recoveries_censored += 1;
+                } else {
+                    recovery_s.push(None);
+                }
                 tails.push(FaultWindow {
                     start: f.end,
                     end: next_start,
@@ -205,6 +217,7 @@ pub fn score(
             .then(|| delays.iter().sum::<f64>() / delays.len() as f64),
         max_delay_s: delays.iter().copied().reduce(f64::max),
         recovery_s,
+        recoveries_censored,
         time_per_epoch_s,
         clear_hours: clear_s / 3600.0,
         clear_alarms: entries_isolated,
@@ -246,7 +259,7 @@ pub fn render(cards: &[Scorecard]) -> String {
         "µs/epoch"
     );
     for c in cards {
-        let recover = if c.recovery_s.is_empty() {
+        let mut recover = if c.recovery_s.is_empty() {
             "—".to_owned()
         } else {
             c.recovery_s
@@ -255,6 +268,9 @@ pub fn render(cards: &[Scorecard]) -> String {
                 .collect::<Vec<_>>()
                 .join("/")
         };
+        if c.recoveries_censored > 0 {
+            recover.push_str(&format!(" (+{} cut)", c.recoveries_censored));
+        }
         let _ = writeln!(
             s,
             "{:<8} {:<16} {:>9} {:>9} {:>8} {:>8} {:>7} {:>9} {:>8} {:>10} {:>9} {:>12} {:>9}",
@@ -377,6 +393,38 @@ mod tests {
         assert_eq!(c.recovery_s, vec![Some(0.0)]);
         assert_eq!(c.fault_epochs, 3 + 7);
         assert!((c.true_positive_rate.unwrap() - 6.0 / 10.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_recovery_cut_short_by_the_next_fault_is_not_never() {
+        //          0123456789012345678
+        let tr = trace("..iiiiiiii....iii..");
+        let faults = [
+            FaultWindow {
+                start: 2.0,
+                end: 4.0,
+            },
+            FaultWindow {
+                start: 6.0,
+                end: 8.0,
+            },
+            FaultWindow {
+                start: 14.0,
+                end: f64::INFINITY,
+            },
+        ];
+        let c = score("range", "counters", &tr, &faults, None);
+        // Fault 1's recovery is cut by fault 2, which recovers at 10 (2 s); fault 3 lasts.
+        assert_eq!(c.recoveries_censored, 1);
+        assert_eq!(c.recovery_s, vec![Some(2.0)]);
+        // A test that never comes back before the run ends still reads `None`.
+        let tr = trace("..iiiiiiiiiiii");
+        let c = score("range", "c", &tr, &faults[..1], None);
+        assert_eq!(
+            (c.recovery_s.clone(), c.recoveries_censored),
+            (vec![None], 0)
+        );
+        assert!(render(&[c]).contains("never"));
     }
 
     #[test]
