@@ -28,8 +28,10 @@ use super::{Monitor, StepError};
 use crate::detect::{ThresholdSpec, chi2};
 use crate::epoch::Epoch;
 
-/// A threshold out of reach of any statistic, so calibration runs see only healthy epochs.
-const OUT_OF_REACH: f64 = 1e300;
+/// A threshold out of reach of any fault-free statistic, so calibration runs see only
+/// healthy epochs. Not larger: the federated HPL needs the non-centrality that gives its
+/// P_MD at the threshold, which is searched up to 1e8 (docs/methods.md §M1, §M7).
+const OUT_OF_REACH: f64 = 1e7;
 
 /// Why a test could not be calibrated.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -108,7 +110,7 @@ pub fn sample(
     for i in 0..bank.slots().len() {
         let _ = bank.set_test_spec(i, Some(out_of_reach));
     }
-    let mut samples: Vec<TestSample> = bank
+    let samples: Vec<TestSample> = bank
         .slots()
         .iter()
         .map(|s| TestSample {
@@ -117,6 +119,10 @@ pub fn sample(
             tails: Vec::new(),
         })
         .collect();
+    // A test with its own policy and threshold (a protection level against its alert
+    // limit) is not a χ² test: nothing to calibrate.
+    let calibrated: Vec<bool> = bank.slots().iter().map(|s| !s.own_policy).collect();
+    let mut samples = samples;
     for (index, epoch) in epochs.iter().enumerate() {
         let report = monitor
             .step(epoch)
@@ -131,7 +137,11 @@ pub fn sample(
             samples[o.index].tails.push(tail);
         }
     }
-    Ok(samples)
+    Ok(samples
+        .into_iter()
+        .zip(calibrated)
+        .filter_map(|(s, keep)| keep.then_some(s))
+        .collect())
 }
 
 /// The smallest number of epochs that can support a rate of `far` at `confidence`.

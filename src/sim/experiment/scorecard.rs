@@ -133,6 +133,21 @@ pub fn score(
     faults: &[FaultWindow],
     time_per_epoch_s: Option<f64>,
 ) -> Scorecard {
+    score_runs(detector, policy, trace, faults, time_per_epoch_s, &[])
+}
+
+/// [`score`] for a trace made of several runs laid end to end, starting at
+/// `run_starts`: a fault's recovery is looked for in its own run only (the monitor
+/// starts afresh with the next), and one not seen by the run's end is censored, not
+/// "never".
+pub fn score_runs(
+    detector: &str,
+    policy: &str,
+    trace: &[(f64, Health)],
+    faults: &[FaultWindow],
+    time_per_epoch_s: Option<f64>,
+    run_starts: &[f64],
+) -> Scorecard {
     let alarms = |h: Health| h != Health::Healthy;
     let mut faults: Vec<FaultWindow> = faults.iter().copied().filter(|f| f.end > f.start).collect();
     faults.sort_by(|a, b| a.start.total_cmp(&b.start));
@@ -154,7 +169,13 @@ pub fn score(
         if f.end > t_last {
             continue;
         }
-        let next_start = faults.get(i + 1).map_or(f64::INFINITY, |n| n.start);
+        let next_fault = faults.get(i + 1).map_or(f64::INFINITY, |n| n.start);
+        let next_run = run_starts
+            .iter()
+            .copied()
+            .filter(|&r| r > f.end)
+            .fold(f64::INFINITY, f64::min);
+        let next_start = next_fault.min(next_run);
         let back = trace
             .iter()
             .find(|(t, h)| *t >= f.end && *t < next_start && !alarms(*h));
@@ -425,6 +446,20 @@ mod tests {
             (vec![None], 0)
         );
         assert!(render(&[c]).contains("never"));
+    }
+
+    #[test]
+    fn a_recovery_is_not_looked_for_in_the_next_run() {
+        // Two runs laid end to end (the second from t = 10): the fault at the end of
+        // the first has not recovered when its run ends; that is not "never".
+        //          0123456789012345
+        let tr = trace("......iiii......");
+        let faults = [FaultWindow { start: 7.0, end: 9.0 }];
+        let c = score_runs("range", "counters", &tr, &faults, None, &[0.0, 10.0]);
+        assert_eq!((c.recovery_s.clone(), c.recoveries_censored), (vec![], 1));
+        // Without the boundary the first healthy epoch of the next run would count.
+        let c = score("range", "counters", &tr, &faults, None);
+        assert_eq!(c.recovery_s, vec![Some(1.0)]);
     }
 
     #[test]

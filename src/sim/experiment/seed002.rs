@@ -334,7 +334,13 @@ impl LaidRuns {
             // Every fault lasts to the end of its run: there is no recovery to time
             // (the windows' ends only separate runs laid end to end).
             card.recovery_s.clear();
-            card
+            card.recoveries_censored = 0;
+            // The nominal per-epoch rate of T_D for the FSS window's χ²(l'·p): the
+            // default four gyros have one parity equation, l' = 6.
+            match crate::detect::chi2::false_alarm_probability(6, T_D) {
+                Ok(p) => card.with_p_fa(p),
+                Err(_) => card,
+            }
         })
     }
 }
