@@ -13,13 +13,13 @@ use clap::Args;
 use serde::Serialize;
 
 use navguard::epoch::Epoch;
-use navguard::monitor::calibrate::{self, Proposal, TestCalibration};
+use navguard::monitor::calibrate::{self, CalibrationLine};
 use navguard::monitor::{self, ModelSource, NoModels};
 use navguard::service::Limits;
 use navguard::service::session::spec::monitor_spec;
 use navguard::service::store::Store;
 use navguard::service::train::Models;
-use navguard::service::wire::{CreateSession, TestThresholdSpec, parse_frame};
+use navguard::service::wire::{CreateSession, TestThresholdSpec, calibrated_tests, parse_frame};
 
 /// Flags of `navguard calibrate`.
 #[derive(Debug, Args)]
@@ -51,51 +51,7 @@ pub(crate) struct CalibrateArgs {
 #[derive(Debug, Serialize)]
 struct MonitorReport {
     monitor: String,
-    tests: Vec<TestReport>,
-}
-
-/// One test's line of the report.
-#[derive(Debug, Serialize)]
-struct TestReport {
-    test: String,
-    dof: u32,
-    epochs: usize,
-    chi2_threshold: f64,
-    chi2_rate: f64,
-    /// The proposed level (the test's own `p_fa`), when calibrated.
-    p_fa: Option<f64>,
-    /// The raw threshold it gives at the primary dof.
-    threshold: Option<f64>,
-    /// Why not, when refused.
-    refused: Option<String>,
-}
-
-impl From<&TestCalibration> for TestReport {
-    fn from(c: &TestCalibration) -> Self {
-        let (p_fa, threshold, refused) = match c.proposal {
-            Proposal::Calibrated {
-                p_fa, threshold, ..
-            } => (Some(p_fa), Some(threshold), None),
-            Proposal::TooShort { needed } => (
-                None,
-                None,
-                Some(format!(
-                    "too short: {} epochs, the rate asked needs at least {needed}",
-                    c.epochs
-                )),
-            ),
-        };
-        TestReport {
-            test: c.test.clone(),
-            dof: c.dof,
-            epochs: c.epochs,
-            chi2_threshold: c.chi2_threshold,
-            chi2_rate: c.chi2_rate,
-            p_fa,
-            threshold,
-            refused,
-        }
-    }
+    tests: Vec<CalibrationLine>,
 }
 
 /// The `PUT …/threshold` body for one monitor.
@@ -158,25 +114,11 @@ pub(crate) async fn run(args: CalibrateArgs) -> anyhow::Result<()> {
         let mut m = monitor_spec(wire)
             .and_then(|spec| monitor::build(&spec, &*models))
             .map_err(|e| anyhow::anyhow!("monitors[{i}]: {e}"))?;
-        let samples = calibrate::sample(&mut *m, &epochs)
+        let tests = calibrate::calibrate_monitor(&mut *m, &epochs, args.far, args.confidence)
             .map_err(|e| anyhow::anyhow!("monitor '{}': {e}", wire.name))?;
-        let mut tests = Vec::new();
-        let mut body = PutBody {
-            tests: BTreeMap::new(),
+        let body = PutBody {
+            tests: calibrated_tests(&tests),
         };
-        for s in &samples {
-            let c = calibrate::calibrate(s, args.far, args.confidence)?;
-            if let Proposal::Calibrated { p_fa, .. } = c.proposal {
-                body.tests.insert(
-                    c.test.clone(),
-                    TestThresholdSpec {
-                        p_fa: Some(p_fa),
-                        threshold: None,
-                    },
-                );
-            }
-            tests.push(TestReport::from(&c));
-        }
         if !body.tests.is_empty() {
             bodies.insert(wire.name.clone(), body);
         }

@@ -22,6 +22,7 @@
 //! beside the χ² threshold at `p_fa = far` it replaces and the rate that one would give
 //! on this data.
 
+use serde::Serialize;
 use statrs::distribution::{Binomial, DiscreteCDF};
 
 use super::{Monitor, StepError};
@@ -94,6 +95,68 @@ pub struct TestCalibration {
     pub chi2_rate: f64,
     /// The proposal.
     pub proposal: Proposal,
+}
+
+/// One test's calibration as reported (CLI table, JSON and the REST answer).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CalibrationLine {
+    /// Test name.
+    pub test: String,
+    /// Primary dof.
+    pub dof: u32,
+    /// Epochs on which the test ran.
+    pub epochs: usize,
+    /// The χ² threshold at `p_fa = far` it replaces.
+    pub chi2_threshold: f64,
+    /// The share of epochs that χ² threshold fails on the data.
+    pub chi2_rate: f64,
+    /// The proposed level, as the test's own `p_fa`, when calibrated.
+    pub p_fa: Option<f64>,
+    /// The raw threshold that level gives at the primary dof.
+    pub threshold: Option<f64>,
+    /// Why not, when refused.
+    pub refused: Option<String>,
+}
+
+impl From<&TestCalibration> for CalibrationLine {
+    fn from(c: &TestCalibration) -> Self {
+        let (p_fa, threshold, refused) = match c.proposal {
+            Proposal::Calibrated {
+                p_fa, threshold, ..
+            } => (Some(p_fa), Some(threshold), None),
+            Proposal::TooShort { needed } => (
+                None,
+                None,
+                Some(format!(
+                    "too short: {} epochs, the rate asked needs at least {needed}",
+                    c.epochs
+                )),
+            ),
+        };
+        CalibrationLine {
+            test: c.test.clone(),
+            dof: c.dof,
+            epochs: c.epochs,
+            chi2_threshold: c.chi2_threshold,
+            chi2_rate: c.chi2_rate,
+            p_fa,
+            threshold,
+            refused,
+        }
+    }
+}
+
+/// Calibrates every test of `monitor` on `epochs` ([`sample`] then [`calibrate`]).
+pub fn calibrate_monitor(
+    monitor: &mut dyn Monitor,
+    epochs: &[Epoch],
+    far: f64,
+    confidence: f64,
+) -> Result<Vec<CalibrationLine>, CalibrateError> {
+    sample(monitor, epochs)?
+        .iter()
+        .map(|s| calibrate(s, far, confidence).map(|c| CalibrationLine::from(&c)))
+        .collect()
 }
 
 /// Runs `monitor` over `epochs` with every test's threshold out of reach and collects

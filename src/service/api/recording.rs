@@ -20,14 +20,15 @@ use serde_json::value::RawValue;
 use std::collections::BTreeMap;
 
 use crate::epoch::Epoch;
-use crate::monitor::calibrate::{self, Proposal};
+use crate::monitor::calibrate::{self, CalibrationLine};
 use crate::service::app::AppState;
 use crate::service::error::ApiError;
 use crate::service::extract::ApiQuery;
+use crate::service::session::SessionError;
 use crate::service::session::history::HistoryView;
 use crate::service::session::spec::build_monitors;
 use crate::service::store::{RecordedFrame, Store};
-use crate::service::wire::{TestThresholdSpec, parse_frame};
+use crate::service::wire::{TestThresholdSpec, calibrated_tests, parse_frame};
 
 /// Frames read from the store per chunk of the response.
 const PAGE: i64 = 500;
@@ -170,24 +171,10 @@ pub struct CalibrationQuery {
     stream: Option<u64>,
 }
 
-/// One test's calibration in the answer.
-#[derive(Debug, serde::Serialize)]
-pub struct TestCalibrationView {
-    test: String,
-    dof: u32,
-    epochs: usize,
-    chi2_threshold: f64,
-    chi2_rate: f64,
-    p_fa: Option<f64>,
-    threshold: Option<f64>,
-    /// Why not calibrated, when refused.
-    refused: Option<String>,
-}
-
 /// One monitor's calibration and the `PUT …/threshold` body that applies it.
 #[derive(Debug, serde::Serialize)]
 pub struct MonitorCalibrationView {
-    tests: Vec<TestCalibrationView>,
+    tests: Vec<CalibrationLine>,
     put: BTreeMap<&'static str, BTreeMap<String, TestThresholdSpec>>,
 }
 
@@ -266,53 +253,12 @@ pub async fn calibration(
         let monitors = build_monitors(&stored, &*models)?;
         let mut out = BTreeMap::new();
         for (name, mut m) in monitors {
-            let samples = calibrate::sample(&mut *m, &epochs).map_err(|e| {
-                crate::service::session::SessionError::invalid(name.clone(), e.to_string())
-            })?;
-            let mut view = MonitorCalibrationView {
-                tests: Vec::new(),
-                put: BTreeMap::from([("tests", BTreeMap::new())]),
-            };
-            for s in &samples {
-                let c = calibrate::calibrate(s, far, confidence).map_err(|e| {
-                    crate::service::session::SessionError::invalid("far", e.to_string())
-                })?;
-                let (p_fa, threshold, refused) = match c.proposal {
-                    Proposal::Calibrated {
-                        p_fa, threshold, ..
-                    } => {
-                        view.put.entry("tests").or_default().insert(
-                            c.test.clone(),
-                            TestThresholdSpec {
-                                p_fa: Some(p_fa),
-                                threshold: None,
-                            },
-                        );
-                        (Some(p_fa), Some(threshold), None)
-                    }
-                    Proposal::TooShort { needed } => (
-                        None,
-                        None,
-                        Some(format!(
-                            "too short: {} epochs, the rate asked needs at least {needed}",
-                            c.epochs
-                        )),
-                    ),
-                };
-                view.tests.push(TestCalibrationView {
-                    test: c.test,
-                    dof: c.dof,
-                    epochs: c.epochs,
-                    chi2_threshold: c.chi2_threshold,
-                    chi2_rate: c.chi2_rate,
-                    p_fa,
-                    threshold,
-                    refused,
-                });
-            }
-            out.insert(name, view);
+            let tests = calibrate::calibrate_monitor(&mut *m, &epochs, far, confidence)
+                .map_err(|e| SessionError::invalid(name.clone(), e.to_string()))?;
+            let put = BTreeMap::from([("tests", calibrated_tests(&tests))]);
+            out.insert(name, MonitorCalibrationView { tests, put });
         }
-        Ok::<_, crate::service::session::SessionError>((out, epochs.len()))
+        Ok::<_, SessionError>((out, epochs.len()))
     })
     .await
     .map_err(|e| ApiError::Internal(e.to_string()))??;

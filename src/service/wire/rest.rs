@@ -158,3 +158,22 @@ pub struct ThresholdView {
     /// Effective threshold per test.
     pub tests: BTreeMap<String, TestThreshold>,
 }
+
+/// The `tests` of a `PUT …/threshold` body that sets every calibrated test's proposed
+/// level as its own `p_fa` (refused tests are left out).
+pub fn calibrated_tests(
+    lines: &[crate::monitor::calibrate::CalibrationLine],
+) -> BTreeMap<String, TestThresholdSpec> {
+    lines
+        .iter()
+        .filter_map(|l| {
+            Some((
+                l.test.clone(),
+                TestThresholdSpec {
+                    p_fa: Some(l.p_fa?),
+                    threshold: None,
+                },
+            ))
+        })
+        .collect()
+}

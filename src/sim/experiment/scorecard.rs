@@ -454,7 +454,10 @@ mod tests {
         // the first has not recovered when its run ends; that is not "never".
         //          0123456789012345
         let tr = trace("......iiii......");
-        let faults = [FaultWindow { start: 7.0, end: 9.0 }];
+        let faults = [FaultWindow {
+            start: 7.0,
+            end: 9.0,
+        }];
         let c = score_runs("range", "counters", &tr, &faults, None, &[0.0, 10.0]);
         assert_eq!((c.recovery_s.clone(), c.recoveries_censored), (vec![], 1));
         // Without the boundary the first healthy epoch of the next run would count.

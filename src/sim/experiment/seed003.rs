@@ -514,8 +514,7 @@ fn level_scorecards(
             // Flights are laid end to end, 60 s apart: a recovery is looked for in its
             // own flight (the monitor starts afresh with the next).
             let starts: Vec<f64> = flight_starts(t);
-            let card =
-                scorecard::score_runs("range", label, t, faults, Some(per_epoch), &starts);
+            let card = scorecard::score_runs("range", label, t, faults, Some(per_epoch), &starts);
             // One figure instead of 2,000: the longest recovery (recoveries the next
             // jump cut short are counted apart). The one-class boundary's nominal rate
             // of flagged clean windows is ν.
