@@ -89,11 +89,7 @@ pub struct RampRow {
 impl RampRow {
     /// `classic T=20`, `counters T=13`, …
     pub fn label(&self) -> String {
-        let name = match self.policy {
-            PolicyConfig::Classic => "classic",
-            PolicyConfig::Counters { .. } => "counters",
-        };
-        format!("{name} T={}", self.threshold)
+        format!("{} T={}", self.policy.kind_name(), self.threshold)
     }
 }
 

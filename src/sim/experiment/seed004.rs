@@ -97,11 +97,7 @@ pub struct CaseResult {
 impl CaseResult {
     /// `classic T=20`, `counters T=13`, …
     pub fn label(&self) -> String {
-        let name = match self.policy {
-            PolicyConfig::Classic => "classic",
-            PolicyConfig::Counters { .. } => "counters",
-        };
-        format!("{name} T={}", self.threshold)
+        format!("{} T={}", self.policy.kind_name(), self.threshold)
     }
 
     /// The larger of the latitude and longitude maxima, m.
