@@ -2,16 +2,26 @@
 //! one Kalman filter, and the residual χ² test λ = rᵀS⁻¹r ~ χ²(m) (seed 004 §1.3)
 //! under the session's decision policy. It is also how navguard is checked
 //! against other Kalman filter libraries.
+//!
+//! Optional guards on the same innovation (docs/methods.md §M23, [`super::guards`]):
+//! `residual.drift`, a windowed-mean test on `ν = L⁻¹ r` for slow drifts the per-epoch
+//! test misses, and `residual.stuck`, a variance collapse of `ν` (a frozen input). Both
+//! are off unless the config has a `drift` or `stuck` block; when on, the filter updates
+//! only if every test allows it. The residual test's `ν` feeds its consistency
+//! diagnostics (docs/methods.md §M22).
 
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
+use super::guards::{self, DriftConfigWire, GuardConfig, InnovationGuards, StuckConfigWire};
 use super::{
     ConfigError, EpochError, Monitor, MonitorKind, MonitorReport, Outputs, StepError, TestBank,
 };
 use crate::detect::{PolicyConfig, ThresholdError, ThresholdSpec};
 use crate::epoch::Epoch;
-use crate::filter::kalman::{self, LinearObservation, LinearTransition, StateEstimate};
+use crate::filter::kalman::{
+    self, FilterError, LinearObservation, LinearTransition, StateEstimate,
+};
 
 /// The `config` of a `linear` monitor as the user writes it: row-major nested arrays.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -32,6 +42,12 @@ pub struct LinearConfigWire {
     /// Control matrix B (n × k), optional.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub b: Option<Vec<Vec<f64>>>,
+    /// The `residual.drift` test (docs/methods.md §M23); off when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub drift: Option<DriftConfigWire>,
+    /// The `residual.stuck` test (docs/methods.md §M21, §M23); off when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stuck: Option<StuckConfigWire>,
 }
 
 /// A validated linear model: `x = F x (+ B u) + w`, `z = H x + v`,
@@ -52,6 +68,8 @@ pub struct LinearConfig {
     pub p0: DMatrix<f64>,
     /// Control matrix B (n × k), when the model has a control input `u`.
     pub b: Option<DMatrix<f64>>,
+    /// The drift and stuck tests on the residual's normalised innovation.
+    pub guards: GuardConfig,
 }
 
 /// Relative tolerance for symmetry and for the smallest eigenvalue of a
@@ -190,6 +208,11 @@ impl TryFrom<LinearConfigWire> for LinearConfig {
         check_covariance("q", &q, false)?;
         check_covariance("r", &r, true)?;
         check_covariance("p0", &p0, false)?;
+        let guards = guards::validate(
+            "",
+            &wire.drift.unwrap_or_else(DriftConfigWire::disabled),
+            &wire.stuck.unwrap_or_else(StuckConfigWire::disabled),
+        )?;
         Ok(LinearConfig {
             f,
             h,
@@ -198,6 +221,7 @@ impl TryFrom<LinearConfigWire> for LinearConfig {
             x0: DVector::from_vec(wire.x0),
             p0,
             b,
+            guards,
         })
     }
 }
@@ -210,20 +234,23 @@ pub struct LinearMonitor {
     initial: StateEstimate<nalgebra::Dyn>,
     estimate: StateEstimate<nalgebra::Dyn>,
     bank: TestBank,
+    guards: InnovationGuards,
 }
 
 /// Index of the `residual` test in the bank.
 const RESIDUAL: usize = 0;
 
 impl LinearMonitor {
-    /// Builds the monitor; its one test `residual` has dof m.
+    /// Builds the monitor: the test `residual` (dof m) and the guards its config enables,
+    /// `residual.drift` (dof m) and `residual.stuck` (dof 1).
     pub fn new(
         config: LinearConfig,
         policy: PolicyConfig,
         spec: ThresholdSpec,
     ) -> Result<Self, ThresholdError> {
-        let dof = config.measurements() as u32;
-        let bank = TestBank::new(&[("residual", dof)], spec, policy)?;
+        let m = config.measurements();
+        let mut bank = TestBank::new(&[("residual", m as u32)], spec, policy)?;
+        let guards = InnovationGuards::new(&mut bank, "residual", m, &config.guards)?;
         let initial = StateEstimate {
             x: config.x0.clone(),
             p: config.p0.clone(),
@@ -241,6 +268,7 @@ impl LinearMonitor {
             estimate: initial.clone(),
             initial,
             bank,
+            guards,
         })
     }
 
@@ -323,15 +351,28 @@ impl Monitor for LinearMonitor {
         // Compute the posterior before deciding so a numerical failure leaves
         // the policy counters untouched too.
         let posterior = kalman::update(&prior, &self.observation, &innovation)?.0;
-        let outcome = self.bank.evaluate(RESIDUAL, innovation.statistic);
-        // seed 004 §2: a suspect or isolated filter predicts without updating.
-        self.estimate = if outcome.decision.update {
-            posterior
-        } else {
-            prior
-        };
+        // ν = L⁻¹ r (S = L Lᵀ): ‖ν‖² = λ; the guards' and the diagnostics' input.
+        let nu = innovation
+            .s_chol
+            .l()
+            .solve_lower_triangular(&innovation.r)
+            .ok_or(FilterError::NotPositiveDefinite)?;
+        let guard = self.guards.preview(&self.bank, nu.as_slice())?;
+        let (outcome, state) = self
+            .bank
+            .preview(RESIDUAL, innovation.statistic, self.bank.slots()[RESIDUAL].dof)?;
+        let decision = self.guards.combined(&self.bank, &guard, outcome.decision);
+        self.bank.commit(RESIDUAL, state);
+        self.bank.observe(RESIDUAL, nu.as_slice(), decision.health);
+        let mut tests = vec![outcome];
+        let healthy = decision.health == crate::detect::Health::Healthy;
+        self.guards
+            .commit(&mut self.bank, guard, nu.as_slice(), healthy, &mut tests);
+        // seed 004 §2: a suspect or isolated filter predicts without updating (any of
+        // its tests can say so); `traditional` always updates (no fusion to leave).
+        self.estimate = if decision.update { posterior } else { prior };
         Ok(MonitorReport {
-            tests: vec![outcome],
+            tests,
             outputs: Outputs::Linear {
                 innovation: Some(innovation.r.as_slice().to_vec()),
                 x: self.estimate.x.as_slice().to_vec(),
@@ -343,6 +384,7 @@ impl Monitor for LinearMonitor {
     fn reset(&mut self) {
         self.estimate = self.initial.clone();
         self.bank.reset();
+        self.guards.reset();
     }
 }
 

@@ -4,6 +4,7 @@
 
 pub mod channel;
 pub mod federated;
+pub mod guards;
 pub mod linear;
 pub mod rimu;
 pub mod tacan;
