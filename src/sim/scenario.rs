@@ -114,12 +114,15 @@ impl Scenario {
             gnss: self.sensors.gnss.map(|g| GnssNoise {
                 pos_sigma_m: g.pos_sigma_m,
                 vel_sigma_mps: g.vel_sigma_mps,
+                ..GnssNoise::default()
             }),
             dvl: self.sensors.dvl.map(|d| DvlNoise {
                 vel_sigma_mps: d.vel_sigma_mps,
+                ..DvlNoise::default()
             }),
             cns: self.sensors.cns.map(|c| CnsNoise {
                 pos_sigma_m: c.pos_sigma_m,
+                ..CnsNoise::default()
             }),
             imu: ImuSection::from(self.ins.imu),
             init,
