@@ -72,13 +72,18 @@ use crate::geo::{self, Lla};
 use integrity::Convergence;
 
 /// The part of an aid's normalised innovation its drift and stuck tests watch: GNSS its
-/// position components (the last three of `[δV; δP]` or all of `δP`: whitening by the
-/// Cholesky factor makes a prefix of `ν` the whitened prefix, so these are the position
-/// innovations given the velocity ones, covariance `I` either way), the others all of it.
+/// horizontal position components (east and north, the 4th and 5th of `[δV; δP]` or the
+/// first two of `δP`: whitening by the Cholesky factor makes a prefix of `ν` the whitened
+/// prefix, so these are the horizontal position innovations given the velocity ones,
+/// covariance `I` either way; the horizontal solution is what the protection level
+/// guards, docs/methods.md §M23), the others all of it.
 fn guard_input(aid: Aid, test: &LocalTest) -> &[f64] {
     let nu = test.nu();
     match aid {
-        Aid::Gnss => &nu[nu.len().saturating_sub(3)..],
+        Aid::Gnss => {
+            let east = nu.len().saturating_sub(3);
+            &nu[east..east + 2]
+        }
         Aid::Dvl | Aid::Cns => nu,
     }
 }
@@ -86,8 +91,8 @@ fn guard_input(aid: Aid, test: &LocalTest) -> &[f64] {
 /// The dimension of [`guard_input`] for `aid`.
 fn guard_dim(aid: Aid) -> usize {
     match aid {
-        Aid::Gnss | Aid::Dvl => 3,
-        Aid::Cns => 2,
+        Aid::Dvl => 3,
+        Aid::Gnss | Aid::Cns => 2,
     }
 }
 
