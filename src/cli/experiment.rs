@@ -8,7 +8,9 @@ use std::path::{Path, PathBuf};
 use super::spinner;
 
 use anyhow::{Context, bail};
-use navguard::sim::experiment::{alarms, ramp, seed000, seed001, seed002, seed003, seed004};
+use navguard::sim::experiment::{
+    alarms, guards, ramp, seed000, seed001, seed002, seed003, seed004,
+};
 
 /// The experiments.
 #[derive(Debug, clap::Subcommand)]
@@ -27,6 +29,19 @@ pub(crate) enum ExperimentCommand {
     Seed001(Seed001Args),
     /// Alarms and warnings per fault-free hour of every federated test (ship seeds, real track).
     Alarms(AlarmsArgs),
+    /// Frozen GNSS fixes and small DVL biases, with and without the aids' drift and stuck tests.
+    Guards(GuardsArgs),
+}
+
+/// `navguard experiment guards` flags.
+#[derive(Debug, clap::Args)]
+pub(crate) struct GuardsArgs {
+    /// Seeds (comma-separated).
+    #[arg(long, value_delimiter = ',', default_value = "1,2,3,4,5")]
+    pub seeds: Vec<u64>,
+    /// False-alarm probability of the tests under the monitor's spec.
+    #[arg(long, default_value_t = 1e-3)]
+    pub p_fa: f64,
 }
 
 /// `navguard experiment alarms` flags.
@@ -488,6 +503,24 @@ impl Experiment for AlarmsArgs {
     }
 }
 
+impl Experiment for GuardsArgs {
+    type Output = guards::GuardsResult;
+    const TITLE: &'static str = "guards";
+
+    fn run(&self) -> anyhow::Result<Self::Output> {
+        let params = guards::GuardsParams {
+            seeds: self.seeds.clone(),
+            p_fa: self.p_fa,
+            ..guards::GuardsParams::default()
+        };
+        Ok(guards::run(params)?)
+    }
+
+    fn render(output: &Self::Output) -> String {
+        guards::render(output)
+    }
+}
+
 fn write_all(dir: &Path, files: &[(String, String)]) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     for (name, text) in files {
@@ -528,5 +561,6 @@ pub(crate) fn run(command: ExperimentCommand) -> anyhow::Result<()> {
         ExperimentCommand::Seed000(args) => execute(&args),
         ExperimentCommand::Seed001(args) => execute(&args),
         ExperimentCommand::Alarms(args) => execute(&args),
+        ExperimentCommand::Guards(args) => execute(&args),
     }
 }

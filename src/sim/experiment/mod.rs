@@ -17,10 +17,13 @@
 //! - [`ramp`]: docs/methods.md §M19's slow GNSS drift benchmark (with §M23's drift test).
 //! - [`alarms`]: alarms and warnings per fault-free hour of every test of a federated
 //!   session (ship seeds and the real track), and every injected fault alarmed.
+//! - [`guards`]: frozen GNSS fixes and small DVL biases, with and without the aids' drift
+//!   and stuck tests.
 //! - [`scorecard`]: the per-detector figures every experiment ends with.
 //! - [`plot`]: the SVG line charts.
 
 pub mod alarms;
+pub mod guards;
 pub mod plot;
 pub mod ramp;
 pub mod scorecard;
