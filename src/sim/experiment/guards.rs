@@ -327,6 +327,6 @@ mod tests {
         assert!(on.alarm.is_some());
         assert!(off.alarm.is_none(), "the χ² test alone misses it: {off:?}");
         let text = render(&r);
-        assert!(text.contains("gnss.stuck"), "{text}");
+        assert!(text.contains("frozen") && text.contains("χ² only"), "{text}");
     }
 }
