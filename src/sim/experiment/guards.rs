@@ -11,6 +11,9 @@
 //!   small for its χ² test (the known limit of docs/methods.md §M6), it pulls the fused
 //!   solution tens of metres off; `dvl.drift` isolates it.
 //!
+//! Three configurations: the defaults, the faulted aid's drift test off (its stuck test
+//! alone beside the χ²), and its χ² test alone.
+//!
 //! Per fault and configuration, over the seeds: the first warning and the first alarm of
 //! the faulted aid after onset (and which of its tests raised it), and the corrected
 //! solution's largest horizontal error while the fault lasts.
@@ -84,6 +87,8 @@ pub fn default_cases() -> Vec<GuardCase> {
 pub enum Guarded {
     /// The monitor's defaults (`gnss.drift`, `dvl.drift`, every `stuck` on).
     Defaults,
+    /// The faulted aid's drift test off, its stuck test on.
+    NoDrift,
     /// The faulted aid's drift and stuck tests off (its χ² test alone).
     Off,
 }
@@ -92,6 +97,7 @@ impl Guarded {
     fn label(self) -> &'static str {
         match self {
             Guarded::Defaults => "defaults",
+            Guarded::NoDrift => "no drift",
             Guarded::Off => "χ² only",
         }
     }
@@ -146,7 +152,7 @@ pub struct GuardRow {
 pub struct GuardsResult {
     /// The parameters.
     pub params: GuardsParams,
-    /// Per case, the defaults then the χ²-only configuration.
+    /// Per case, the defaults, the drift test off, then the χ² test alone.
     pub rows: Vec<GuardRow>,
 }
 
@@ -158,11 +164,9 @@ fn spec(
     p_fa: f64,
 ) -> Result<MonitorSpec, ExperimentError> {
     let mut config: FederatedConfigWire = scenario.monitor_config();
-    if guarded == Guarded::Off {
-        let (drift, stuck) = (
-            Some(DriftConfigWire::disabled()),
-            Some(StuckConfigWire::disabled()),
-        );
+    if guarded != Guarded::Defaults {
+        let drift = Some(DriftConfigWire::disabled());
+        let stuck = (guarded == Guarded::Off).then(StuckConfigWire::disabled);
         match aid {
             Aid::Gnss => {
                 let g = config.gnss.get_or_insert_with(GnssNoise::default);
@@ -211,7 +215,7 @@ fn first(
 pub fn run(params: GuardsParams) -> Result<GuardsResult, ExperimentError> {
     let mut rows = Vec::new();
     for case in &params.cases {
-        let mut by_config: Vec<GuardRow> = [Guarded::Defaults, Guarded::Off]
+        let mut by_config: Vec<GuardRow> = [Guarded::Defaults, Guarded::NoDrift, Guarded::Off]
             .into_iter()
             .map(|guarded| GuardRow {
                 case: case.clone(),
@@ -317,14 +321,18 @@ mod tests {
             p_fa: 1e-3,
         };
         let r = run(params).unwrap();
-        assert_eq!(r.rows.len(), 2);
-        let (on, off) = (&r.rows[0].runs[0], &r.rows[1].runs[0]);
+        assert_eq!(r.rows.len(), 3);
+        let (on, stuck, off) = (&r.rows[0].runs[0], &r.rows[1].runs[0], &r.rows[2].runs[0]);
         // The held fix repeats one noise draw: its differences collapse (gnss.stuck after
         // k = 8 differences) and its offset is a standing bias (gnss.drift may fire first).
         let (t, test) = on.warning.clone().unwrap();
         assert!(test == "gnss.stuck" || test == "gnss.drift", "{test}");
         assert!(t <= 10.0, "flagged after {t} s");
         assert!(on.alarm.is_some());
+        // Alone, the stuck test flags it after k = 8 repeated differences.
+        let (t, test) = stuck.warning.clone().unwrap();
+        assert_eq!(test, "gnss.stuck");
+        assert!(t <= 9.0, "stuck test after {t} s");
         assert!(off.alarm.is_none(), "the χ² test alone misses it: {off:?}");
         let text = render(&r);
         assert!(text.contains("frozen") && text.contains("χ² only"), "{text}");
