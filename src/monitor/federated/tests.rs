@@ -115,6 +115,70 @@ fn invalid_configs_are_refused_naming_the_field() {
     );
 }
 
+#[test]
+fn guard_and_convergence_fields_are_refused_by_monitor_build_naming_the_exact_path() {
+    let cases = [
+        (json!({"gnss": {"drift": {"windows": []}}}), "gnss.drift.windows"),
+        (json!({"gnss": {"drift": {"windows": [0]}}}), "gnss.drift.windows[0]"),
+        (json!({"gnss": {"drift": {"windows": [5, 1001]}}}), "gnss.drift.windows[1]"),
+        (json!({"gnss": {"drift": {"windows": [5, 5]}}}), "gnss.drift.windows[1]"),
+        (json!({"gnss": {"drift": {"p_fa": 0}}}), "gnss.drift.p_fa"),
+        (json!({"gnss": {"drift": {"threshold": -1}}}), "gnss.drift.threshold"),
+        (json!({"gnss": {"drift": {"p_fa": 0.1, "threshold": 9}}}), "gnss.drift"),
+        (json!({"gnss": {"drift": {"scales": [5]}}}), "gnss.drift.scales"),
+        (json!({"gnss": {"drift": {"windows": "10"}}}), "gnss.drift.windows"),
+        (json!({"gnss": {"stuck": {"k": 1}}}), "gnss.stuck.k"),
+        (json!({"gnss": {"stuck": {"p_fa": 1}}}), "gnss.stuck.p_fa"),
+        (json!({"gnss": {"stuck": {"threshold": 0}}}), "gnss.stuck.threshold"),
+        (json!({"gnss": {"stuck": {"p_fa": 1e-6, "threshold": 24}}}), "gnss.stuck"),
+        (json!({"gnss": {"stuck": {"enabled": "yes"}}}), "gnss.stuck.enabled"),
+        (json!({"dvl": {"drift": {"windows": [0]}}}), "dvl.drift.windows[0]"),
+        (json!({"dvl": {"stuck": {"k": 5000}}}), "dvl.stuck.k"),
+        (json!({"cns": {"drift": {"p_fa": -1}}}), "cns.drift.p_fa"),
+        (json!({"cns": {"stuck": {"threshold": 0}}}), "cns.stuck.threshold"),
+        (json!({"converge_max_s": 0}), "converge_max_s"),
+        (json!({"converge_max_s": -5}), "converge_max_s"),
+        (json!({"converge_max_s": "long"}), "converge_max_s"),
+    ];
+    for (extra, field) in cases {
+        let mut config = all_aids();
+        for (k, v) in extra.as_object().unwrap() {
+            config[k] = v.clone();
+        }
+        match MonitorSpecForTest::build(config) {
+            Err(crate::monitor::BuildError::Config(e)) => {
+                assert_eq!(e.field, field, "{extra}: {e}")
+            }
+            Err(e) => panic!("{extra}: {e}"),
+            Ok(_) => panic!("{extra} accepted"),
+        }
+    }
+}
+
+#[test]
+fn a_config_stored_before_the_guards_loads_with_their_defaults() {
+    // A session spec written before drift, stuck and converge_max_s existed.
+    let old = json!({"aids": ["gnss", "dvl", "cns"], "gnss": {"pos_sigma_m": 10, "vel_sigma_mps": 0.1},
+                     "dvl": {"vel_sigma_mps": 0.1}, "cns": {"pos_sigma_m": 450}, "hal_m": 25, "p_md": 0.001});
+    let c = FederatedConfig::from_json(&old).unwrap();
+    assert_eq!(c.converge_max_s, DEFAULT_CONVERGE_MAX_S);
+    let on = |i: usize| (c.guards[i].drift.is_some(), c.guards[i].stuck.is_some());
+    assert_eq!(
+        [on(0), on(1), on(2)],
+        [
+            (GNSS_DRIFT_DEFAULT_ON, STUCK_DEFAULT_ON),
+            (DVL_DRIFT_DEFAULT_ON, STUCK_DEFAULT_ON),
+            (CNS_DRIFT_DEFAULT_ON, STUCK_DEFAULT_ON)
+        ]
+    );
+    assert!(MonitorSpecForTest::build(old.clone()).is_ok());
+    // The typed wire form round-trips without inventing blocks.
+    let wire: FederatedConfigWire = serde_json::from_value(old).unwrap();
+    let back = serde_json::to_value(&wire).unwrap();
+    assert!(back["gnss"].get("drift").is_none(), "{back}");
+    assert_eq!(back["converge_max_s"], json!(DEFAULT_CONVERGE_MAX_S));
+}
+
 /// `monitor::build` as the REST layer calls it.
 struct MonitorSpecForTest;
 
@@ -141,23 +205,26 @@ fn one_test_per_configured_aid_then_the_guards_and_no_hpl_test() {
     );
     let slots = m.tests().slots();
     let names: Vec<_> = slots.iter().map(|s| (&*s.name, s.dof)).collect();
-    // The defaults: gnss.drift on, dvl.drift off, every aid's stuck test on.
+    // The defaults: gnss.drift (horizontal, dof 2) and dvl.drift on, every aid's stuck
+    // test on.
     assert_eq!(
         names,
         vec![
             ("dvl", 3),
             ("gnss", 6),
+            ("dvl.drift", 3),
             ("dvl.stuck", 1),
-            ("gnss.drift", 3),
+            ("gnss.drift", 2),
             ("gnss.stuck", 1)
         ]
     );
     assert!((slots[1].threshold_for(3).unwrap() - 14.7955).abs() < 1e-4);
-    // The drift test follows the monitor's spec (χ²(3) at 0.002), the stuck test keeps its
-    // own (χ²(1) at 1e-6); both follow the monitor's policy.
-    assert!((slots[3].threshold - 14.7955).abs() < 1e-4);
-    assert!((slots[2].threshold - 23.9281).abs() < 1e-3);
-    assert_eq!(slots[4].policy.config(), PolicyConfig::counters_default());
+    // The drift tests follow the monitor's spec (χ²(3), χ²(2) at 0.002), the stuck tests
+    // keep their own (χ²(1) at 1e-6); all follow the monitor's policy.
+    assert!((slots[2].threshold - 14.7955).abs() < 1e-4);
+    assert!((slots[4].threshold - 12.4292).abs() < 1e-4);
+    assert!((slots[3].threshold - 23.9281).abs() < 1e-3);
+    assert_eq!(slots[5].policy.config(), PolicyConfig::counters_default());
     assert!(m.tests().index_of("hpl").is_none(), "HPL is integrity, not a test");
     assert!(MonitorSpecForTest::build(all_aids()).is_ok());
     // Each block can be turned on, off or tuned in its aid's section.
