@@ -42,6 +42,8 @@ fn model() -> LinearConfigWire {
             vec![0.0, 0.0, 0.0, 5.0],
         ],
         b: None,
+        drift: None,
+        stuck: None,
     }
 }
 

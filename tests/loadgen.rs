@@ -84,6 +84,8 @@ fn linear_config() -> Value {
             vec![0.0, 0.0, 0.0, p0],
         ],
         b: None,
+        drift: None,
+        stuck: None,
     };
     serde_json::to_value(config).unwrap()
 }

@@ -1479,14 +1479,22 @@ async fn consistency_diagnostics_name_a_mis_tuned_model() {
     assert!(
         optimistic["nis_mean"].as_f64().unwrap() > optimistic["nis_bounds"][1].as_f64().unwrap()
     );
-    let text = c
-        .get(format!("{}/metrics", http(&server)))
-        .send()
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    // /metrics reads the published statistics (≤ 20 a second): wait for the last ones.
+    let mut text = String::new();
+    for _ in 0..250 {
+        text = c
+            .get(format!("{}/metrics", http(&server)))
+            .send()
+            .await
+            .unwrap()
+            .text()
+            .await
+            .unwrap();
+        if text.contains("navguard_tests_by_consistency{flag=\"ok\"} 1") {
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    }
     assert!(
         text.contains("navguard_tests_by_consistency{flag=\"ok\"} 1"),
         "{text}"

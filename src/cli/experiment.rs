@@ -8,13 +8,14 @@ use std::path::{Path, PathBuf};
 use super::spinner;
 
 use anyhow::{Context, bail};
-use navguard::sim::experiment::coloured;
-use navguard::sim::experiment::{ramp, seed000, seed001, seed002, seed003, seed004};
+use navguard::sim::experiment::{
+    alarms, coloured, guards, ramp, seed000, seed001, seed002, seed003, seed004,
+};
 
 /// The experiments.
 #[derive(Debug, clap::Subcommand)]
 pub(crate) enum ExperimentCommand {
-    /// Seed 004: classic vs counter policy at thresholds 13 and 20 on the ship scenario.
+    /// Seed 004: traditional, classic and counter policies at thresholds 13 and 20 on the ship.
     Seed004(Seed004Args),
     /// Seed 002: redundant-gyro fault isolation (parity FSS test + wavelet-packet C-SVC).
     Seed002(Seed002Args),
@@ -26,6 +27,10 @@ pub(crate) enum ExperimentCommand {
     Seed000(Seed000Args),
     /// Seed 001: online vs batch vs global LS-SVM, IMU fault modes, outlier filter.
     Seed001(Seed001Args),
+    /// Alarms and warnings per fault-free hour of every federated test (ship seeds, real track).
+    Alarms(AlarmsArgs),
+    /// Frozen GNSS fixes and small DVL biases, with and without the aids' drift and stuck tests.
+    Guards(GuardsArgs),
     /// T_a's false-alarm rate on coloured residuals: successive-difference vs batch-means variance.
     Coloured(ColouredArgs),
 }
@@ -61,6 +66,38 @@ impl Experiment for ColouredArgs {
     fn render(output: &Self::Output) -> String {
         coloured::render(output)
     }
+}
+
+/// `navguard experiment guards` flags.
+#[derive(Debug, clap::Args)]
+pub(crate) struct GuardsArgs {
+    /// Seeds (comma-separated).
+    #[arg(long, value_delimiter = ',', default_value = "1,2,3,4,5")]
+    pub seeds: Vec<u64>,
+    /// False-alarm probability of the tests under the monitor's spec.
+    #[arg(long, default_value_t = 1e-3)]
+    pub p_fa: f64,
+}
+
+/// `navguard experiment alarms` flags.
+#[derive(Debug, clap::Args)]
+pub(crate) struct AlarmsArgs {
+    /// Ship seeds (comma-separated).
+    #[arg(long, value_delimiter = ',', default_value = "1,2,3,4,5")]
+    pub seeds: Vec<u64>,
+    /// The real track (1 Hz RTK fixes, the `simulate --track` format); `none` to skip it.
+    #[arg(long, default_value = "../shared/data/kf-gins-gnss-rtk.txt")]
+    pub track: PathBuf,
+    /// Seed of the track run.
+    #[arg(long, default_value_t = 1)]
+    pub track_seed: u64,
+    /// False-alarm probability of every test under the monitor's spec.
+    #[arg(long, default_value_t = 1e-3)]
+    pub p_fa: f64,
+    /// Exit non-zero unless, with the defaults, every session raises at most one alarm in
+    /// each started fault-free hour and every injected fault raises one.
+    #[arg(long)]
+    pub check: bool,
 }
 
 /// `navguard experiment seed000` flags.
@@ -118,7 +155,8 @@ pub(crate) struct Seed004Args {
     /// Error statistics start at this time, s (0: the whole run, initial convergence included).
     #[arg(long, default_value_t = seed004::SETTLE_S)]
     pub settle: f64,
-    /// Exit non-zero unless the counter policy beats the classic one at threshold 20.
+    /// Exit non-zero unless the counter policy beats the traditional one at threshold 20 in
+    /// every variant.
     #[arg(long)]
     pub check: bool,
 }
@@ -190,15 +228,32 @@ pub(crate) struct Seed003Args {
 /// `navguard experiment ramp` flags.
 #[derive(Debug, clap::Args)]
 pub(crate) struct RampArgs {
-    /// Scenario seed.
-    #[arg(long, default_value_t = 1)]
-    pub seed: u64,
+    /// Scenario seeds (comma-separated); mean and worst are over them.
+    #[arg(long, value_delimiter = ',', default_value = "1,2,3,4,5")]
+    pub seeds: Vec<u64>,
     /// Drift onset, s.
     #[arg(long, default_value_t = 1000.0)]
     pub onset: f64,
     /// How long after onset to wait for an alarm, s.
     #[arg(long, default_value_t = 600.0)]
     pub window: f64,
+    /// Drift rates, m/s (comma-separated).
+    #[arg(long, value_delimiter = ',', default_value = "0.5,1,2,5")]
+    pub rates: Vec<f64>,
+    /// Window lengths of the drift test of the `+drift` case, GNSS epochs (comma-separated).
+    #[arg(long, value_delimiter = ',', default_value = "12")]
+    pub drift_windows: Vec<usize>,
+    /// The drift test's own false-alarm probability in the `+drift` case (default: the
+    /// monitor's).
+    #[arg(long)]
+    pub drift_p_fa: Option<f64>,
+    /// Length of the fault-free runs, s (0: skip them).
+    #[arg(long, default_value_t = navguard::sim::SHIP_DURATION_S)]
+    pub fault_free: f64,
+    /// Exit non-zero unless the `+drift` case excludes every 0.5 and 1 m/s drift within
+    /// 20 m and every 2 m/s drift within 25 m, on every seed.
+    #[arg(long)]
+    pub check: bool,
 }
 
 /// What every experiment command does, so [`run`] drives them all alike:
@@ -254,8 +309,13 @@ impl Experiment for Seed004Args {
     }
 
     fn check(&self, output: &Self::Output) -> anyhow::Result<()> {
-        if self.check && !output.counters_beat_classic(20.0) {
-            bail!("the counter policy does not beat the classic one at threshold 20");
+        for v in &output.variants {
+            if self.check && !v.counters_beat("traditional", 20.0) {
+                bail!(
+                    "the counter policy does not beat the traditional one at threshold 20 (velocity fault {:?} s)",
+                    v.velocity_fault_s
+                );
+            }
         }
         Ok(())
     }
@@ -352,10 +412,20 @@ impl Experiment for RampArgs {
     const TITLE: &'static str = "ramp";
 
     fn run(&self) -> anyhow::Result<Self::Output> {
+        let mut cases = ramp::default_cases();
+        for case in &mut cases {
+            if let Some(d) = &mut case.drift {
+                d.windows = self.drift_windows.clone();
+                d.p_fa = self.drift_p_fa;
+            }
+        }
         let params = ramp::RampParams {
-            seed: self.seed,
+            seeds: self.seeds.clone(),
             onset_s: self.onset,
             window_s: self.window,
+            rates_mps: self.rates.clone(),
+            cases,
+            fault_free_s: self.fault_free,
             ..ramp::RampParams::default()
         };
         Ok(ramp::run(params)?)
@@ -363,6 +433,27 @@ impl Experiment for RampArgs {
 
     fn render(output: &Self::Output) -> String {
         ramp::render(output)
+    }
+
+    fn check(&self, output: &Self::Output) -> anyhow::Result<()> {
+        if !self.check {
+            return Ok(());
+        }
+        for row in output.rows.iter().filter(|r| r.case.drift.is_some()) {
+            let limit = if row.rate_mps <= 1.0 { 20.0 } else { 25.0 };
+            if row.rate_mps > 2.0 {
+                continue;
+            }
+            match row.drift_at_exclusion_m() {
+                Some((_, worst)) if worst <= limit => {}
+                other => bail!(
+                    "{} at {} m/s: worst drift at exclusion {other:?}, target ≤ {limit} m",
+                    row.label(),
+                    row.rate_mps
+                ),
+            }
+        }
+        Ok(())
     }
 }
 
@@ -422,6 +513,63 @@ impl Experiment for Seed001Args {
     }
 }
 
+impl Experiment for AlarmsArgs {
+    type Output = alarms::AlarmsResult;
+    const TITLE: &'static str = "alarms";
+
+    fn run(&self) -> anyhow::Result<Self::Output> {
+        let track = if self.track.as_os_str() == "none" {
+            None
+        } else {
+            let text = std::fs::read_to_string(&self.track)
+                .with_context(|| format!("reading --track {}", self.track.display()))?;
+            let track = navguard::sim::Track::parse(&text)
+                .with_context(|| format!("--track {}", self.track.display()))?;
+            Some((track, self.track_seed))
+        };
+        let params = alarms::AlarmsParams {
+            seeds: self.seeds.clone(),
+            track,
+            p_fa: self.p_fa,
+            ..alarms::AlarmsParams::default()
+        };
+        Ok(alarms::run(params)?)
+    }
+
+    fn render(output: &Self::Output) -> String {
+        alarms::render(output)
+    }
+
+    fn check(&self, output: &Self::Output) -> anyhow::Result<()> {
+        let defaults = alarms::AlarmsConfig::Defaults;
+        if self.check && !output.within_target(defaults) {
+            bail!("a session raised more than one alarm in a fault-free hour");
+        }
+        if self.check && !output.every_fault_alarmed(defaults) {
+            bail!("an injected fault raised no alarm");
+        }
+        Ok(())
+    }
+}
+
+impl Experiment for GuardsArgs {
+    type Output = guards::GuardsResult;
+    const TITLE: &'static str = "guards";
+
+    fn run(&self) -> anyhow::Result<Self::Output> {
+        let params = guards::GuardsParams {
+            seeds: self.seeds.clone(),
+            p_fa: self.p_fa,
+            ..guards::GuardsParams::default()
+        };
+        Ok(guards::run(params)?)
+    }
+
+    fn render(output: &Self::Output) -> String {
+        guards::render(output)
+    }
+}
+
 fn write_all(dir: &Path, files: &[(String, String)]) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     for (name, text) in files {
@@ -462,5 +610,7 @@ pub(crate) fn run(command: ExperimentCommand) -> anyhow::Result<()> {
         ExperimentCommand::Seed000(args) => execute(&args),
         ExperimentCommand::Seed001(args) => execute(&args),
         ExperimentCommand::Coloured(args) => execute(&args),
+        ExperimentCommand::Alarms(args) => execute(&args),
+        ExperimentCommand::Guards(args) => execute(&args),
     }
 }

@@ -303,6 +303,8 @@ fn linear_config(dt: f64) -> LinearConfigWire {
         x0: vec![0.0, 1.0, 0.0, -1.0],
         p0: diagonal(&[5.0; 4]),
         b: None,
+        drift: None,
+        stuck: None,
     }
 }
 

@@ -1,7 +1,9 @@
 //! Decision policies (docs/methods.md §M3): turn each epoch's exceedance of a test into
 //! a health state and into what the filter may do this epoch (update, take part
-//! in fusion, be reset). `classic` is the traditional residual χ² test; `counters`
-//! is seed 004 §2's improved test with the three counters t1, t2, t3.
+//! in fusion, be reset). `classic` is a per-epoch gate on the residual χ² test;
+//! `traditional` is seed 004's traditional ("no recursion") method, which keeps updating
+//! the guarded filter and only leaves it out of fusion; `counters` is seed 004 §2's
+//! improved test with the three counters t1, t2, t3.
 
 use serde::{Deserialize, Serialize};
 
@@ -14,7 +16,8 @@ pub enum Health {
     Healthy,
     /// Counters policy only: the filter predicts without updating, still fused.
     Suspect,
-    /// Left out of fusion; the measurement is not used.
+    /// Left out of fusion. The measurement is not used, except under `traditional`,
+    /// whose local filter still updates with it (seed 004's "no recursion" method).
     Isolated,
 }
 
@@ -48,13 +51,19 @@ pub enum PolicyError {
 }
 
 /// Which policy a test uses and its parameters, as the REST API states it:
-/// `{"kind": "classic"}` or `{"kind": "counters", "n1": 10, "n2": 5}`.
+/// `{"kind": "classic"}`, `{"kind": "traditional"}` or
+/// `{"kind": "counters", "n1": 10, "n2": 5}`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum PolicyConfig {
     /// λ > T_D rejects the measurement for this epoch (isolated for one epoch).
     #[default]
     Classic,
+    /// Seed 004's traditional method: λ > T_D leaves the filter out of fusion for this
+    /// epoch (isolated) but its local filter still updates with the measurement; no
+    /// reset on readmission. For a monitor without fusion (`linear`) the test only
+    /// reports: the filter always updates.
+    Traditional,
     /// Seed 004 §2 counters. `n1`: epochs without exceedance after which t1 is
     /// cleared; `n2`: exceedances tolerated as *suspect* before *isolated*.
     Counters {
@@ -81,6 +90,15 @@ impl PolicyConfig {
         PolicyConfig::Counters {
             n1: default_n1(),
             n2: default_n2(),
+        }
+    }
+
+    /// The wire name of the kind: `classic`, `traditional` or `counters`.
+    pub fn kind_name(&self) -> &'static str {
+        match self {
+            PolicyConfig::Classic => "classic",
+            PolicyConfig::Traditional => "traditional",
+            PolicyConfig::Counters { .. } => "counters",
         }
     }
 
@@ -111,7 +129,9 @@ impl Decision {
     fn for_health(health: Health, previous: Health, policy: PolicyConfig) -> Self {
         Decision {
             health,
-            update: health == Health::Healthy,
+            // seed 004 §2, traditional ("no recursion") method: the sub-filter keeps
+            // filtering the measurement; only the master fusion leaves it out.
+            update: health == Health::Healthy || policy == PolicyConfig::Traditional,
             fuse: health != Health::Isolated,
             reset: matches!(policy, PolicyConfig::Counters { .. })
                 && previous == Health::Isolated
@@ -135,7 +155,7 @@ impl PolicyState {
     pub fn new(config: PolicyConfig) -> Self {
         let t2 = match config {
             PolicyConfig::Counters { n1, .. } => n1,
-            PolicyConfig::Classic => 0,
+            PolicyConfig::Classic | PolicyConfig::Traditional => 0,
         };
         PolicyState {
             config,
@@ -156,7 +176,7 @@ impl PolicyState {
         self.health
     }
 
-    /// The counters `(t1, t2, t3)`; all zero for the classic policy.
+    /// The counters `(t1, t2, t3)`; all zero for the classic and traditional policies.
     pub fn counters(&self) -> (u32, u32, u32) {
         (self.t1, self.t2, self.t3)
     }
@@ -185,7 +205,7 @@ impl PolicyState {
     pub fn step(&mut self, exceeds: bool) -> Decision {
         let previous = self.health;
         self.health = match self.config {
-            PolicyConfig::Classic => {
+            PolicyConfig::Classic | PolicyConfig::Traditional => {
                 if exceeds {
                     Health::Isolated
                 } else {
@@ -252,6 +272,38 @@ mod tests {
                 reset: false
             }
         );
+    }
+
+    #[test]
+    fn traditional_policy_keeps_updating_but_leaves_an_exceeding_epoch_out_of_fusion() {
+        let mut p = PolicyState::new(PolicyConfig::Traditional);
+        assert_eq!(p.counters(), (0, 0, 0));
+        let d = p.step(true);
+        assert_eq!(
+            d,
+            Decision {
+                health: Health::Isolated,
+                update: true,
+                fuse: false,
+                reset: false
+            }
+        );
+        // Readmitted at the next quiet epoch, without a reset (the local filter carries
+        // its own, possibly contaminated, estimate back into the fusion).
+        let d = p.step(false);
+        assert_eq!(
+            d,
+            Decision {
+                health: Health::Healthy,
+                update: true,
+                fuse: true,
+                reset: false
+            }
+        );
+        // An epoch without data: predict only, fused as the health says.
+        p.step(true);
+        let idle = p.idle();
+        assert_eq!((idle.update, idle.fuse), (false, false));
     }
 
     #[test]
@@ -401,6 +453,13 @@ mod tests {
         assert_eq!(c, PolicyConfig::Counters { n1: 7, n2: 5 });
         let c: PolicyConfig = serde_json::from_str(r#"{"kind":"classic"}"#).unwrap();
         assert_eq!(c, PolicyConfig::Classic);
+        let c: PolicyConfig = serde_json::from_str(r#"{"kind":"traditional"}"#).unwrap();
+        assert_eq!(c, PolicyConfig::Traditional);
+        assert_eq!(
+            serde_json::to_value(c).unwrap(),
+            serde_json::json!({"kind": "traditional"})
+        );
+
         assert!(serde_json::from_str::<PolicyConfig>(r#"{"kind":"vote"}"#).is_err());
         assert!(serde_json::from_str::<PolicyConfig>(r#"{"kind":"counters","n3":1}"#).is_err());
     }

@@ -186,6 +186,17 @@ pub struct LocalTest {
     pub statistic: f64,
     /// Its dof (the measurement dimension).
     pub dof: u32,
+    /// The normalised innovation `ν = L⁻¹ r` (`S = L Lᵀ`, `‖ν‖² = λ`) in its first `dof`
+    /// entries, the rest zero: the input of the consistency diagnostics and of the drift
+    /// and stuck tests (docs/methods.md §M22, §M23). Fixed-size, so nothing is allocated.
+    pub nu: SVector<f64, 6>,
+}
+
+impl LocalTest {
+    /// `ν` as a slice of `dof` entries.
+    pub fn nu(&self) -> &[f64] {
+        &self.nu.as_slice()[..self.dof as usize]
+    }
 }
 
 /// What happened to one aid's local filter in one epoch.
@@ -474,11 +485,12 @@ impl<'a> EpochWork<'a> {
                         Some(e) => (e, 1.0),
                         None => (master_prior, self.betas[i]),
                     };
-                    let (statistic, s) = with_measurement!(o, m => share_test(prior, beta, m)?);
-                    self.s_local[i] = s;
+                    let t = with_measurement!(o, m => share_test(prior, beta, m)?);
+                    self.s_local[i] = t.s_inv;
                     Some(LocalTest {
-                        statistic,
+                        statistic: t.statistic,
                         dof: o.dof(),
+                        nu: t.nu,
                     })
                 }
                 None => None,
@@ -497,7 +509,7 @@ impl<'a> EpochWork<'a> {
                 // The test ran on the stale own prior; the update and the slope use the
                 // master's share the filter was just reset to.
                 self.s_local[i] =
-                    with_measurement!(o, m => share_test(master_prior, self.betas[i], m)?.1);
+                    with_measurement!(o, m => share_test(master_prior, self.betas[i], m)?.s_inv);
             }
         }
         Ok(())

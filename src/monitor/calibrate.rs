@@ -281,6 +281,8 @@ mod tests {
             x0: vec![0.0],
             p0: vec![vec![1e-8]],
             b: None,
+            drift: None,
+            stuck: None,
         })
         .unwrap();
         let mut m =

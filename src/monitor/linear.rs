@@ -2,16 +2,26 @@
 //! one Kalman filter, and the residual χ² test λ = rᵀS⁻¹r ~ χ²(m) (seed 004 §1.3)
 //! under the session's decision policy. It is also how navguard is checked
 //! against other Kalman filter libraries.
+//!
+//! Optional guards on the same innovation (docs/methods.md §M23, [`super::guards`]):
+//! `residual.drift`, a windowed-mean test on `ν = L⁻¹ r` for slow drifts the per-epoch
+//! test misses, and `residual.stuck`, a variance collapse of `ν` (a frozen input). Both
+//! are off unless the config has a `drift` or `stuck` block; when on, the filter updates
+//! only if every test allows it. The residual test's `ν` feeds its consistency
+//! diagnostics (docs/methods.md §M22).
 
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
+use super::guards::{self, DriftConfigWire, GuardConfig, InnovationGuards, StuckConfigWire};
 use super::{
     ConfigError, EpochError, Monitor, MonitorKind, MonitorReport, Outputs, StepError, TestBank,
 };
 use crate::detect::{PolicyConfig, ThresholdError, ThresholdSpec};
 use crate::epoch::Epoch;
-use crate::filter::kalman::{self, LinearObservation, LinearTransition, StateEstimate};
+use crate::filter::kalman::{
+    self, FilterError, LinearObservation, LinearTransition, StateEstimate,
+};
 
 /// The `config` of a `linear` monitor as the user writes it: row-major nested arrays.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -32,6 +42,12 @@ pub struct LinearConfigWire {
     /// Control matrix B (n × k), optional.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub b: Option<Vec<Vec<f64>>>,
+    /// The `residual.drift` test (docs/methods.md §M23); off when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub drift: Option<DriftConfigWire>,
+    /// The `residual.stuck` test (docs/methods.md §M21, §M23); off when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stuck: Option<StuckConfigWire>,
 }
 
 /// A validated linear model: `x = F x (+ B u) + w`, `z = H x + v`,
@@ -52,6 +68,8 @@ pub struct LinearConfig {
     pub p0: DMatrix<f64>,
     /// Control matrix B (n × k), when the model has a control input `u`.
     pub b: Option<DMatrix<f64>>,
+    /// The drift and stuck tests on the residual's normalised innovation.
+    pub guards: GuardConfig,
 }
 
 /// Relative tolerance for symmetry and for the smallest eigenvalue of a
@@ -190,6 +208,11 @@ impl TryFrom<LinearConfigWire> for LinearConfig {
         check_covariance("q", &q, false)?;
         check_covariance("r", &r, true)?;
         check_covariance("p0", &p0, false)?;
+        let guards = guards::validate(
+            "",
+            &wire.drift.unwrap_or_else(DriftConfigWire::disabled),
+            &wire.stuck.unwrap_or_else(StuckConfigWire::disabled),
+        )?;
         Ok(LinearConfig {
             f,
             h,
@@ -198,6 +221,7 @@ impl TryFrom<LinearConfigWire> for LinearConfig {
             x0: DVector::from_vec(wire.x0),
             p0,
             b,
+            guards,
         })
     }
 }
@@ -210,20 +234,23 @@ pub struct LinearMonitor {
     initial: StateEstimate<nalgebra::Dyn>,
     estimate: StateEstimate<nalgebra::Dyn>,
     bank: TestBank,
+    guards: InnovationGuards,
 }
 
 /// Index of the `residual` test in the bank.
 const RESIDUAL: usize = 0;
 
 impl LinearMonitor {
-    /// Builds the monitor; its one test `residual` has dof m.
+    /// Builds the monitor: the test `residual` (dof m) and the guards its config enables,
+    /// `residual.drift` (dof m) and `residual.stuck` (dof 1).
     pub fn new(
         config: LinearConfig,
         policy: PolicyConfig,
         spec: ThresholdSpec,
     ) -> Result<Self, ThresholdError> {
-        let dof = config.measurements() as u32;
-        let bank = TestBank::new(&[("residual", dof)], spec, policy)?;
+        let m = config.measurements();
+        let mut bank = TestBank::new(&[("residual", m as u32)], spec, policy)?;
+        let guards = InnovationGuards::new(&mut bank, "residual", m, &config.guards)?;
         let initial = StateEstimate {
             x: config.x0.clone(),
             p: config.p0.clone(),
@@ -241,6 +268,7 @@ impl LinearMonitor {
             estimate: initial.clone(),
             initial,
             bank,
+            guards,
         })
     }
 
@@ -323,20 +351,30 @@ impl Monitor for LinearMonitor {
         // Compute the posterior before deciding so a numerical failure leaves
         // the policy counters untouched too.
         let posterior = kalman::update(&prior, &self.observation, &innovation)?.0;
-        let outcome = self.bank.evaluate(RESIDUAL, innovation.statistic);
-        // docs/methods.md §M22: ν = L⁻¹r, so ‖ν‖² is the statistic.
-        if let Some(nu) = innovation.s_chol.l().solve_lower_triangular(&innovation.r) {
-            self.bank
-                .observe(RESIDUAL, nu.as_slice(), outcome.decision.health);
-        }
-        // seed 004 §2: a suspect or isolated filter predicts without updating.
-        self.estimate = if outcome.decision.update {
-            posterior
-        } else {
-            prior
-        };
+        // ν = L⁻¹ r (S = L Lᵀ): ‖ν‖² = λ; the guards' and the diagnostics' input.
+        let nu = innovation
+            .s_chol
+            .l()
+            .solve_lower_triangular(&innovation.r)
+            .ok_or(FilterError::NotPositiveDefinite)?;
+        let guard = self.guards.preview(&self.bank, nu.as_slice())?;
+        let (outcome, state) = self.bank.preview(
+            RESIDUAL,
+            innovation.statistic,
+            self.bank.slots()[RESIDUAL].dof,
+        )?;
+        let decision = self.guards.combined(&self.bank, &guard, outcome.decision);
+        self.bank.commit(RESIDUAL, state);
+        self.bank.observe(RESIDUAL, nu.as_slice(), decision.health);
+        let mut tests = vec![outcome];
+        let healthy = decision.health == crate::detect::Health::Healthy;
+        self.guards
+            .commit(&mut self.bank, guard, nu.as_slice(), healthy, &mut tests);
+        // seed 004 §2: a suspect or isolated filter predicts without updating (any of
+        // its tests can say so); `traditional` always updates (no fusion to leave).
+        self.estimate = if decision.update { posterior } else { prior };
         Ok(MonitorReport {
-            tests: vec![outcome],
+            tests,
             outputs: Outputs::Linear {
                 innovation: Some(innovation.r.as_slice().to_vec()),
                 x: self.estimate.x.as_slice().to_vec(),
@@ -348,6 +386,7 @@ impl Monitor for LinearMonitor {
     fn reset(&mut self) {
         self.estimate = self.initial.clone();
         self.bank.reset();
+        self.guards.reset();
     }
 }
 
@@ -508,6 +547,186 @@ mod tests {
             .unwrap();
         assert!(report.tests.is_empty());
         assert!((m.estimate().p[(0, 0)] - 20.25).abs() < 1e-12);
+    }
+
+    /// A 1-D random walk seen with σ = 1, the residual guarded as `guards` says.
+    fn walk(guards: serde_json::Value, policy: PolicyConfig) -> LinearMonitor {
+        let mut c = json!({
+            "f": [[1.0]], "h": [[1.0]], "q": [[1e-4]], "r": [[1.0]], "x0": [0.0], "p0": [[1.0]]
+        });
+        for (k, v) in guards.as_object().unwrap() {
+            c[k] = v.clone();
+        }
+        let config = LinearConfig::from_json(&c).unwrap();
+        LinearMonitor::new(config, policy, ThresholdSpec::PFa(1e-3)).unwrap()
+    }
+
+    fn noise(k: u32) -> f64 {
+        // A deterministic, zero-mean, unit-variance-ish sequence (no RNG needed).
+        let x = f64::from(k.wrapping_mul(2_654_435_761) % 1000) / 1000.0;
+        (x - 0.5) * 12f64.sqrt()
+    }
+
+    #[test]
+    fn guards_are_off_by_default_and_a_config_without_them_still_loads() {
+        // A config stored before the guards existed: no `drift`, no `stuck`.
+        let m = walk(json!({}), PolicyConfig::counters_default());
+        let names: Vec<_> = m.tests().slots().iter().map(|s| &*s.name).collect();
+        assert_eq!(names, ["residual"]);
+        let m = walk(
+            json!({"drift": {"windows": [5, 20]}, "stuck": {}}),
+            PolicyConfig::counters_default(),
+        );
+        let slots = m.tests().slots();
+        let names: Vec<_> = slots.iter().map(|s| (&*s.name, s.dof)).collect();
+        assert_eq!(
+            names,
+            [
+                ("residual", 1),
+                ("residual.drift", 1),
+                ("residual.stuck", 1)
+            ]
+        );
+        // The drift test follows the monitor's p_fa, the stuck test keeps its 1e-6.
+        assert!((slots[1].threshold - 10.8276).abs() < 1e-3);
+        assert!((slots[2].threshold - 23.9281).abs() < 1e-3);
+        let wire: LinearConfigWire = serde_json::from_value(cv_config()).unwrap();
+        let back = serde_json::to_value(&wire).unwrap();
+        assert!(
+            back.get("drift").is_none(),
+            "absent blocks stay absent: {back}"
+        );
+    }
+
+    #[test]
+    fn residual_drift_catches_a_slow_ramp_and_stops_the_update() {
+        let mut m = walk(json!({"drift": {}}), PolicyConfig::counters_default());
+        let (mut drift, mut chi2) = (None, None);
+        for k in 0..400u32 {
+            let ramp = if k >= 200 {
+                0.15 * f64::from(k - 200)
+            } else {
+                0.0
+            };
+            let before = m.estimate().x[0];
+            let r = m
+                .step(&Epoch {
+                    t: f64::from(k),
+                    z: Some(vec![noise(k) + ramp]),
+                    ..Default::default()
+                })
+                .unwrap();
+            let bad = |name: &str| {
+                r.tests
+                    .iter()
+                    .any(|o| &*o.name == name && o.decision.health != Health::Healthy)
+            };
+            if k >= 200 && drift.is_none() && bad("residual.drift") {
+                drift = Some(k - 200);
+                // The residual test is still healthy, but the filter only predicted
+                // (F = 1): the combined decision stopped the update.
+                assert!(!bad("residual"));
+                assert_eq!(m.estimate().x[0], before);
+            }
+            if k >= 200 && chi2.is_none() && bad("residual") {
+                chi2 = Some(k - 200);
+            }
+            assert!(k >= 200 || !bad("residual.drift"), "false alarm at {k}");
+        }
+        let drift = drift.expect("the drift test fires");
+        assert!(drift < chi2.unwrap_or(u32::MAX), "{drift} vs {chi2:?}");
+        // The consistency diagnostics were fed ν on the healthy epochs.
+        let mut c = m.tests().slots()[RESIDUAL].consistency.clone();
+        assert!(c.summary().unwrap().samples > 0);
+    }
+
+    #[test]
+    fn residual_stuck_catches_a_frozen_measurement() {
+        let mut m = walk(json!({"stuck": {}}), PolicyConfig::counters_default());
+        let mut flagged = None;
+        for k in 0..200u32 {
+            // Frozen from epoch 150: the same value repeated.
+            let z = if k >= 150 { noise(149) } else { noise(k) };
+            let r = m
+                .step(&Epoch {
+                    t: f64::from(k),
+                    z: Some(vec![z]),
+                    ..Default::default()
+                })
+                .unwrap();
+            let stuck = r.tests.iter().find(|o| &*o.name == "residual.stuck");
+            if let Some(o) = stuck
+                && o.decision.health != Health::Healthy
+                && flagged.is_none()
+            {
+                flagged = Some(k);
+            }
+        }
+        let k = flagged.expect("flagged");
+        assert!((150..=160).contains(&k), "flagged at {k}");
+    }
+
+    #[test]
+    fn traditional_on_a_filter_without_fusion_flags_but_keeps_updating() {
+        let c = LinearConfig::from_json(&cv_config()).unwrap();
+        let mut m = LinearMonitor::new(c, PolicyConfig::Traditional, ThresholdSpec::Threshold(5.0))
+            .unwrap();
+        let report = m
+            .step(&Epoch {
+                t: 0.0,
+                z: Some(vec![100.0]),
+                ..Default::default()
+            })
+            .unwrap();
+        assert_eq!(report.tests[0].decision.health, Health::Isolated);
+        let Outputs::Linear { x, .. } = report.outputs else {
+            panic!("linear outputs")
+        };
+        assert!(x[0] > 90.0, "the outlier was used: {x:?}");
+    }
+
+    #[test]
+    fn guard_blocks_are_refused_by_monitor_build_naming_the_exact_path() {
+        let cases = [
+            (json!({"drift": {"windows": []}}), "drift.windows"),
+            (json!({"drift": {"windows": [0]}}), "drift.windows[0]"),
+            (json!({"drift": {"windows": [3, 3]}}), "drift.windows[1]"),
+            (json!({"drift": {"p_fa": 2}}), "drift.p_fa"),
+            (json!({"drift": {"threshold": 0}}), "drift.threshold"),
+            (json!({"drift": {"p_fa": 0.1, "threshold": 3}}), "drift"),
+            (json!({"drift": {"window": 3}}), "drift.window"),
+            (json!({"drift": {"enabled": 1}}), "drift.enabled"),
+            (json!({"stuck": {"k": 1}}), "stuck.k"),
+            (json!({"stuck": {"p_fa": 0}}), "stuck.p_fa"),
+            (json!({"stuck": {"threshold": -2}}), "stuck.threshold"),
+            (json!({"stuck": {"p_fa": 1e-6, "threshold": 24}}), "stuck"),
+            (json!({"stuck": {"k": "8"}}), "stuck.k"),
+        ];
+        for (guards, field) in cases {
+            let mut c = cv_config();
+            for (k, v) in guards.as_object().unwrap() {
+                c[k] = v.clone();
+            }
+            let spec = crate::monitor::MonitorSpec {
+                kind: MonitorKind::Linear,
+                config: match crate::monitor::MonitorConfig::parse(MonitorKind::Linear, &c) {
+                    Ok(config) => config,
+                    Err(e) => {
+                        assert_eq!(e.field, field, "{guards}: {e}");
+                        continue;
+                    }
+                },
+                policy: PolicyConfig::Classic,
+                threshold: ThresholdSpec::default(),
+            };
+            match crate::monitor::build(&spec, &crate::monitor::NoModels) {
+                Err(crate::monitor::BuildError::Config(e)) => {
+                    assert_eq!(e.field, field, "{guards}: {e}")
+                }
+                Err(e) => panic!("{guards}: {e}"),
+                Ok(_) => panic!("{guards} accepted"),
+            }
+        }
     }
 
     #[test]

@@ -5,6 +5,7 @@
 pub mod calibrate;
 pub mod channel;
 pub mod federated;
+pub mod guards;
 pub mod linear;
 pub mod rimu;
 pub mod tacan;

@@ -32,14 +32,16 @@ impl SessionGauges {
         use crate::monitor::Availability;
         for m in stats.monitors.values() {
             for t in m.tests.values() {
-                let c = match t.consistency.and_then(|c| c.flag) {
-                    Some(ConsistencyFlag::Ok) => 0,
-                    Some(ConsistencyFlag::Overconfident) => 1,
-                    Some(ConsistencyFlag::Underconfident) => 2,
-                    Some(ConsistencyFlag::Correlated) => 3,
-                    None => 4,
-                };
-                self.consistency[c] += 1;
+                // Tests fed no normalised innovation have no diagnostics to count.
+                if let Some(c) = t.consistency {
+                    self.consistency[match c.flag {
+                        Some(ConsistencyFlag::Ok) => 0,
+                        Some(ConsistencyFlag::Overconfident) => 1,
+                        Some(ConsistencyFlag::Underconfident) => 2,
+                        Some(ConsistencyFlag::Correlated) => 3,
+                        None => 4,
+                    }] += 1;
+                }
                 self.states[match t.state {
                     Health::Healthy => 0,
                     Health::Suspect => 1,

@@ -33,8 +33,9 @@ pub use faults::{Channel, Fault, FaultInjector, FaultKind};
 pub use ins_truth::{InsErrorConfig, InsErrorSim};
 pub use scenario::{
     SHIP_DURATION_S, SHIP_INS_RATE_HZ, SHIP_START_LAT_DEG, SHIP_START_LON_DEG, Scenario,
-    ScenarioParams, SimEpoch, ship, ship_fault_free, ship_faults, ship_params, ship_trajectory,
-    ship_with, simulate, track_scenario,
+    ScenarioParams, SimEpoch, gnss_freeze, ship, ship_fault_free, ship_faults, ship_params,
+    ship_trajectory, ship_with, simulate, station_keeping_trajectory, station_keeping_with,
+    track_scenario,
 };
 pub use sensors::{AidSensors, CnsSpec, DvlSpec, GnssSpec, SensorConfig};
 pub use track::{Track, TrackError, TrackFix};

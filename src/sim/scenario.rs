@@ -114,12 +114,15 @@ impl Scenario {
             gnss: self.sensors.gnss.map(|g| GnssNoise {
                 pos_sigma_m: g.pos_sigma_m,
                 vel_sigma_mps: g.vel_sigma_mps,
+                ..GnssNoise::default()
             }),
             dvl: self.sensors.dvl.map(|d| DvlNoise {
                 vel_sigma_mps: d.vel_sigma_mps,
+                ..DvlNoise::default()
             }),
             cns: self.sensors.cns.map(|c| CnsNoise {
                 pos_sigma_m: c.pos_sigma_m,
+                ..CnsNoise::default()
             }),
             imu: ImuSection::from(self.ins.imu),
             init,
@@ -202,6 +205,70 @@ pub fn ship_trajectory() -> Result<Trajectory, SimError> {
         .speed_change(10.0, 0.02)
         .turn(deg(60.0), deg(0.3))
         .build()
+}
+
+/// A ship that stops and starts again (docs/methods.md §M19, §M23; for the frozen-fix
+/// faults of `experiment guards`): seed 004's start, then
+///
+/// | t (s) | manoeuvre |
+/// |---|---|
+/// | 0–300 | straight, 045°, 10 m/s |
+/// | 300–500 | slow down to 0 at 0.05 m/s² |
+/// | 500–1200 | stationary |
+/// | 1200–1210 | creep off at 0.05 m/s² to 0.5 m/s |
+/// | 1210–1510 | creeping at 0.5 m/s |
+/// | 1510–1700 | speed up to 10 m/s |
+/// | 1700– | straight at 10 m/s |
+pub fn station_keeping_trajectory() -> Result<Trajectory, SimError> {
+    let start = Lla {
+        lat: SHIP_START_LAT_DEG.to_radians(),
+        lon: SHIP_START_LON_DEG.to_radians(),
+        h: 0.0,
+    };
+    TrajectoryBuilder::new(start, 10.0, 45f64.to_radians())
+        .straight(300.0)
+        .speed_change(0.0, 0.05)
+        .straight(700.0)
+        .speed_change(0.5, 0.05)
+        .straight(300.0)
+        .speed_change(10.0, 0.05)
+        .build()
+}
+
+/// A frozen GNSS fix: every position component held at its value at `start_s` until
+/// `end_s` (seed 001's stuck fault on a whole fix; the velocity keeps reporting).
+pub fn gnss_freeze(start_s: f64, end_s: f64) -> Vec<Fault> {
+    (0..3)
+        .map(|component| Fault {
+            aid: Aid::Gnss,
+            channel: Channel::Position,
+            component,
+            kind: FaultKind::Stuck,
+            start_s,
+            end_s: Some(end_s),
+        })
+        .collect()
+}
+
+/// The station-keeping ship (10 Hz INS, seed 004's sensors) with `faults`, `duration_s`
+/// long.
+///
+/// # Errors
+/// [`SimError`] for a negative duration or an invalid fault.
+pub fn station_keeping_with(
+    seed: u64,
+    faults: Vec<Fault>,
+    duration_s: f64,
+) -> Result<Scenario, SimError> {
+    check_non_negative("duration_s", duration_s)?;
+    let truth = station_keeping_trajectory()?.sample(SHIP_INS_RATE_HZ, duration_s)?;
+    simulate(
+        ScenarioParams {
+            name: "station-keeping".into(),
+            ..ship_params(seed, faults)
+        },
+        truth,
+    )
 }
 
 /// Seed 004's faults (docs/methods.md §M19): a GNSS position jump of 0.02′ in latitude
@@ -448,6 +515,25 @@ mod tests {
             ship_with(1, vec![bad], 1.0),
             Err(SimError::InvalidFault { index: 0, .. })
         ));
+    }
+
+    #[test]
+    fn the_station_keeping_ship_stops_creeps_and_a_freeze_holds_the_fix() {
+        let truth = station_keeping_trajectory()
+            .unwrap()
+            .sample(1.0, 1800.0)
+            .unwrap();
+        let speed = |t: usize| truth[t].vel.xy().norm();
+        assert_relative_eq!(speed(100), 10.0, epsilon = 1e-9);
+        assert!(speed(800) < 1e-9);
+        assert_relative_eq!(speed(1300), 0.5, epsilon = 1e-9);
+        assert_relative_eq!(speed(1750), 10.0, epsilon = 1e-9);
+        let s = station_keeping_with(2, gnss_freeze(20.0, 30.0), 40.0).unwrap();
+        let fix = |t: usize| gnss_lla(&s.epochs[t * 10]).unwrap();
+        assert_eq!(fix(20), fix(29), "held");
+        assert_ne!(fix(19), fix(20));
+        assert_ne!(fix(29), fix(30), "released");
+        assert_eq!(s.name, "station-keeping");
     }
 
     #[test]

@@ -94,13 +94,15 @@ pub(super) fn bias_columns_zero<const M: usize>(h: &SMatrix<f64, M, N>) -> bool 
 
 /// The local test of `m` against the prior `(x, P/β)` without forming `P/β`:
 /// `r = z − H x`, `S = H P Hᵀ / β + R`, `λ = |L⁻¹ r|²` with `S = L Lᵀ` — what
-/// [`kalman::innovation`] computes for that prior. Returns `λ` and the diagonal of `S⁻¹`
-/// (first M entries), which the HPL slope needs.
+/// [`kalman::innovation`] computes for that prior. Returns `λ`, the diagonal of `S⁻¹`
+/// (first M entries), which the HPL slope needs, and the normalised innovation
+/// `ν = L⁻¹ r` (first M entries; `‖ν‖² = λ`), which the consistency diagnostics and the
+/// drift and stuck tests take (docs/methods.md §M22, §M23).
 pub(super) fn share_test<const M: usize>(
     prior: &ErrorEstimate,
     beta: f64,
     m: &AidMeasurement<M>,
-) -> Result<(f64, SVector<f64, 6>), FilterError> {
+) -> Result<ShareTest, FilterError> {
     let h = &m.obs.h;
     let r = m.z - h * prior.x;
     let hph = if bias_columns_zero(h) {
@@ -114,15 +116,33 @@ pub(super) fn share_test<const M: usize>(
     finite("innovation covariance", &s)?;
     let l_inv = inverse_cholesky_factor(&s).ok_or(FilterError::NotPositiveDefinite)?;
     // λ = rᵀ (L Lᵀ)⁻¹ r = |L⁻¹ r|², and (S⁻¹)_ii = Σ_k (L⁻¹)_ki² (column norms of L⁻¹).
-    let statistic = (l_inv * r).norm_squared();
+    let nu_m = l_inv * r;
+    let statistic = nu_m.norm_squared();
     if !statistic.is_finite() {
         return Err(FilterError::NonFinite("chi-square statistic"));
     }
     let mut s_inv = SVector::<f64, 6>::zeros();
+    let mut nu = SVector::<f64, 6>::zeros();
     for i in 0..M {
         s_inv[i] = l_inv.column(i).norm_squared();
+        nu[i] = nu_m[i];
     }
-    Ok((statistic, s_inv))
+    Ok(ShareTest {
+        statistic,
+        s_inv,
+        nu,
+    })
+}
+
+/// What [`share_test`] computes: fixed-size, so the test allocates nothing.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct ShareTest {
+    /// `λ = rᵀ S⁻¹ r`.
+    pub(super) statistic: f64,
+    /// Diagonal of `S⁻¹`, first M entries.
+    pub(super) s_inv: SVector<f64, 6>,
+    /// `ν = L⁻¹ r`, first M entries.
+    pub(super) nu: SVector<f64, 6>,
 }
 
 /// `L⁻¹` for the Cholesky factor `S = L Lᵀ` of a small SPD matrix, by plain loops (for

@@ -221,10 +221,17 @@ fn fast_kernels_equal_the_generic_kalman_filter() {
             assert_eq!(fast.p, fast.p.transpose());
             for o in obs.iter().flatten() {
                 with_measurement!(o, m => {
-                    let (lambda, _) = share_test(&slow, 0.25, m).unwrap();
+                    let test = share_test(&slow, 0.25, m).unwrap();
+                    let lambda = test.statistic;
                     let innov =
                         kalman::innovation(&scaled(&slow, 0.25), &m.obs, &m.z).unwrap();
                     assert!((lambda - innov.statistic).abs() <= 1e-12 * innov.statistic);
+                    // ν = L⁻¹ r with the generic filter's Cholesky factor of S.
+                    let nu = innov.s_chol.l().solve_lower_triangular(&innov.r).unwrap();
+                    for (i, v) in nu.iter().enumerate() {
+                        assert!((test.nu[i] - v).abs() <= 1e-10 * (1.0 + v.abs()), "ν[{i}]");
+                    }
+                    assert!(test.nu.iter().skip(nu.len()).all(|&v| v == 0.0));
                     let mut fast = slow.clone();
                     joseph_update(&mut fast, m).unwrap();
                     let reference = kalman_update(&slow, m).unwrap();

@@ -14,12 +14,18 @@
 //!   missed-detection rates (its Fig. 3 and Table 2) on the `ads-gnss` scenario.
 //! - [`seed001`]: seed 001's online vs batch vs global LS-SVM, IMU fault modes and
 //!   outlier filter on the `imu-channel` scenario.
-//! - [`ramp`]: docs/methods.md §M19's slow GNSS drift benchmark.
+//! - [`ramp`]: docs/methods.md §M19's slow GNSS drift benchmark (with §M23's drift test).
 //! - [`coloured`]: T_a's false-alarm rate on coloured residuals, old and calibrated variance.
+//! - [`alarms`]: alarms and warnings per fault-free hour of every test of a federated
+//!   session (ship seeds and the real track), and every injected fault alarmed.
+//! - [`guards`]: frozen GNSS fixes and small DVL biases, with and without the aids' drift
+//!   and stuck tests.
 //! - [`scorecard`]: the per-detector figures every experiment ends with.
 //! - [`plot`]: the SVG line charts.
 
+pub mod alarms;
 pub mod coloured;
+pub mod guards;
 pub mod plot;
 pub mod ramp;
 pub mod scorecard;
@@ -40,7 +46,7 @@ use crate::epoch::Aid;
 use crate::features::FeatureError;
 use crate::geo::{self, Lla};
 use crate::learn::LearnError;
-use crate::monitor::{self, BuildError, MonitorSpec, StepError};
+use crate::monitor::{self, Availability, BuildError, MonitorSpec, StepError};
 use scorecard::FaultWindow;
 
 /// Why an experiment could not run.
@@ -117,6 +123,9 @@ pub struct MonitorRun {
     pub tests: BTreeMap<String, Vec<TestSample>>,
     /// HPL at every epoch that reports one, `(t, m)`.
     pub hpl: Vec<(f64, f64)>,
+    /// INS epochs whose integrity was converging, available, unavailable
+    /// (docs/methods.md §M24).
+    pub integrity_counts: [usize; 3],
     /// Mean wall-clock time of one monitor step, s.
     pub time_per_epoch_s: f64,
 }
@@ -128,6 +137,38 @@ impl MonitorRun {
             .get(test)
             .map(|s| s.iter().map(|x| (x.t, x.health)).collect())
             .unwrap_or_default()
+    }
+
+    /// The combined `(t, health)` trace of an aid (docs/methods.md §M23): at every epoch on
+    /// which its χ² test `aid` ran, the worst health of that test and of its guards
+    /// (`aid.drift`, `aid.stuck`, each at its last reported health) — the health its local
+    /// filter followed.
+    pub fn aid_health_trace(&self, aid: &str) -> Vec<(f64, Health)> {
+        let prefix = format!("{aid}.");
+        let guards: Vec<&Vec<TestSample>> = self
+            .tests
+            .iter()
+            .filter(|(name, _)| name.starts_with(&prefix))
+            .map(|(_, samples)| samples)
+            .collect();
+        let mut cursors = vec![0usize; guards.len()];
+        let mut last = vec![Health::Healthy; guards.len()];
+        let Some(main) = self.tests.get(aid) else {
+            return Vec::new();
+        };
+        main.iter()
+            .map(|s| {
+                let mut h = s.health;
+                for (g, samples) in guards.iter().enumerate() {
+                    while cursors[g] < samples.len() && samples[cursors[g]].t <= s.t {
+                        last[g] = samples[cursors[g]].health;
+                        cursors[g] += 1;
+                    }
+                    h = crate::monitor::guards::worse(h, last[g]);
+                }
+                (s.t, h)
+            })
+            .collect()
     }
 
     /// The first epoch at or after `from` on which `test` is not healthy.
@@ -167,6 +208,7 @@ pub fn run_monitor(scenario: &Scenario, spec: &MonitorSpec) -> Result<MonitorRun
         errors: Vec::with_capacity(scenario.epochs.len()),
         tests: BTreeMap::new(),
         hpl: Vec::new(),
+        integrity_counts: [0; 3],
         time_per_epoch_s: 0.0,
     };
     let mut busy = std::time::Duration::ZERO;
@@ -187,6 +229,13 @@ pub fn run_monitor(scenario: &Scenario, spec: &MonitorSpec) -> Result<MonitorRun
                     threshold: o.statistic.threshold,
                     health: o.decision.health,
                 });
+        }
+        if let Some(i) = report.integrity {
+            run.integrity_counts[match i.state {
+                Availability::Converging => 0,
+                Availability::Available => 1,
+                Availability::Unavailable => 2,
+            }] += 1;
         }
         let outputs = serde_json::to_value(&report.outputs).unwrap_or(Value::Null);
         let (lla, vel, hpl) = solution(&outputs).ok_or(ExperimentError::NoSolution(t))?;
