@@ -374,14 +374,8 @@ pub fn render(r: &AlarmsResult) -> String {
     );
     let _ = writeln!(
         s,
-        "{:<20} {:<36} {:>6} {:>9} {:>8}  {:<34} {}",
-        "config",
-        "session",
-        "hours",
-        "alarms/h",
-        "warn/h",
-        "alarming tests (alarms, warnings)",
-        "integrity conv/avail/unavail"
+        "{:<20} {:<36} {:>6} {:>9} {:>8}  {:<34} integrity conv/avail/unavail",
+        "config", "session", "hours", "alarms/h", "warn/h", "alarming tests (alarms, warnings)"
     );
     for x in &r.sessions {
         let noisy: Vec<String> = x
