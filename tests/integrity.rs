@@ -1,0 +1,348 @@
+//! Issue 12 through the real server (docs/methods.md §M23, §M24): a federated session
+//! opens `converging` with its protection level above the alert limit and raises no alarm;
+//! a GNSS fault present from the start is a warning while the filter converges and an
+//! alarm the moment it has converged; the drift and stuck tests raise their own alarms
+//! (`gnss.drift` on a slow GNSS drift, `residual.stuck` on a frozen measurement), stored
+//! in the alarm log with their test names.
+//!
+//! The ship runs at a 1 Hz INS rate (as in tests/federated.rs) so a debug build streams
+//! a few hundred seconds quickly.
+
+mod common;
+
+use common::{Socket, create_session, http, ingest, recv, send, start};
+use navguard::service::wire::epoch_to_wire;
+use navguard::service::{Limits, Server};
+use navguard::sim::scenario::{ScenarioParams, ship_params};
+use navguard::sim::{self, Channel, Fault, FaultKind, Scenario};
+use serde_json::{Value, json};
+
+fn client() -> reqwest::Client {
+    reqwest::Client::new()
+}
+
+/// The ship at a 1 Hz INS rate.
+fn ship_1hz(seed: u64, faults: Vec<Fault>, duration_s: f64) -> Scenario {
+    let truth = sim::ship_trajectory()
+        .unwrap()
+        .sample(1.0, duration_s)
+        .unwrap();
+    let params = ScenarioParams {
+        ins_rate_hz: 1.0,
+        ..ship_params(seed, faults)
+    };
+    sim::simulate(params, truth).unwrap()
+}
+
+/// A session `id` with one federated monitor `nav` (the scenario's config with `extra`
+/// merged in), counters, p_fa 1e-3, echoing results.
+fn federated_session(id: &str, scenario: &Scenario, extra: Value) -> Value {
+    let mut config = scenario.default_monitor_config();
+    for (k, v) in extra.as_object().unwrap() {
+        config[k] = v.clone();
+    }
+    json!({"id": id, "echo": true, "monitors": [{
+        "name": "nav", "type": "federated", "config": config,
+        "policy": {"kind": "counters", "n1": 10, "n2": 5}, "p_fa": 1e-3
+    }]})
+}
+
+/// Streams `frames` in batches of 10 and returns, in arrival order, every message the
+/// ingest socket sent up to the last `result`: the results and the events between them.
+async fn stream_all(socket: &mut Socket, frames: &[Value]) -> (Vec<Value>, Vec<Value>) {
+    for chunk in frames.chunks(10) {
+        send(socket, &Value::Array(chunk.to_vec())).await;
+    }
+    let (mut results, mut events) = (Vec::new(), Vec::new());
+    while results.len() < frames.len() {
+        let message = recv(socket).await;
+        assert_ne!(message["type"], "error", "{message}");
+        if message["type"] == "result" {
+            results.push(message);
+        } else {
+            events.push(message);
+        }
+    }
+    (results, events)
+}
+
+fn frames(scenario: &Scenario) -> Vec<Value> {
+    scenario
+        .epochs
+        .iter()
+        .map(|e| serde_json::from_str(&epoch_to_wire(&e.epoch).unwrap()).unwrap())
+        .collect()
+}
+
+/// The session's stored alarm log (alarms and warnings), oldest first.
+async fn alarm_log(server: &Server, session: &str) -> Vec<Value> {
+    let page: Value = client()
+        .get(format!(
+            "{}/api/v1/alarms?session={session}&limit=1000",
+            http(server)
+        ))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let mut log = page["alarms"].as_array().unwrap().clone();
+    log.sort_by_key(|a| a["id"].as_i64().unwrap());
+    log
+}
+
+fn of_type<'a>(events: &'a [Value], kind: &str) -> Vec<&'a Value> {
+    events.iter().filter(|e| e["type"] == kind).collect()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_federated_session_opens_converging_without_an_alarm_and_then_is_available() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = start(&dir.path().join("i.db"), None, Limits::default()).await;
+    let scenario = ship_1hz(11, Vec::new(), 240.0);
+    create_session(
+        &client(),
+        &server,
+        &federated_session("conv", &scenario, json!({})),
+    )
+    .await;
+    let mut socket = ingest(&server, "conv").await;
+    let (results, events) = stream_all(&mut socket, &frames(&scenario)).await;
+
+    // At t = 0 the HPL from P0 is above the HAL: the filter converging, not a fault.
+    let first = &results[0]["monitors"]["nav"]["integrity"];
+    assert_eq!(first["state"], "converging", "{first}");
+    assert!(
+        first["protection_level"].as_f64().unwrap() > first["alert_limit"].as_f64().unwrap(),
+        "{first}"
+    );
+    // One change, converging → available, at the first epoch whose HPL is within the HAL.
+    let changes = of_type(&events, "availability");
+    assert_eq!(changes.len(), 1, "{changes:?}");
+    let change = changes[0];
+    assert_eq!(
+        (&change["from"], &change["to"]),
+        (&json!("converging"), &json!("available"))
+    );
+    let at = results
+        .iter()
+        .position(|r| r["monitors"]["nav"]["integrity"]["state"] == "available")
+        .unwrap();
+    assert_eq!(change["t"], results[at]["t"]);
+    assert!(
+        change["protection_level"].as_f64().unwrap() <= change["alert_limit"].as_f64().unwrap()
+    );
+    assert!(
+        results[..at]
+            .iter()
+            .all(|r| r["monitors"]["nav"]["integrity"]["state"] == "converging")
+    );
+    // No alarm on either channel, none stored.
+    assert!(of_type(&events, "alarm").is_empty(), "{events:?}");
+    let log = alarm_log(&server, "conv").await;
+    assert!(
+        log.iter().all(|a| a["severity"] != "alarm"),
+        "fault-free alarms: {log:?}"
+    );
+    // The stats keep the timeline: the convergence stretch, then available now.
+    let stats: Value = client()
+        .get(format!("{}/api/v1/sessions/conv/stats", http(&server)))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let integrity = &stats["monitors"]["nav"]["integrity"];
+    assert_eq!(integrity["state"], "available", "{integrity}");
+    let timeline = integrity["timeline"].as_array().unwrap();
+    assert_eq!(timeline[0]["state"], "converging", "{integrity}");
+    assert_eq!(
+        timeline.last().unwrap()["state"],
+        "available",
+        "{integrity}"
+    );
+    server.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_gnss_fault_from_the_start_warns_while_converging_and_alarms_once_converged() {
+    // A 100 m east offset on every GNSS fix from t = 0 and a 30 s convergence cap: GNSS is
+    // excluded within seconds, and without it the HPL may never come within the HAL.
+    let fault = Fault {
+        aid: navguard::epoch::Aid::Gnss,
+        channel: Channel::Position,
+        component: 0,
+        kind: FaultKind::Step { value: 100.0 },
+        start_s: 0.0,
+        end_s: None,
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let server = start(&dir.path().join("i.db"), None, Limits::default()).await;
+    let scenario = ship_1hz(12, vec![fault], 60.0);
+    create_session(
+        &client(),
+        &server,
+        &federated_session("start", &scenario, json!({"converge_max_s": 30.0})),
+    )
+    .await;
+    let mut socket = ingest(&server, "start").await;
+    let (_, events) = stream_all(&mut socket, &frames(&scenario)).await;
+
+    let changes = of_type(&events, "availability");
+    let converged = changes
+        .iter()
+        .find(|c| c["from"] == "converging")
+        .expect("the monitor converges (or its cap passes)");
+    let t_conv = converged["t"].as_f64().unwrap();
+    assert!(t_conv <= 31.0, "{converged}");
+    // Before it: the GNSS tests' changes are warnings, however far they went.
+    let states = of_type(&events, "state");
+    let early: Vec<_> = states
+        .iter()
+        .filter(|s| s["t"].as_f64().unwrap() < t_conv)
+        .collect();
+    assert!(
+        early
+            .iter()
+            .any(|s| s["test"] == "gnss" && s["to"] == "isolated"),
+        "GNSS isolated while converging: {states:?}"
+    );
+    assert!(
+        early.iter().all(|s| s["severity"] == "warning"),
+        "{early:?}"
+    );
+    // At convergence: one alarm per test left isolated, `gnss` among them, at that epoch.
+    let alarms = of_type(&events, "alarm");
+    assert!(!alarms.is_empty(), "{events:?}");
+    assert!(alarms.iter().any(|a| a["test"] == "gnss"), "{alarms:?}");
+    for a in &alarms {
+        assert_eq!(a["t"].as_f64().unwrap(), t_conv, "{a}");
+        assert!(a["test"].as_str().unwrap().starts_with("gnss"), "{a}");
+        assert_eq!(a["state"], "isolated", "{a}");
+    }
+    // Stored the same way: warnings before, the alarms at convergence.
+    let log = alarm_log(&server, "start").await;
+    let stored: Vec<_> = log.iter().filter(|a| a["severity"] == "alarm").collect();
+    assert_eq!(stored.len(), alarms.len(), "{log:?}");
+    assert!(
+        log.iter()
+            .filter(|a| a["t"].as_f64().unwrap() < t_conv)
+            .all(|a| a["severity"] == "warning"),
+        "{log:?}"
+    );
+    server.shutdown().await;
+}
+
+/// Onset of the drift, s.
+const ONSET: f64 = 600.0;
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn gnss_drift_alarms_on_a_slow_gnss_drift_through_the_server() {
+    // 1 m/s north-east from 600 s (as tests/federated.rs does in-process): the drift test
+    // warns within about 20 m and excludes GNSS well before the per-epoch χ² test.
+    let faults = navguard::sim::experiment::ramp::ramp_faults(1.0, ONSET);
+    let dir = tempfile::tempdir().unwrap();
+    let server = start(&dir.path().join("i.db"), None, Limits::default()).await;
+    let scenario = ship_1hz(6, faults, ONSET + 80.0);
+    create_session(
+        &client(),
+        &server,
+        &federated_session("ramp", &scenario, json!({})),
+    )
+    .await;
+    let mut socket = ingest(&server, "ramp").await;
+    let (results, events) = stream_all(&mut socket, &frames(&scenario)).await;
+
+    let states = of_type(&events, "state");
+    let first = |test: &str| {
+        states
+            .iter()
+            .find(|s| s["test"] == test && s["from"] == "healthy")
+            .map(|s| s["t"].as_f64().unwrap() - ONSET)
+    };
+    let warned = first("gnss.drift").expect("gnss.drift flags the drift");
+    assert!(
+        warned <= 25.0,
+        "gnss.drift flagged {warned} s (m) into the drift"
+    );
+    assert!(first("gnss").is_none_or(|c| c >= warned), "{states:?}");
+    let alarms = of_type(&events, "alarm");
+    assert!(
+        alarms.iter().all(|a| a["t"].as_f64().unwrap() >= ONSET
+            && a["test"].as_str().unwrap().starts_with("gnss")),
+        "{alarms:?}"
+    );
+    let drift = alarms
+        .iter()
+        .find(|a| a["test"] == "gnss.drift")
+        .unwrap_or_else(|| panic!("no gnss.drift alarm: {alarms:?}"));
+    let after = drift["t"].as_f64().unwrap() - ONSET;
+    assert!(
+        after <= 40.0,
+        "gnss.drift alarm {after} s (m) into the drift"
+    );
+    assert_eq!(drift["dof"], 2, "{drift}");
+    assert!(drift["test_ratio"].as_f64().unwrap() > 1.0, "{drift}");
+    // The results carry the test beside the χ² test, and the log stores the alarm.
+    let tests = &results.last().unwrap()["monitors"]["nav"]["tests"];
+    assert!(tests.get("gnss.drift").is_some(), "{tests}");
+    let log = alarm_log(&server, "ramp").await;
+    assert!(
+        log.iter()
+            .any(|a| a["test"] == "gnss.drift" && a["severity"] == "alarm"),
+        "{log:?}"
+    );
+    server.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn residual_stuck_alarms_on_a_frozen_measurement_through_the_server() {
+    // A slow 1-D random walk seen with σ = 1, frozen from measurement 300.
+    let mut g = common::Gauss::new(21);
+    let mut truth = 0.0;
+    let mut z: Vec<f64> = (0..400)
+        .map(|_| {
+            truth += 0.01 * g.normal();
+            truth + g.normal()
+        })
+        .collect();
+    let held = z[299];
+    for v in &mut z[300..] {
+        *v = held;
+    }
+    let config = json!({
+        "f": [[1.0]], "h": [[1.0]], "q": [[1e-4]], "r": [[1.0]], "x0": [0.0], "p0": [[1.0]],
+        "stuck": {}
+    });
+    let body = json!({"id": "stuck", "echo": true, "monitors": [{
+        "name": "cv", "type": "linear", "config": config,
+        "policy": {"kind": "classic"}, "p_fa": 1e-3
+    }]});
+    let dir = tempfile::tempdir().unwrap();
+    let server = start(&dir.path().join("i.db"), None, Limits::default()).await;
+    create_session(&client(), &server, &body).await;
+    let mut socket = ingest(&server, "stuck").await;
+    let (results, events) = stream_all(&mut socket, &common::epochs(&z, 0)).await;
+
+    let alarms = of_type(&events, "alarm");
+    let stuck = alarms
+        .iter()
+        .find(|a| a["test"] == "residual.stuck")
+        .unwrap_or_else(|| panic!("no residual.stuck alarm: {alarms:?}"));
+    // The first repeat is measurement 301; k = 8 repeated differences flag it.
+    let t = stuck["t"].as_f64().unwrap();
+    assert!((300.0..=310.0).contains(&t), "{stuck}");
+    assert_eq!(stuck["dof"], 1, "{stuck}");
+    // Nothing before the freeze (p_fa 1e-6 on the stuck test).
+    assert!(
+        alarms
+            .iter()
+            .all(|a| a["test"] != "residual.stuck" || a["t"].as_f64().unwrap() >= 300.0),
+        "{alarms:?}"
+    );
+    let last = &results.last().unwrap()["monitors"]["cv"]["tests"];
+    assert!(last.get("residual.stuck").is_some(), "{last}");
+    server.shutdown().await;
+}
