@@ -25,7 +25,7 @@
 //! `cns`), thresholds and policy from the monitor's spec; its normalised innovation
 //! `ν = L⁻¹ r` feeds the test's consistency diagnostics (docs/methods.md §M22). Beside it,
 //! as the config enables them (docs/methods.md §M23, [`super::guards`]): `<aid>.drift`, a
-//! windowed-mean test on `ν` (GNSS: its position components, dof 3; DVL 3; CNS 2) under
+//! windowed-mean test on `ν` (GNSS: its horizontal position components, dof 2; DVL 3; CNS 2) under
 //! the monitor's threshold and policy, and `<aid>.stuck`, the variance collapse of the same
 //! `ν` (dof 1, its own threshold, default p_fa 1e-6). The aid's local filter follows the
 //! *combined* decision of its tests: the worst health, an update only when every test

@@ -43,7 +43,7 @@ pub struct DriftConfigWire {
     /// says whether a missing block runs).
     pub enabled: bool,
     /// Window lengths in epochs of the guarded test (1 to [`MAX_DRIFT_WINDOWS`] distinct
-    /// values, each 1 to [`MAX_DRIFT_WINDOW`]). Default `[10]`.
+    /// values, each 1 to [`MAX_DRIFT_WINDOW`]). Default `[12]` ([`DEFAULT_DRIFT_WINDOW`]).
     pub windows: Vec<usize>,
     /// The test's own false-alarm probability per epoch; default: the monitor's.
     #[serde(skip_serializing_if = "Option::is_none")]
