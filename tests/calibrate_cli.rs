@@ -28,10 +28,6 @@ fn mis_scaled_data(
     (data, spec_file)
 }
 
-fn client() -> reqwest::Client {
-    reqwest::Client::new()
-}
-
 fn calibrate(args: &[&std::ffi::OsStr]) -> std::process::Output {
     std::process::Command::new(env!("CARGO_BIN_EXE_navguard"))
         .arg("calibrate")

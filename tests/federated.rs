@@ -27,7 +27,7 @@ use navguard::monitor::{Monitor, MonitorSpec};
 use navguard::service::Limits;
 use navguard::service::wire::{epoch_to_wire, parse_frame};
 use navguard::sim::experiment::{run_monitor, seed004};
-use navguard::sim::scenario::{ScenarioParams, ship_params};
+
 use navguard::sim::{self, Channel, Fault, FaultKind, Scenario};
 use serde_json::{Value, json};
 use statrs::distribution::{Binomial, ChiSquared, ContinuousCDF, DiscreteCDF};
@@ -37,18 +37,7 @@ const N1: u32 = 10;
 const N2: u32 = 5;
 const COUNTERS: PolicyConfig = PolicyConfig::Counters { n1: N1, n2: N2 };
 
-/// The ship at a 1 Hz INS rate (module doc).
-fn ship_1hz(seed: u64, faults: Vec<Fault>, duration_s: f64) -> Scenario {
-    let truth = sim::ship_trajectory()
-        .unwrap()
-        .sample(1.0, duration_s)
-        .unwrap();
-    let params = ScenarioParams {
-        ins_rate_hz: 1.0,
-        ..ship_params(seed, faults)
-    };
-    sim::simulate(params, truth).unwrap()
-}
+use common::ship_1hz;
 
 /// One fault-free 3000 s run shared by the tests that need one.
 fn fault_free() -> &'static Scenario {

@@ -10,29 +10,11 @@
 
 mod common;
 
-use common::{Socket, create_session, http, ingest, recv, send, start};
+use common::{Socket, client, create_session, http, ingest, recv, send, ship_1hz, start};
 use navguard::service::wire::epoch_to_wire;
 use navguard::service::{Limits, Server};
-use navguard::sim::scenario::{ScenarioParams, ship_params};
-use navguard::sim::{self, Channel, Fault, FaultKind, Scenario};
+use navguard::sim::{Channel, Fault, FaultKind, Scenario};
 use serde_json::{Value, json};
-
-fn client() -> reqwest::Client {
-    reqwest::Client::new()
-}
-
-/// The ship at a 1 Hz INS rate.
-fn ship_1hz(seed: u64, faults: Vec<Fault>, duration_s: f64) -> Scenario {
-    let truth = sim::ship_trajectory()
-        .unwrap()
-        .sample(1.0, duration_s)
-        .unwrap();
-    let params = ScenarioParams {
-        ins_rate_hz: 1.0,
-        ..ship_params(seed, faults)
-    };
-    sim::simulate(params, truth).unwrap()
-}
 
 /// A session `id` with one federated monitor `nav` (the scenario's config with `extra`
 /// merged in), counters, p_fa 1e-3, echoing results.

@@ -15,10 +15,6 @@ use navguard::service::{Limits, Server};
 use reqwest::StatusCode;
 use serde_json::{Value, json};
 
-fn client() -> reqwest::Client {
-    reqwest::Client::new()
-}
-
 async fn post(server: &Server, path: &str, body: &Value) -> (StatusCode, Value) {
     let resp = client()
         .post(format!("{}{path}", http(server)))

@@ -11,10 +11,6 @@ use navguard::service::store::Retention;
 use navguard::service::{Limits, ServiceConfig};
 use serde_json::{Value, json};
 
-fn client() -> reqwest::Client {
-    reqwest::Client::new()
-}
-
 const MODEL: CvModel = CvModel {
     q: 0.01,
     sigma: 1.0,

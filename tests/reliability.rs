@@ -11,16 +11,6 @@ use common::*;
 use navguard::service::Limits;
 use serde_json::{Value, json};
 
-fn client() -> reqwest::Client {
-    reqwest::Client::new()
-}
-
-async fn get_json(url: &str) -> (u16, Value) {
-    let resp = reqwest::get(url).await.unwrap();
-    let status = resp.status().as_u16();
-    (status, resp.json().await.unwrap_or(Value::Null))
-}
-
 /// A 1-D random walk seen directly, with measurement variance `r`.
 fn walk(name: &str, r: f64) -> Value {
     json!({

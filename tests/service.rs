@@ -10,16 +10,6 @@ use navguard::service::{self, Limits, ServiceConfig};
 use serde_json::{Value, json};
 use statrs::distribution::{Binomial, DiscreteCDF};
 
-fn client() -> reqwest::Client {
-    reqwest::Client::new()
-}
-
-async fn get_json(url: &str) -> (u16, Value) {
-    let resp = client().get(url).send().await.unwrap();
-    let status = resp.status().as_u16();
-    (status, resp.json().await.unwrap_or(Value::Null))
-}
-
 /// Polls the session's stats until it has processed `epochs` epochs.
 async fn wait_for_epochs(server: &service::Server, session: &str, epochs: u64) -> Value {
     for _ in 0..500 {

@@ -24,6 +24,37 @@ pub(crate) async fn start(db: &Path, token: Option<&str>, limits: Limits) -> Ser
     service::start(config).await.expect("server starts")
 }
 
+/// A plain HTTP client.
+pub(crate) fn client() -> reqwest::Client {
+    reqwest::Client::new()
+}
+
+/// GETs `url`: the status and the JSON body (`null` when the body is not JSON).
+pub(crate) async fn get_json(url: &str) -> (u16, Value) {
+    let resp = reqwest::get(url).await.unwrap();
+    let status = resp.status().as_u16();
+    (status, resp.json().await.unwrap_or(Value::Null))
+}
+
+/// Seed 004's ship at a 1 Hz INS rate: the same route, sensors, aid rates and faults as
+/// the 10 Hz scenario with one prediction per second, which keeps every property the
+/// tests assert while a debug build runs it ten times faster.
+pub(crate) fn ship_1hz(
+    seed: u64,
+    faults: Vec<navguard::sim::Fault>,
+    duration_s: f64,
+) -> navguard::sim::Scenario {
+    let truth = navguard::sim::ship_trajectory()
+        .unwrap()
+        .sample(1.0, duration_s)
+        .unwrap();
+    let params = navguard::sim::scenario::ScenarioParams {
+        ins_rate_hz: 1.0,
+        ..navguard::sim::scenario::ship_params(seed, faults)
+    };
+    navguard::sim::simulate(params, truth).unwrap()
+}
+
 /// `http://addr`
 pub(crate) fn http(server: &Server) -> String {
     format!("http://{}", server.addr)
