@@ -97,6 +97,21 @@ struct Actor {
     history: History,
 }
 
+/// The built monitors of `stored`, each with its alarm level (its own, else the
+/// session's, else the default) and no availability seen yet.
+fn with_alarm_levels(monitors: NamedMonitors, stored: &StoredSession) -> Vec<NamedMonitor> {
+    monitors
+        .into_iter()
+        .zip(&stored.monitors)
+        .map(|((name, monitor), wire)| NamedMonitor {
+            name,
+            monitor,
+            alarm_level: wire.alarm_level.or(stored.alarm_level).unwrap_or_default(),
+            availability: None,
+        })
+        .collect()
+}
+
 /// Builds the monitors of `stored` and starts its actor.
 pub fn spawn(stored: StoredSession, deps: ActorDeps) -> Result<SessionHandle, SessionError> {
     let monitors = build_monitors(&stored, &*deps.models)?;
@@ -114,16 +129,7 @@ pub fn spawn(stored: StoredSession, deps: ActorDeps) -> Result<SessionHandle, Se
     let actor = Actor {
         id: id.clone(),
         echo: stored.echo,
-        monitors: monitors
-            .into_iter()
-            .zip(&stored.monitors)
-            .map(|((name, monitor), wire)| NamedMonitor {
-                name,
-                monitor,
-                alarm_level: wire.alarm_level.or(stored.alarm_level).unwrap_or_default(),
-                availability: None,
-            })
-            .collect(),
+        monitors: with_alarm_levels(monitors, &stored),
         stats,
         deps,
         shared: shared.clone(),
@@ -814,16 +820,7 @@ impl Actor {
             .clone();
         match build_monitors(&stored, &*self.deps.models) {
             Ok(monitors) => {
-                self.monitors = monitors
-                    .into_iter()
-                    .zip(&stored.monitors)
-                    .map(|((name, monitor), wire)| NamedMonitor {
-                        name,
-                        monitor,
-                        alarm_level: wire.alarm_level.or(stored.alarm_level).unwrap_or_default(),
-                        availability: None,
-                    })
-                    .collect();
+                self.monitors = with_alarm_levels(monitors, &stored);
             }
             Err(e) => {
                 tracing::error!(session = %self.id, error = %e, "could not rebuild the monitors");
