@@ -23,7 +23,7 @@ use crate::epoch::Epoch;
 use crate::monitor::calibrate::{self, CalibrationLine};
 use crate::service::app::AppState;
 use crate::service::error::ApiError;
-use crate::service::extract::ApiQuery;
+use crate::service::extract::{ApiQuery, query_integer_opt};
 use crate::service::session::SessionError;
 use crate::service::session::history::HistoryView;
 use crate::service::session::spec::build_monitors;
@@ -51,6 +51,7 @@ pub enum RecordingFormat {
 #[serde(deny_unknown_fields)]
 pub struct RecordingQuery {
     /// Which stream (its attach time, Unix ms, as the index lists it); default the latest.
+    #[serde(default, deserialize_with = "query_integer_opt")]
     stream: Option<u64>,
     /// `epochs` (default), `events` or `index`.
     #[serde(default)]
@@ -168,6 +169,7 @@ pub struct CalibrationQuery {
     /// Confidence that the true rate at the proposal is at most `far` (default 0.95).
     confidence: Option<f64>,
     /// The recorded stream to replay (default the latest).
+    #[serde(default, deserialize_with = "query_integer_opt")]
     stream: Option<u64>,
 }
 

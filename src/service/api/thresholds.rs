@@ -32,7 +32,7 @@ pub(crate) fn check_policy_keys(policy: Option<&Value>, field: &str) -> Result<(
         return Ok(()); // absent, or not an object: the typed parse says so
     };
     let allowed: &[&str] = match policy.get("kind").and_then(Value::as_str) {
-        Some("classic") => &["kind"],
+        Some("classic") | Some("traditional") => &["kind"],
         Some("counters") => &["kind", "n1", "n2"],
         _ => return Ok(()),
     };
@@ -85,4 +85,31 @@ pub async fn put(
         .ok_or_else(|| ApiError::NotFound(format!("no session '{id}'")))?;
     // The actor stores the change before it answers, in the order changes are applied.
     Ok(Json(handle.set_threshold(&name, update).await?))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    #[test]
+    fn every_policy_kind_refuses_keys_it_does_not_have() {
+        for (policy, bad) in [
+            (json!({"kind": "classic", "n1": 4}), Some("n1")),
+            (json!({"kind": "traditional", "n1": 4}), Some("n1")),
+            (json!({"kind": "counters", "n1": 4, "n3": 1}), Some("n3")),
+            (json!({"kind": "classic"}), None),
+            (json!({"kind": "traditional"}), None),
+            (json!({"kind": "counters", "n1": 4, "n2": 2}), None),
+        ] {
+            let got = check_policy_keys(Some(&policy), "policy");
+            match bad {
+                Some(key) => {
+                    let e = got.expect_err(&policy.to_string());
+                    assert!(e.to_string().contains(key), "{policy}: {e}");
+                }
+                None => assert!(got.is_ok(), "{policy}"),
+            }
+        }
+    }
 }
