@@ -1469,7 +1469,8 @@ async fn consistency_diagnostics_name_a_mis_tuned_model() {
     assert!(
         optimistic["nis_mean"].as_f64().unwrap() > optimistic["nis_bounds"][1].as_f64().unwrap()
     );
-    // /metrics reads the published statistics (≤ 20 a second): wait for the last ones.
+    // /metrics reads the published statistics (≤ 20 a second): wait for the last ones of
+    // both sessions.
     let mut text = String::new();
     for _ in 0..250 {
         text = c
@@ -1480,7 +1481,9 @@ async fn consistency_diagnostics_name_a_mis_tuned_model() {
             .text()
             .await
             .unwrap();
-        if text.contains("navguard_tests_by_consistency{flag=\"ok\"} 1") {
+        if text.contains("navguard_tests_by_consistency{flag=\"ok\"} 1")
+            && text.contains("navguard_tests_by_consistency{flag=\"overconfident\"} 1")
+        {
             break;
         }
         tokio::time::sleep(std::time::Duration::from_millis(20)).await;
