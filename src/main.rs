@@ -44,7 +44,7 @@ struct ServeArgs {
     /// Address to listen on. A non-loopback address requires a token.
     #[arg(long, env = "NAVGUARD_BIND", default_value = "127.0.0.1:8080")]
     bind: SocketAddr,
-    /// SQLite database file (created if missing).
+    /// SQLite database file (created if missing), or a Postgres URL `postgres://user[:password]@host[:port]/database`.
     #[arg(long, env = "NAVGUARD_DB", default_value = "navguard.db")]
     db: PathBuf,
     /// Bearer token required on every /api route and socket.
@@ -156,7 +156,7 @@ impl ServeArgs {
 
 async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     let config = args.into_config();
-    let db = config.db_path.display().to_string();
+    let db = navguard::service::store::display_db(&config.db_path);
     let server = service::start(config).await.context("starting navguard")?;
     println!(
         "navguard listening on http://{} (store: {db}); dashboard at http://{}/",

@@ -198,7 +198,10 @@ async fn a_replayed_recording_reproduces_every_result_and_alarm_bit_for_bit() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn retention_keeps_the_newest_frames_and_an_unknown_recording_is_404() {
     let dir = tempfile::tempdir().unwrap();
-    let mut config = ServiceConfig::new("127.0.0.1:0".parse().unwrap(), dir.path().join("k.db"));
+    let mut config = ServiceConfig::new(
+        "127.0.0.1:0".parse().unwrap(),
+        common::store_for(&dir.path().join("k.db")).await,
+    );
     config.record_default = true;
     config.retention = Retention {
         session_bytes: 4_000,

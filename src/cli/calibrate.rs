@@ -35,7 +35,8 @@ pub(crate) struct CalibrateArgs {
     /// Confidence that the true rate at the proposed threshold is at most `--far`.
     #[arg(long, default_value_t = 0.95)]
     confidence: f64,
-    /// A navguard store to take trained models from (for `channel`, `rimu`, `tacan`).
+    /// A navguard store to take trained models from (for `channel`, `rimu`, `tacan`):
+    /// a SQLite file or a `postgres://` URL.
     #[arg(long)]
     db: Option<PathBuf>,
     /// Write the proposals as `PUT /api/v1/sessions/{id}/monitors/{name}/threshold`
@@ -86,11 +87,16 @@ fn read_epochs(file: &PathBuf) -> anyhow::Result<Vec<Epoch>> {
     Ok(epochs)
 }
 
+/// A SQLite path (checked to exist, not created), not a Postgres URL.
+fn navguard_store_is_file(db: &std::path::Path) -> bool {
+    navguard::service::store::postgres_url(db).is_none()
+}
+
 async fn model_source(db: Option<&PathBuf>) -> anyhow::Result<Box<dyn ModelSource>> {
     let Some(db) = db else {
         return Ok(Box::new(NoModels));
     };
-    if !db.exists() {
+    if navguard_store_is_file(db) && !db.exists() {
         bail!("no store at {}", db.display());
     }
     let store = Store::open(db).await.context("opening the store")?;

@@ -84,7 +84,8 @@ impl Default for Limits {
 pub struct ServiceConfig {
     /// Listen address (default 127.0.0.1:8080; port 0 picks a free port).
     pub bind: SocketAddr,
-    /// SQLite file (default `navguard.db`).
+    /// SQLite file (default `navguard.db`), or a `postgres://` / `postgresql://` URL
+    /// (`store::postgres_url`).
     pub db_path: PathBuf,
     /// Bearer token required on every `/api` route and socket, when set.
     pub token: Option<String>,

@@ -1,9 +1,10 @@
 //! Shared harness for the integration tests: a real server on port 0 with a
-//! temporary SQLite file, a real WebSocket client, and a seeded Gaussian source.
+//! temporary SQLite file (or, with `NAVGUARD_TEST_POSTGRES` set, a Postgres schema of
+//! its own: [`store_for`]), a real WebSocket client, and a seeded Gaussian source.
 
 #![allow(dead_code)]
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use futures_util::{SinkExt, StreamExt};
@@ -16,9 +17,39 @@ use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};
 /// A client socket.
 pub(crate) type Socket = WebSocketStream<MaybeTlsStream<TcpStream>>;
 
-/// Starts a server on 127.0.0.1:0 with the given store file, token and limits.
+/// The variable naming a Postgres server for the tests: an admin URL such as
+/// `postgres://postgres@127.0.0.1:55432/postgres`. Unset: the tests use SQLite files.
+pub(crate) const POSTGRES_VAR: &str = "NAVGUARD_TEST_POSTGRES";
+
+/// The store a test server uses for the SQLite path `db`: the path itself, or with
+/// [`POSTGRES_VAR`] set, a URL to a Postgres schema named after the path, created here
+/// (empty the first time). The same path gives the same schema, so a test that restarts
+/// its server on the same path reopens the same store; paths under a fresh temporary
+/// folder give every test a store of its own.
+pub(crate) async fn store_for(db: &Path) -> PathBuf {
+    let Some(admin) = std::env::var(POSTGRES_VAR).ok().filter(|v| !v.is_empty()) else {
+        return db.to_path_buf();
+    };
+    use sqlx::Connection as _;
+    use std::hash::{Hash, Hasher};
+    let mut hasher = std::collections::hash_map::DefaultHasher::new();
+    db.hash(&mut hasher);
+    let schema = format!("ng_{:016x}", hasher.finish());
+    let mut conn = sqlx::PgConnection::connect(&admin)
+        .await
+        .unwrap_or_else(|e| panic!("{POSTGRES_VAR}={admin}: {e}"));
+    sqlx::query(&format!("CREATE SCHEMA IF NOT EXISTS {schema}"))
+        .execute(&mut conn)
+        .await
+        .expect("create the test schema");
+    let _ = conn.close().await;
+    let sep = if admin.contains('?') { '&' } else { '?' };
+    PathBuf::from(format!("{admin}{sep}options=-c%20search_path%3D{schema}"))
+}
+
+/// Starts a server on 127.0.0.1:0 with the given store ([`store_for`]), token and limits.
 pub(crate) async fn start(db: &Path, token: Option<&str>, limits: Limits) -> Server {
-    let mut config = ServiceConfig::new("127.0.0.1:0".parse().unwrap(), db);
+    let mut config = ServiceConfig::new("127.0.0.1:0".parse().unwrap(), store_for(db).await);
     config.token = token.map(str::to_owned);
     config.limits = limits;
     service::start(config).await.expect("server starts")

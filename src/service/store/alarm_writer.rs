@@ -1,15 +1,14 @@
 //! Group commit for alarms. Every alarm is committed before it is announced
 //! (docs/architecture.md §A4), but when many sessions raise alarms at once (1,000 federated
 //! sessions all fail the same epoch), one transaction per alarm serialises them
-//! on SQLite's single writer. One writer task takes every alarm queued at the
+//! on SQLite's single writer (and pay one fsync each on Postgres). One writer task takes every alarm queued at the
 //! moment, inserts them in one transaction, and answers each caller with its id
 //! only after the commit: the durability guarantee is unchanged, the commits
 //! are shared.
 
-use sqlx::SqlitePool;
 use tokio::sync::{mpsc, oneshot};
 
-use super::StoreError;
+use super::{Pool, StoreError};
 use crate::service::wire::AlarmRecord;
 
 /// Alarms taken into one transaction at most.
@@ -27,7 +26,7 @@ pub(super) struct AlarmWriter {
 
 impl AlarmWriter {
     /// Starts the writer task on the current runtime.
-    pub(super) fn spawn(pool: SqlitePool) -> Self {
+    pub(super) fn spawn(pool: Pool) -> Self {
         let (tx, rx) = mpsc::channel(QUEUE);
         tokio::spawn(run(pool, rx));
         AlarmWriter { tx }
@@ -46,7 +45,7 @@ impl AlarmWriter {
     }
 }
 
-async fn run(pool: SqlitePool, mut rx: mpsc::Receiver<(AlarmRecord, Reply)>) {
+async fn run(pool: Pool, mut rx: mpsc::Receiver<(AlarmRecord, Reply)>) {
     let mut batch = Vec::with_capacity(GROUP);
     while rx.recv_many(&mut batch, GROUP).await > 0 {
         match commit(&pool, &batch).await {
@@ -69,32 +68,31 @@ async fn run(pool: SqlitePool, mut rx: mpsc::Receiver<(AlarmRecord, Reply)>) {
 }
 
 /// Inserts every alarm of `batch` in one transaction; ids in order.
-async fn commit(
-    pool: &SqlitePool,
-    batch: &[(AlarmRecord, Reply)],
-) -> Result<Vec<i64>, sqlx::Error> {
-    let mut tx = pool.begin().await?;
-    let mut ids = Vec::with_capacity(batch.len());
-    for (alarm, _) in batch {
-        let done = sqlx::query(
-            "INSERT INTO alarms (session, monitor, test, state, t, statistic, threshold, dof, delay_s, raised_at_ms, cleared_t, severity)
-             VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, NULL, ?)",
-        )
-        .bind(&alarm.session)
-        .bind(&alarm.monitor)
-        .bind(&alarm.test)
-        .bind(alarm.state.as_str())
-        .bind(alarm.t)
-        .bind(alarm.statistic)
-        .bind(alarm.threshold)
-        .bind(alarm.dof)
-        .bind(alarm.delay_s)
-        .bind(alarm.raised_at_ms)
-        .bind(alarm.severity.as_str())
-        .execute(&mut *tx)
-        .await?;
-        ids.push(done.last_insert_rowid());
-    }
-    tx.commit().await?;
-    Ok(ids)
+async fn commit(pool: &Pool, batch: &[(AlarmRecord, Reply)]) -> Result<Vec<i64>, sqlx::Error> {
+    with_pool!(pool, p => {
+        let mut tx = p.begin().await?;
+        let mut ids = Vec::with_capacity(batch.len());
+        for (alarm, _) in batch {
+            let id: i64 = sqlx::query_scalar(
+                "INSERT INTO alarms (session, monitor, test, state, t, statistic, threshold, dof, delay_s, raised_at_ms, cleared_t, severity)
+                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, NULL, $11) RETURNING id",
+            )
+            .bind(&alarm.session)
+            .bind(&alarm.monitor)
+            .bind(&alarm.test)
+            .bind(alarm.state.as_str())
+            .bind(alarm.t)
+            .bind(alarm.statistic)
+            .bind(alarm.threshold)
+            .bind(i64::from(alarm.dof))
+            .bind(alarm.delay_s)
+            .bind(alarm.raised_at_ms)
+            .bind(alarm.severity.as_str())
+            .fetch_one(&mut *tx)
+            .await?;
+            ids.push(id);
+        }
+        tx.commit().await?;
+        Ok(ids)
+    })
 }

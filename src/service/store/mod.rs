@@ -1,15 +1,29 @@
 //! Persistence (docs/architecture.md §A4): sessions with their monitors and thresholds,
-//! the alarm log and trained models ([`models`]), in SQLite through sqlx (WAL).
-//! An alarm is committed here before anyone is told about it.
+//! the alarm log and trained models ([`models`]), through sqlx in SQLite (a file, WAL;
+//! the default) or Postgres (`--db postgres://…`), with versioned migrations per backend
+//! ([`migrate`]). An alarm is committed here before anyone is told about it.
+
+/// Runs `$body` with `$p` bound to the backend's pool (or any other value of the same
+/// shape): the same code, compiled once per backend. The SQL is written once, in the
+/// syntax both accept (`$n` placeholders, `RETURNING`, `ON CONFLICT`).
+macro_rules! with_pool {
+    ($pool:expr, $p:ident => $body:expr) => {
+        match $pool {
+            $crate::service::store::Pool::Sqlite($p) => $body,
+            $crate::service::store::Pool::Postgres($p) => $body,
+        }
+    };
+}
 
 mod alarm_writer;
+mod migrate;
 pub mod models;
 pub mod recordings;
 
 use std::path::Path;
 use std::str::FromStr;
 
-use sqlx::Row;
+use sqlx::postgres::{PgConnectOptions, PgPool, PgPoolOptions};
 use sqlx::sqlite::{
     SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteSynchronous,
 };
@@ -26,6 +40,9 @@ pub enum StoreError {
     /// The database refused or failed.
     #[error("database: {0}")]
     Db(#[from] sqlx::Error),
+    /// The Postgres server named by `--db` could not be reached or refused the login.
+    #[error("connecting to {0}: {1}")]
+    Connect(String, sqlx::Error),
     /// A stored row could not be decoded.
     #[error("corrupt stored row: {0}")]
     Corrupt(String),
@@ -112,85 +129,71 @@ pub struct AlarmQuery {
     pub limit: i64,
 }
 
-/// The SQLite store. Cheap to clone (a pool).
+/// The connection pool of one backend.
+#[derive(Debug, Clone)]
+pub(crate) enum Pool {
+    /// A SQLite file.
+    Sqlite(SqlitePool),
+    /// A Postgres database.
+    Postgres(PgPool),
+}
+
+/// Which backend a `--db` value names: a `postgres://` or `postgresql://` URL is
+/// Postgres, anything else a SQLite file path.
+pub fn postgres_url(db: &Path) -> Option<&str> {
+    let text = db.to_str()?;
+    (text.starts_with("postgres://") || text.starts_with("postgresql://")).then_some(text)
+}
+
+/// `db` for logs: a Postgres URL without its password, a path as it is.
+pub fn display_db(db: &Path) -> String {
+    let Some(url) = postgres_url(db) else {
+        return db.display().to_string();
+    };
+    let (scheme, rest) = url.split_once("://").unwrap_or(("postgres", url));
+    let authority_end = rest.find('/').unwrap_or(rest.len());
+    match rest[..authority_end].rfind('@') {
+        Some(at) => {
+            let user = rest[..at].split(':').next().unwrap_or("");
+            format!("{scheme}://{user}@{}", &rest[at + 1..])
+        }
+        None => url.to_owned(),
+    }
+}
+
+/// The store (SQLite or Postgres). Cheap to clone (a pool).
 #[derive(Debug, Clone)]
 pub struct Store {
-    pool: SqlitePool,
+    pool: Pool,
     /// Alarms go through one writer task that commits them in groups.
     alarms: alarm_writer::AlarmWriter,
     /// Recorded frames go through another (not awaited per frame).
     recordings: recordings::RecordingWriter,
 }
 
-const SCHEMA: &[&str] = &[
-    "CREATE TABLE IF NOT EXISTS sessions (
-        id TEXT PRIMARY KEY,
-        spec TEXT NOT NULL,
-        created_at_ms INTEGER NOT NULL
-    )",
-    "CREATE TABLE IF NOT EXISTS alarms (
-        id INTEGER PRIMARY KEY AUTOINCREMENT,
-        session TEXT NOT NULL,
-        monitor TEXT NOT NULL,
-        test TEXT NOT NULL,
-        state TEXT NOT NULL,
-        t REAL NOT NULL,
-        statistic REAL NOT NULL,
-        threshold REAL NOT NULL,
-        dof INTEGER NOT NULL,
-        delay_s REAL NOT NULL,
-        raised_at_ms INTEGER NOT NULL,
-        cleared_t REAL
-    )",
-    "CREATE INDEX IF NOT EXISTS alarms_by_session ON alarms (session, monitor, id)",
-    "CREATE INDEX IF NOT EXISTS alarms_by_time ON alarms (raised_at_ms)",
-];
-
-/// Columns added after the first schema, with their definitions: added to an older
-/// database at open (rows written before read their default).
+/// Columns added to SQLite's first schema before migrations were versioned, with their
+/// definitions: added to an older database at open (rows written before read their
+/// default). Later changes are numbered migrations ([`migrate`]).
 const ADDED_COLUMNS: &[(&str, &str, &str)] =
     &[("alarms", "severity", "TEXT NOT NULL DEFAULT 'alarm'")];
 
 impl Store {
-    /// Opens (creating if needed) the database file in WAL mode and applies the schema,
-    /// with the default recording retention.
-    pub async fn open(path: &Path) -> Result<Self, StoreError> {
-        Store::open_with(path, Retention::default()).await
+    /// Opens (creating if needed) the database file in WAL mode, or connects to the
+    /// Postgres database `db` names ([`postgres_url`]), and applies the migrations, with
+    /// the default recording retention.
+    pub async fn open(db: &Path) -> Result<Self, StoreError> {
+        Store::open_with(db, Retention::default()).await
     }
 
     /// [`Store::open`] with the given recording retention limits.
-    pub async fn open_with(path: &Path, retention: Retention) -> Result<Self, StoreError> {
-        let url = format!("sqlite://{}", path.display());
-        let options = SqliteConnectOptions::from_str(&url)?
-            .create_if_missing(true)
-            .journal_mode(SqliteJournalMode::Wal)
-            // WAL + NORMAL: a committed transaction survives a process crash;
-            // only an OS crash or power loss can lose the last commits.
-            .synchronous(SqliteSynchronous::Normal)
-            .busy_timeout(std::time::Duration::from_secs(5));
-        let pool = SqlitePoolOptions::new()
-            .max_connections(4)
-            .connect_with(options)
-            .await?;
-        for statement in SCHEMA
-            .iter()
-            .chain(models::SCHEMA)
-            .chain(recordings::SCHEMA)
-        {
-            sqlx::query(statement).execute(&pool).await?;
-        }
-        for (table, column, definition) in ADDED_COLUMNS {
-            let present: Vec<String> =
-                sqlx::query_scalar(&format!("SELECT name FROM pragma_table_info('{table}')"))
-                    .fetch_all(&pool)
-                    .await?;
-            if !present.iter().any(|c| c == column) {
-                sqlx::query(&format!(
-                    "ALTER TABLE {table} ADD COLUMN {column} {definition}"
-                ))
-                .execute(&pool)
-                .await?;
-            }
+    pub async fn open_with(db: &Path, retention: Retention) -> Result<Self, StoreError> {
+        let pool = match postgres_url(db) {
+            Some(url) => Pool::Postgres(open_postgres(url).await?),
+            None => Pool::Sqlite(open_sqlite(db).await?),
+        };
+        migrate::apply(&pool).await?;
+        if let Pool::Sqlite(sqlite) = &pool {
+            add_columns(sqlite).await?;
         }
         let alarms = alarm_writer::AlarmWriter::spawn(pool.clone());
         let recordings = recordings::RecordingWriter::spawn(pool.clone(), retention);
@@ -201,46 +204,49 @@ impl Store {
         })
     }
 
-    /// Flushes the WAL into the main file and closes every connection.
+    /// Flushes the WAL into the main file (SQLite) and closes every connection.
     pub async fn close(&self) {
-        let _ = sqlx::query("PRAGMA wal_checkpoint(TRUNCATE)")
-            .execute(&self.pool)
-            .await;
-        self.pool.close().await;
+        match &self.pool {
+            Pool::Sqlite(pool) => {
+                let _ = sqlx::query("PRAGMA wal_checkpoint(TRUNCATE)")
+                    .execute(pool)
+                    .await;
+                pool.close().await;
+            }
+            Pool::Postgres(pool) => pool.close().await,
+        }
     }
 
     /// Inserts or replaces a session's spec.
     pub async fn put_session(&self, session: &StoredSession) -> Result<(), StoreError> {
         let spec = StoredSpec::encode(session)?;
-        sqlx::query("INSERT INTO sessions (id, spec, created_at_ms) VALUES (?, ?, ?) ON CONFLICT(id) DO UPDATE SET spec = excluded.spec")
+        with_pool!(&self.pool, p => sqlx::query("INSERT INTO sessions (id, spec, created_at_ms) VALUES ($1, $2, $3) ON CONFLICT (id) DO UPDATE SET spec = excluded.spec")
             .bind(&session.id)
-            .bind(spec)
+            .bind(&spec)
             .bind(session.created_at_ms)
-            .execute(&self.pool)
-            .await?;
+            .execute(p)
+            .await?.rows_affected());
         Ok(())
     }
 
     /// Deletes a session's spec (its alarms stay in the log).
     pub async fn delete_session(&self, id: &str) -> Result<bool, StoreError> {
-        let done = sqlx::query("DELETE FROM sessions WHERE id = ?")
+        let done = with_pool!(&self.pool, p => sqlx::query("DELETE FROM sessions WHERE id = $1")
             .bind(id)
-            .execute(&self.pool)
-            .await?;
-        Ok(done.rows_affected() > 0)
+            .execute(p)
+            .await?
+            .rows_affected());
+        Ok(done > 0)
     }
 
     /// Every stored session, oldest first.
     pub async fn sessions(&self) -> Result<Vec<StoredSession>, StoreError> {
-        let rows = sqlx::query("SELECT spec FROM sessions ORDER BY created_at_ms, id")
-            .fetch_all(&self.pool)
-            .await?;
-        rows.iter()
-            .map(|row| {
-                let spec: String = row.try_get("spec")?;
-                StoredSpec::decode(&spec)
-            })
-            .collect()
+        let specs: Vec<String> = with_pool!(&self.pool, p => sqlx::query_scalar(
+            "SELECT spec FROM sessions ORDER BY created_at_ms, id",
+        )
+        .fetch_all(p)
+        .await?);
+        specs.iter().map(|spec| StoredSpec::decode(spec)).collect()
     }
 
     /// Commits an alarm and returns it with its id. Alarms raised at the same
@@ -286,23 +292,23 @@ impl Store {
         test: &str,
         t: Option<f64>,
     ) -> Result<(), StoreError> {
-        sqlx::query("UPDATE alarms SET cleared_t = COALESCE(?, t) WHERE session = ? AND monitor = ? AND test = ? AND cleared_t IS NULL")
+        with_pool!(&self.pool, p => sqlx::query("UPDATE alarms SET cleared_t = COALESCE($1, t) WHERE session = $2 AND monitor = $3 AND test = $4 AND cleared_t IS NULL")
             .bind(t)
             .bind(session)
             .bind(monitor)
             .bind(test)
-            .execute(&self.pool)
-            .await?;
+            .execute(p)
+            .await?.rows_affected());
         Ok(())
     }
 
     /// Closes every open alarm of a session whose stream restarted from scratch
     /// (its filters were reset); `cleared_t` is set to the alarm's own `t`.
     pub async fn clear_session_alarms(&self, session: &str) -> Result<(), StoreError> {
-        sqlx::query("UPDATE alarms SET cleared_t = t WHERE session = ? AND cleared_t IS NULL")
+        with_pool!(&self.pool, p => sqlx::query("UPDATE alarms SET cleared_t = t WHERE session = $1 AND cleared_t IS NULL")
             .bind(session)
-            .execute(&self.pool)
-            .await?;
+            .execute(p)
+            .await?.rows_affected());
         Ok(())
     }
 
@@ -311,77 +317,164 @@ impl Store {
         let mut sql = String::from(
             "SELECT id, session, monitor, test, state, t, statistic, threshold, dof, delay_s, raised_at_ms, cleared_t, severity FROM alarms WHERE 1 = 1",
         );
+        let mut n = 0;
+        let mut filter = |sql: &mut String, condition: &str| {
+            n += 1;
+            sql.push_str(&format!(" AND {condition} ${n}"));
+        };
         if q.session.is_some() {
-            sql.push_str(" AND session = ?");
+            filter(&mut sql, "session =");
         }
         if q.monitor.is_some() {
-            sql.push_str(" AND monitor = ?");
+            filter(&mut sql, "monitor =");
         }
         if q.since_ms.is_some() {
-            sql.push_str(" AND raised_at_ms >= ?");
+            filter(&mut sql, "raised_at_ms >=");
         }
         if q.until_ms.is_some() {
-            sql.push_str(" AND raised_at_ms < ?");
+            filter(&mut sql, "raised_at_ms <");
         }
         if q.before_id.is_some() {
-            sql.push_str(" AND id < ?");
+            filter(&mut sql, "id <");
         }
         if q.after_id.is_some() {
-            sql.push_str(" AND id > ?");
+            filter(&mut sql, "id >");
         }
         if q.severity.is_some() {
-            sql.push_str(" AND severity = ?");
+            filter(&mut sql, "severity =");
         }
-        sql.push_str(" ORDER BY id DESC LIMIT ?");
-        let mut query = sqlx::query(&sql);
-        if let Some(s) = &q.session {
-            query = query.bind(s);
-        }
-        if let Some(m) = &q.monitor {
-            query = query.bind(m);
-        }
-        if let Some(v) = q.since_ms {
-            query = query.bind(v);
-        }
-        if let Some(v) = q.until_ms {
-            query = query.bind(v);
-        }
-        if let Some(v) = q.before_id {
-            query = query.bind(v);
-        }
-        if let Some(v) = q.after_id {
-            query = query.bind(v);
-        }
-        if let Some(v) = q.severity {
-            query = query.bind(v.as_str());
-        }
-        let rows = query.bind(q.limit).fetch_all(&self.pool).await?;
-        rows.iter().map(alarm_from_row).collect()
+        sql.push_str(&format!(" ORDER BY id DESC LIMIT ${}", n + 1));
+        let rows: Vec<AlarmRow> = with_pool!(&self.pool, p => {
+            let mut query = sqlx::query_as(&sql);
+            if let Some(s) = &q.session {
+                query = query.bind(s);
+            }
+            if let Some(m) = &q.monitor {
+                query = query.bind(m);
+            }
+            if let Some(v) = q.since_ms {
+                query = query.bind(v);
+            }
+            if let Some(v) = q.until_ms {
+                query = query.bind(v);
+            }
+            if let Some(v) = q.before_id {
+                query = query.bind(v);
+            }
+            if let Some(v) = q.after_id {
+                query = query.bind(v);
+            }
+            if let Some(v) = q.severity {
+                query = query.bind(v.as_str());
+            }
+            query.bind(q.limit).fetch_all(p).await?
+        });
+        rows.into_iter().map(alarm_from_row).collect()
     }
 }
 
-fn alarm_from_row(row: &sqlx::sqlite::SqliteRow) -> Result<AlarmRecord, StoreError> {
-    let state: String = row.try_get("state")?;
-    let severity: String = row.try_get("severity")?;
-    let statistic: f64 = row.try_get("statistic")?;
-    let threshold: f64 = row.try_get("threshold")?;
-    Ok(AlarmRecord {
-        id: row.try_get("id")?,
-        severity: Severity::parse(&severity)
-            .ok_or_else(|| StoreError::Corrupt(format!("alarm severity '{severity}'")))?,
-        session: row.try_get("session")?,
-        monitor: row.try_get("monitor")?,
-        test: row.try_get("test")?,
-        state: Health::parse(&state)
-            .ok_or_else(|| StoreError::Corrupt(format!("alarm state '{state}'")))?,
-        t: row.try_get("t")?,
+async fn open_sqlite(path: &Path) -> Result<SqlitePool, StoreError> {
+    let url = format!("sqlite://{}", path.display());
+    let options = SqliteConnectOptions::from_str(&url)?
+        .create_if_missing(true)
+        .journal_mode(SqliteJournalMode::Wal)
+        // WAL + NORMAL: a committed transaction survives a process crash;
+        // only an OS crash or power loss can lose the last commits.
+        .synchronous(SqliteSynchronous::Normal)
+        .busy_timeout(std::time::Duration::from_secs(5));
+    Ok(SqlitePoolOptions::new()
+        .max_connections(4)
+        .connect_with(options)
+        .await?)
+}
+
+async fn open_postgres(url: &str) -> Result<PgPool, StoreError> {
+    // Every commit is durable (synchronous_commit as the server has it, on by default).
+    let options = PgConnectOptions::from_str(url)?;
+    let shown = display_db(Path::new(url));
+    // One connection first, for the server's own reason when it fails (the pool would
+    // only report a timeout).
+    use sqlx::Connection as _;
+    let probe = sqlx::PgConnection::connect_with(&options)
+        .await
+        .map_err(|e| StoreError::Connect(shown.clone(), e))?;
+    let _ = probe.close().await;
+    PgPoolOptions::new()
+        .max_connections(8)
+        .acquire_timeout(std::time::Duration::from_secs(10))
+        .connect_with(options)
+        .await
+        .map_err(|e| StoreError::Connect(shown, e))
+}
+
+/// Adds [`ADDED_COLUMNS`] missing from an older SQLite file.
+async fn add_columns(pool: &SqlitePool) -> Result<(), StoreError> {
+    for (table, column, definition) in ADDED_COLUMNS {
+        let present: Vec<String> =
+            sqlx::query_scalar(&format!("SELECT name FROM pragma_table_info('{table}')"))
+                .fetch_all(pool)
+                .await?;
+        if !present.iter().any(|c| c == column) {
+            sqlx::query(&format!(
+                "ALTER TABLE {table} ADD COLUMN {column} {definition}"
+            ))
+            .execute(pool)
+            .await?;
+        }
+    }
+    Ok(())
+}
+
+/// An `alarms` row in the order [`Store::alarms`] selects it.
+type AlarmRow = (
+    i64,
+    String,
+    String,
+    String,
+    String,
+    f64,
+    f64,
+    f64,
+    i64,
+    f64,
+    i64,
+    Option<f64>,
+    String,
+);
+
+fn alarm_from_row(row: AlarmRow) -> Result<AlarmRecord, StoreError> {
+    let (
+        id,
+        session,
+        monitor,
+        test,
+        state,
+        t,
         statistic,
         threshold,
-        dof: row.try_get("dof")?,
+        dof,
+        delay_s,
+        raised_at_ms,
+        cleared_t,
+        severity,
+    ) = row;
+    Ok(AlarmRecord {
+        id,
+        severity: Severity::parse(&severity)
+            .ok_or_else(|| StoreError::Corrupt(format!("alarm severity '{severity}'")))?,
+        session,
+        monitor,
+        test,
+        state: Health::parse(&state)
+            .ok_or_else(|| StoreError::Corrupt(format!("alarm state '{state}'")))?,
+        t,
+        statistic,
+        threshold,
+        dof: u32::try_from(dof).map_err(|_| StoreError::Corrupt(format!("alarm dof {dof}")))?,
         test_ratio: statistic / threshold,
-        delay_s: row.try_get("delay_s")?,
-        raised_at_ms: row.try_get("raised_at_ms")?,
-        cleared_t: row.try_get("cleared_t")?,
+        delay_s,
+        raised_at_ms,
+        cleared_t,
     })
 }
 
@@ -581,6 +674,29 @@ mod tests {
     }
 
     #[tokio::test]
+    async fn a_database_from_a_newer_server_is_refused_and_an_old_one_migrates_once() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("v.db");
+        let store = Store::open(&path).await.unwrap();
+        store.close().await;
+        // Reopening applies nothing twice.
+        let store = Store::open(&path).await.unwrap();
+        let versions: Vec<i64> = with_pool!(&store.pool, p => sqlx::query_scalar("SELECT version FROM schema_version ORDER BY version")
+            .fetch_all(p)
+            .await
+            .unwrap());
+        assert_eq!(versions, [1]);
+        with_pool!(&store.pool, p => sqlx::query("INSERT INTO schema_version (version, name, applied_at_ms) VALUES (99, 'future', 0)")
+            .execute(p)
+            .await
+            .unwrap()
+            .rows_affected());
+        store.close().await;
+        let err = Store::open(&path).await.unwrap_err().to_string();
+        assert!(err.contains("schema version 99 is newer"), "{err}");
+    }
+
+    #[tokio::test]
     async fn sessions_survive_reopening() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("t.db");
@@ -609,11 +725,12 @@ mod tests {
         let store = Store::open(&dir.path().join("v0.db")).await.unwrap();
         // Format 0, as written before the format version existed: no `format` field.
         let v0 = r#"{"id":"old","echo":false,"monitors":[{"name":"cv","type":"linear","config":{"f":[[1.0]],"h":[[1.0]],"q":[[0.1]],"r":[[1.0]],"x0":[0.0],"p0":[[1.0]]},"policy":{"kind":"classic"},"p_fa":0.002}],"created_at_ms":7}"#;
-        sqlx::query("INSERT INTO sessions (id, spec, created_at_ms) VALUES ('old', ?, 7)")
+        with_pool!(&store.pool, p => sqlx::query("INSERT INTO sessions (id, spec, created_at_ms) VALUES ('old', $1, 7)")
             .bind(v0)
-            .execute(&store.pool)
+            .execute(p)
             .await
-            .unwrap();
+            .unwrap()
+            .rows_affected());
         let loaded = store.sessions().await.unwrap();
         assert_eq!(loaded.len(), 1);
         assert_eq!((loaded[0].id.as_str(), loaded[0].created_at_ms), ("old", 7));
@@ -624,19 +741,19 @@ mod tests {
         );
         // Written back, it carries the current format and reads the same.
         store.put_session(&loaded[0]).await.unwrap();
-        let row: String = sqlx::query("SELECT spec FROM sessions WHERE id = 'old'")
-            .fetch_one(&store.pool)
+        let row: String = with_pool!(&store.pool, p => sqlx::query_scalar("SELECT spec FROM sessions WHERE id = 'old'")
+            .fetch_one(p)
             .await
-            .unwrap()
-            .get("spec");
+            .unwrap());
         assert!(row.starts_with(r#"{"format":1,"#), "{row}");
         assert_eq!(store.sessions().await.unwrap(), loaded);
         // A format from the future is refused, not misread.
-        sqlx::query("UPDATE sessions SET spec = ? WHERE id = 'old'")
+        with_pool!(&store.pool, p => sqlx::query("UPDATE sessions SET spec = $1 WHERE id = 'old'")
             .bind(row.replace(r#""format":1"#, r#""format":9"#))
-            .execute(&store.pool)
+            .execute(p)
             .await
-            .unwrap();
+            .unwrap()
+            .rows_affected());
         assert!(matches!(
             store.sessions().await,
             Err(StoreError::Corrupt(_))

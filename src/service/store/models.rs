@@ -4,28 +4,7 @@
 //! starts and again when it ends; a row left `training` by a stopped server is
 //! marked failed at the next start.
 
-use sqlx::Row;
-
 use super::{Store, StoreError};
-
-/// The `models` table (applied by [`Store::open`] with the rest of the schema).
-pub(super) const SCHEMA: &[&str] = &[
-    "CREATE TABLE IF NOT EXISTS models (
-        id TEXT PRIMARY KEY,
-        name TEXT,
-        kind TEXT NOT NULL,
-        status TEXT NOT NULL,
-        params TEXT NOT NULL,
-        n INTEGER NOT NULL,
-        dim INTEGER NOT NULL,
-        metrics TEXT,
-        error TEXT,
-        model TEXT,
-        created_ms INTEGER NOT NULL,
-        finished_ms INTEGER
-    )",
-    "CREATE INDEX IF NOT EXISTS models_by_time ON models (created_ms)",
-];
 
 /// Why a row is marked failed when the server starts.
 pub const RESTARTED: &str = "server restarted during training";
@@ -62,9 +41,9 @@ pub struct StoredModel {
 impl Store {
     /// Inserts a new model row (a job that just started).
     pub async fn insert_model(&self, m: &StoredModel) -> Result<(), StoreError> {
-        sqlx::query(
+        with_pool!(&self.pool, p => sqlx::query(
             "INSERT INTO models (id, name, kind, status, params, n, dim, metrics, error, model, created_ms, finished_ms)
-             VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+             VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12)",
         )
         .bind(&m.id)
         .bind(&m.name)
@@ -78,8 +57,8 @@ impl Store {
         .bind(&m.model)
         .bind(m.created_ms)
         .bind(m.finished_ms)
-        .execute(&self.pool)
-        .await?;
+        .execute(p)
+        .await?.rows_affected());
         Ok(())
     }
 
@@ -93,18 +72,19 @@ impl Store {
         model: &str,
         finished_ms: i64,
     ) -> Result<bool, StoreError> {
-        let done = sqlx::query(
-            "UPDATE models SET status = 'ready', params = ?, metrics = ?, model = ?, finished_ms = ?
-             WHERE id = ? AND status = 'training'",
+        let done = with_pool!(&self.pool, p => sqlx::query(
+            "UPDATE models SET status = 'ready', params = $1, metrics = $2, model = $3, finished_ms = $4
+             WHERE id = $5 AND status = 'training'",
         )
         .bind(params)
         .bind(metrics)
         .bind(model)
         .bind(finished_ms)
         .bind(id)
-        .execute(&self.pool)
-        .await?;
-        Ok(done.rows_affected() > 0)
+        .execute(p)
+        .await?
+        .rows_affected());
+        Ok(done > 0)
     }
 
     /// Marks a training row failed with `error`. False when the row is gone.
@@ -114,68 +94,103 @@ impl Store {
         error: &str,
         finished_ms: i64,
     ) -> Result<bool, StoreError> {
-        let done = sqlx::query(
-            "UPDATE models SET status = 'failed', error = ?, finished_ms = ?
-             WHERE id = ? AND status = 'training'",
+        let done = with_pool!(&self.pool, p => sqlx::query(
+            "UPDATE models SET status = 'failed', error = $1, finished_ms = $2
+             WHERE id = $3 AND status = 'training'",
         )
         .bind(error)
         .bind(finished_ms)
         .bind(id)
-        .execute(&self.pool)
-        .await?;
-        Ok(done.rows_affected() > 0)
+        .execute(p)
+        .await?
+        .rows_affected());
+        Ok(done > 0)
     }
 
     /// Deletes a model row; true if it existed.
     pub async fn delete_model(&self, id: &str) -> Result<bool, StoreError> {
-        let done = sqlx::query("DELETE FROM models WHERE id = ?")
+        let done = with_pool!(&self.pool, p => sqlx::query("DELETE FROM models WHERE id = $1")
             .bind(id)
-            .execute(&self.pool)
-            .await?;
-        Ok(done.rows_affected() > 0)
+            .execute(p)
+            .await?
+            .rows_affected());
+        Ok(done > 0)
     }
 
     /// Marks every row still `training` as failed ([`RESTARTED`]): its job died
     /// with the previous process. Returns how many.
     pub async fn fail_interrupted_models(&self, finished_ms: i64) -> Result<u64, StoreError> {
-        let done = sqlx::query(
-            "UPDATE models SET status = 'failed', error = ?, finished_ms = ? WHERE status = 'training'",
+        let done = with_pool!(&self.pool, p => sqlx::query(
+            "UPDATE models SET status = 'failed', error = $1, finished_ms = $2 WHERE status = 'training'",
         )
         .bind(RESTARTED)
         .bind(finished_ms)
-        .execute(&self.pool)
-        .await?;
-        Ok(done.rows_affected())
+        .execute(p)
+        .await?
+        .rows_affected());
+        Ok(done)
     }
 
     /// Every model row, oldest first, with the model text of ready ones.
     pub async fn models(&self) -> Result<Vec<StoredModel>, StoreError> {
-        let rows = sqlx::query(
+        let rows: Vec<ModelRow> = with_pool!(&self.pool, p => sqlx::query_as(
             "SELECT id, name, kind, status, params, n, dim, metrics, error, model, created_ms, finished_ms
              FROM models ORDER BY created_ms, id",
         )
-        .fetch_all(&self.pool)
-        .await?;
-        rows.iter()
-            .map(|row| {
-                Ok(StoredModel {
-                    id: row.try_get("id")?,
-                    name: row.try_get("name")?,
-                    kind: row.try_get("kind")?,
-                    status: row.try_get("status")?,
-                    params: row.try_get("params")?,
-                    n: row.try_get("n")?,
-                    dim: row.try_get("dim")?,
-                    metrics: row.try_get("metrics")?,
-                    error: row.try_get("error")?,
-                    model: row.try_get("model")?,
-                    created_ms: row.try_get("created_ms")?,
-                    finished_ms: row.try_get("finished_ms")?,
-                })
-            })
-            .collect()
+        .fetch_all(p)
+        .await?);
+        Ok(rows
+            .into_iter()
+            .map(
+                |(
+                    id,
+                    name,
+                    kind,
+                    status,
+                    params,
+                    n,
+                    dim,
+                    metrics,
+                    error,
+                    model,
+                    created_ms,
+                    finished_ms,
+                )| {
+                    StoredModel {
+                        id,
+                        name,
+                        kind,
+                        status,
+                        params,
+                        n,
+                        dim,
+                        metrics,
+                        error,
+                        model,
+                        created_ms,
+                        finished_ms,
+                    }
+                },
+            )
+            .collect())
     }
 }
+
+/// A `models` row in the order [`Store::models`] selects it.
+type ModelRow = (
+    String,
+    Option<String>,
+    String,
+    String,
+    String,
+    i64,
+    i64,
+    Option<String>,
+    Option<String>,
+    Option<String>,
+    i64,
+    Option<i64>,
+);
 
 #[cfg(test)]
 mod tests {

@@ -7,7 +7,7 @@
 //! soon as they arrive (no timer): a frame is stored within one commit of the moment its
 //! epochs were processed, so a `kill -9` loses at most the frames processed during the
 //! last commit and those still queued (bounded by [`QUEUE`]); what was committed is intact
-//! (SQLite WAL). The writer also applies the retention limits after each commit:
+//! (SQLite WAL, or Postgres). The writer also applies the retention limits after each commit:
 //!
 //! 1. frames older than the maximum age, from every session;
 //! 2. a session over its byte limit loses its oldest frames;
@@ -16,31 +16,14 @@
 use std::collections::HashMap;
 use std::sync::Arc;
 
-use sqlx::{Row, SqlitePool};
 use tokio::sync::{mpsc, oneshot};
 
-use super::StoreError;
+use super::{Pool, StoreError};
 
 /// Frames waiting for the writer before actors wait for room (the loss window's bound).
 pub const QUEUE: usize = 4096;
 /// Frames taken into one transaction at most.
 const GROUP: usize = 512;
-
-/// The recorder's tables.
-pub(super) const SCHEMA: &[&str] = &[
-    "CREATE TABLE IF NOT EXISTS recording_frames (
-        id INTEGER PRIMARY KEY AUTOINCREMENT,
-        session TEXT NOT NULL,
-        stream INTEGER NOT NULL,
-        first_epoch INTEGER NOT NULL,
-        epochs INTEGER NOT NULL,
-        recorded_at_ms INTEGER NOT NULL,
-        bytes INTEGER NOT NULL,
-        frame TEXT NOT NULL,
-        events TEXT NOT NULL
-    )",
-    "CREATE INDEX IF NOT EXISTS recording_by_session ON recording_frames (session, stream, id)",
-];
 
 /// Retention limits (docs/architecture.md §A12).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -108,7 +91,7 @@ impl std::fmt::Debug for Command {
 
 impl RecordingWriter {
     /// Starts the writer task on the current runtime.
-    pub(super) fn spawn(pool: SqlitePool, retention: Retention) -> Self {
+    pub(super) fn spawn(pool: Pool, retention: Retention) -> Self {
         let (tx, rx) = mpsc::channel(QUEUE);
         tokio::spawn(run(pool, rx, retention));
         RecordingWriter { tx }
@@ -130,7 +113,7 @@ impl RecordingWriter {
     }
 }
 
-async fn run(pool: SqlitePool, mut rx: mpsc::Receiver<Command>, retention: Retention) {
+async fn run(pool: Pool, mut rx: mpsc::Receiver<Command>, retention: Retention) {
     let mut bytes = match Usage::load(&pool).await {
         Ok(u) => u,
         Err(e) => {
@@ -169,25 +152,27 @@ async fn run(pool: SqlitePool, mut rx: mpsc::Receiver<Command>, retention: Reten
     }
 }
 
-async fn commit(pool: &SqlitePool, frames: &[RecordedFrame]) -> Result<(), sqlx::Error> {
-    let mut tx = pool.begin().await?;
-    for f in frames {
-        sqlx::query(
-            "INSERT INTO recording_frames (session, stream, first_epoch, epochs, recorded_at_ms, bytes, frame, events)
-             VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-        )
-        .bind(&f.session)
-        .bind(f.stream as i64)
-        .bind(f.first_epoch as i64)
-        .bind(f.epochs as i64)
-        .bind(f.recorded_at_ms)
-        .bind(f.frame.len() as i64)
-        .bind(&*f.frame)
-        .bind(&f.events)
-        .execute(&mut *tx)
-        .await?;
-    }
-    tx.commit().await
+async fn commit(pool: &Pool, frames: &[RecordedFrame]) -> Result<(), sqlx::Error> {
+    with_pool!(pool, p => {
+        let mut tx = p.begin().await?;
+        for f in frames {
+            sqlx::query(
+                "INSERT INTO recording_frames (session, stream, first_epoch, epochs, recorded_at_ms, bytes, frame, events)
+                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8)",
+            )
+            .bind(&f.session)
+            .bind(f.stream as i64)
+            .bind(f.first_epoch as i64)
+            .bind(f.epochs as i64)
+            .bind(f.recorded_at_ms)
+            .bind(f.frame.len() as i64)
+            .bind(&*f.frame)
+            .bind(&f.events)
+            .execute(&mut *tx)
+            .await?;
+        }
+        tx.commit().await
+    })
 }
 
 /// Bytes recorded per session and in all, kept by the writer (loaded once at start).
@@ -198,15 +183,16 @@ struct Usage {
 }
 
 impl Usage {
-    async fn load(pool: &SqlitePool) -> Result<Self, sqlx::Error> {
-        let rows =
-            sqlx::query("SELECT session, SUM(bytes) AS b FROM recording_frames GROUP BY session")
-                .fetch_all(pool)
-                .await?;
+    async fn load(pool: &Pool) -> Result<Self, sqlx::Error> {
+        // CAST: Postgres sums BIGINT as NUMERIC.
+        let rows: Vec<(String, i64)> = with_pool!(pool, p => sqlx::query_as(
+            "SELECT session, CAST(SUM(bytes) AS BIGINT) AS b FROM recording_frames GROUP BY session",
+        )
+        .fetch_all(p)
+        .await?);
         let mut u = Usage::default();
-        for row in rows {
-            let b: i64 = row.try_get("b")?;
-            u.add(&row.try_get::<String, _>("session")?, b as u64);
+        for (session, b) in rows {
+            u.add(&session, b as u64);
         }
         Ok(u)
     }
@@ -219,14 +205,15 @@ impl Usage {
 
 /// Applies the retention limits in their order (module doc); recomputes the usage
 /// whenever something was dropped.
-async fn enforce(pool: &SqlitePool, usage: &mut Usage, r: &Retention) -> Result<(), sqlx::Error> {
+async fn enforce(pool: &Pool, usage: &mut Usage, r: &Retention) -> Result<(), sqlx::Error> {
     let mut dropped = false;
     let cutoff = super::super::now_ms() - r.max_age_ms;
-    let done = sqlx::query("DELETE FROM recording_frames WHERE recorded_at_ms < ?")
+    let done = with_pool!(pool, p => sqlx::query("DELETE FROM recording_frames WHERE recorded_at_ms < $1")
         .bind(cutoff)
-        .execute(pool)
-        .await?;
-    dropped |= done.rows_affected() > 0;
+        .execute(p)
+        .await?
+        .rows_affected());
+    dropped |= done > 0;
     let over: Vec<String> = usage
         .per_session
         .iter()
@@ -235,34 +222,35 @@ async fn enforce(pool: &SqlitePool, usage: &mut Usage, r: &Retention) -> Result<
         .collect();
     for session in over {
         // Drop the session's oldest frames until what stays fits its limit.
-        sqlx::query(
-            "DELETE FROM recording_frames WHERE session = ?1 AND id <= (
+        with_pool!(pool, p => sqlx::query(
+            "DELETE FROM recording_frames WHERE session = $1 AND id <= (
                 SELECT id FROM (
-                    SELECT id, SUM(bytes) OVER (ORDER BY id DESC) AS newer
-                    FROM recording_frames WHERE session = ?1
-                ) WHERE newer > ?2 ORDER BY id DESC LIMIT 1
+                    SELECT id, CAST(SUM(bytes) OVER (ORDER BY id DESC) AS BIGINT) AS newer
+                    FROM recording_frames WHERE session = $1
+                ) AS w WHERE newer > $2 ORDER BY id DESC LIMIT 1
             )",
         )
         .bind(&session)
         .bind(r.session_bytes as i64)
-        .execute(pool)
-        .await?;
+        .execute(p)
+        .await?.rows_affected());
         dropped = true;
     }
     if dropped {
         *usage = Usage::load(pool).await?;
     }
     if usage.total > r.total_bytes {
-        sqlx::query(
+        with_pool!(pool, p => sqlx::query(
             "DELETE FROM recording_frames WHERE id <= (
                 SELECT id FROM (
-                    SELECT id, SUM(bytes) OVER (ORDER BY id DESC) AS newer FROM recording_frames
-                ) WHERE newer > ?1 ORDER BY id DESC LIMIT 1
+                    SELECT id, CAST(SUM(bytes) OVER (ORDER BY id DESC) AS BIGINT) AS newer
+                    FROM recording_frames
+                ) AS w WHERE newer > $1 ORDER BY id DESC LIMIT 1
             )",
         )
         .bind(r.total_bytes as i64)
-        .execute(pool)
-        .await?;
+        .execute(p)
+        .await?.rows_affected());
         *usage = Usage::load(pool).await?;
     }
     Ok(())
@@ -270,66 +258,68 @@ async fn enforce(pool: &SqlitePool, usage: &mut Usage, r: &Retention) -> Result<
 
 /// A page of a session's recording: frames with an id above `after`, oldest first.
 pub(super) async fn page(
-    pool: &SqlitePool,
+    pool: &Pool,
     session: &str,
     stream: u64,
     after: i64,
     limit: i64,
 ) -> Result<Vec<(i64, RecordedFrame)>, StoreError> {
-    let rows = sqlx::query(
+    type FrameRow = (i64, String, i64, i64, i64, i64, String, String);
+    let rows: Vec<FrameRow> = with_pool!(pool, p => sqlx::query_as(
         "SELECT id, session, stream, first_epoch, epochs, recorded_at_ms, frame, events
-         FROM recording_frames WHERE session = ? AND stream = ? AND id > ? ORDER BY id LIMIT ?",
+         FROM recording_frames WHERE session = $1 AND stream = $2 AND id > $3 ORDER BY id LIMIT $4",
     )
     .bind(session)
     .bind(stream as i64)
     .bind(after)
     .bind(limit)
-    .fetch_all(pool)
-    .await?;
-    rows.iter()
-        .map(|row| {
-            let frame: String = row.try_get("frame")?;
-            Ok((
-                row.try_get("id")?,
-                RecordedFrame {
-                    session: row.try_get("session")?,
-                    stream: row.try_get::<i64, _>("stream")? as u64,
-                    first_epoch: row.try_get::<i64, _>("first_epoch")? as u64,
-                    epochs: row.try_get::<i64, _>("epochs")? as u64,
-                    recorded_at_ms: row.try_get("recorded_at_ms")?,
-                    frame: Arc::from(frame),
-                    events: row.try_get("events")?,
-                },
-            ))
-        })
-        .collect()
+    .fetch_all(p)
+    .await?);
+    Ok(rows
+        .into_iter()
+        .map(
+            |(id, session, stream, first_epoch, epochs, recorded_at_ms, frame, events)| {
+                (
+                    id,
+                    RecordedFrame {
+                        session,
+                        stream: stream as u64,
+                        first_epoch: first_epoch as u64,
+                        epochs: epochs as u64,
+                        recorded_at_ms,
+                        frame: Arc::from(frame),
+                        events,
+                    },
+                )
+            },
+        )
+        .collect())
 }
 
 /// The streams a session has recorded, with their frames, epochs and bytes.
-pub(super) async fn streams(
-    pool: &SqlitePool,
-    session: &str,
-) -> Result<Vec<StreamSummary>, StoreError> {
-    let rows = sqlx::query(
-        "SELECT stream, COUNT(*) AS frames, SUM(epochs) AS epochs, SUM(bytes) AS bytes,
+pub(super) async fn streams(pool: &Pool, session: &str) -> Result<Vec<StreamSummary>, StoreError> {
+    let rows: Vec<(i64, i64, i64, i64, i64, i64)> = with_pool!(pool, p => sqlx::query_as(
+        "SELECT stream, COUNT(*) AS frames, CAST(SUM(epochs) AS BIGINT) AS epochs,
+                CAST(SUM(bytes) AS BIGINT) AS bytes,
                 MIN(recorded_at_ms) AS first_ms, MAX(recorded_at_ms) AS last_ms
-         FROM recording_frames WHERE session = ? GROUP BY stream ORDER BY stream",
+         FROM recording_frames WHERE session = $1 GROUP BY stream ORDER BY stream",
     )
     .bind(session)
-    .fetch_all(pool)
-    .await?;
-    rows.iter()
-        .map(|row| {
-            Ok(StreamSummary {
-                stream: row.try_get::<i64, _>("stream")? as u64,
-                frames: row.try_get::<i64, _>("frames")? as u64,
-                epochs: row.try_get::<i64, _>("epochs")? as u64,
-                bytes: row.try_get::<i64, _>("bytes")? as u64,
-                first_ms: row.try_get("first_ms")?,
-                last_ms: row.try_get("last_ms")?,
-            })
-        })
-        .collect()
+    .fetch_all(p)
+    .await?);
+    Ok(rows
+        .into_iter()
+        .map(
+            |(stream, frames, epochs, bytes, first_ms, last_ms)| StreamSummary {
+                stream: stream as u64,
+                frames: frames as u64,
+                epochs: epochs as u64,
+                bytes: bytes as u64,
+                first_ms,
+                last_ms,
+            },
+        )
+        .collect())
 }
 
 /// One recorded stream of a session.

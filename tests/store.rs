@@ -1,0 +1,410 @@
+//! The store's round trips on each backend: SQLite always, Postgres too when
+//! `NAVGUARD_TEST_POSTGRES` names a server (tests/common: `store_for`). The same
+//! assertions run on both, through the public `Store` API only.
+
+mod common;
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use navguard::detect::Health;
+use navguard::service::store::{
+    AlarmQuery, RecordedFrame, Retention, Store, StoredModel, StoredSession,
+};
+use navguard::service::wire::{AlarmRecord, Severity};
+
+/// The stores to run on: a SQLite file, and a Postgres schema when the variable is set.
+async fn backends(dir: &tempfile::TempDir, name: &str) -> Vec<(&'static str, PathBuf)> {
+    let path = dir.path().join(format!("{name}.db"));
+    let mut out = vec![("sqlite", path.clone())];
+    if std::env::var(common::POSTGRES_VAR).is_ok_and(|v| !v.is_empty()) {
+        out.push(("postgres", common::store_for(&path).await));
+    } else {
+        eprintln!(
+            "{name}: skipping the Postgres backend ({} is not set); SQLite only",
+            common::POSTGRES_VAR
+        );
+    }
+    out
+}
+
+/// Values whose f64 must come back bit for bit.
+// (-0.0 is not among them: SQLite stores it as 0.)
+const AWKWARD: [f64; 6] = [
+    0.1 + 0.2,
+    1e-300,
+    5e-324,
+    -1.5e-7,
+    1.7976931348623157e308,
+    9.5495,
+];
+
+fn alarm(session: &str, t: f64, statistic: f64) -> AlarmRecord {
+    AlarmRecord {
+        id: 0,
+        severity: Severity::Alarm,
+        session: session.into(),
+        monitor: "m".into(),
+        test: "residual".into(),
+        state: Health::Isolated,
+        t,
+        statistic,
+        threshold: 20.0,
+        dof: 3,
+        test_ratio: statistic / 20.0,
+        delay_s: 0.25,
+        raised_at_ms: 1_000 + t as i64,
+        cleared_t: None,
+    }
+}
+
+fn all(limit: i64) -> AlarmQuery {
+    AlarmQuery {
+        limit,
+        ..AlarmQuery::default()
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sessions_alarms_and_models_round_trip_and_survive_reopening() {
+    let dir = tempfile::tempdir().unwrap();
+    for (backend, db) in backends(&dir, "rt").await {
+        let store = Store::open(&db).await.unwrap();
+        // Sessions: put, replace, list oldest first, delete.
+        let mut s1 = StoredSession {
+            id: "s1".into(),
+            echo: true,
+            monitors: vec![],
+            created_at_ms: 20,
+            record: Some(true),
+            alarm_level: None,
+        };
+        let s0 = StoredSession {
+            id: "s0".into(),
+            created_at_ms: 10,
+            record: None,
+            ..s1.clone()
+        };
+        store.put_session(&s1).await.unwrap();
+        store.put_session(&s0).await.unwrap();
+        s1.echo = false;
+        store.put_session(&s1).await.unwrap();
+        assert_eq!(
+            store.sessions().await.unwrap(),
+            vec![s0.clone(), s1.clone()],
+            "{backend}"
+        );
+
+        // Alarms: ids in order, f64 bit for bit, filters, cursors, clearing.
+        let mut ids = Vec::new();
+        for (k, x) in AWKWARD.iter().enumerate() {
+            let session = if k % 2 == 0 { "a" } else { "b" };
+            let mut a = alarm(session, k as f64, *x);
+            if k == 5 {
+                a.severity = Severity::Warning;
+            }
+            ids.push(store.insert_alarm(a).await.unwrap().id);
+        }
+        assert!(ids.windows(2).all(|w| w[0] < w[1]), "{backend}: {ids:?}");
+        let got = store.alarms(&all(100)).await.unwrap();
+        assert_eq!(got.len(), 6, "{backend}");
+        let stats: Vec<u64> = got.iter().rev().map(|a| a.statistic.to_bits()).collect();
+        let want: Vec<u64> = AWKWARD.iter().map(|x| x.to_bits()).collect();
+        assert_eq!(stats, want, "{backend}: f64 bit for bit");
+        assert_eq!(
+            got[5],
+            AlarmRecord {
+                id: ids[0],
+                ..alarm("a", 0.0, AWKWARD[0])
+            }
+        );
+        let a_only = store
+            .alarms(&AlarmQuery {
+                session: Some("a".into()),
+                ..all(100)
+            })
+            .await
+            .unwrap();
+        assert_eq!(
+            a_only.iter().map(|a| a.t).collect::<Vec<_>>(),
+            [4.0, 2.0, 0.0]
+        );
+        let page = store
+            .alarms(&AlarmQuery {
+                before_id: Some(ids[4]),
+                after_id: Some(ids[0]),
+                monitor: Some("m".into()),
+                ..all(2)
+            })
+            .await
+            .unwrap();
+        assert_eq!(
+            page.iter().map(|a| a.t).collect::<Vec<_>>(),
+            [3.0, 2.0],
+            "{backend}"
+        );
+        let warnings = store
+            .alarms(&AlarmQuery {
+                severity: Some(Severity::Warning),
+                ..all(100)
+            })
+            .await
+            .unwrap();
+        assert_eq!(warnings.iter().map(|a| a.t).collect::<Vec<_>>(), [5.0]);
+        let timed = store
+            .alarms(&AlarmQuery {
+                since_ms: Some(1_001),
+                until_ms: Some(1_003),
+                ..all(100)
+            })
+            .await
+            .unwrap();
+        assert_eq!(timed.iter().map(|a| a.t).collect::<Vec<_>>(), [2.0, 1.0]);
+        store
+            .clear_alarms("a", "m", "residual", Some(9.5))
+            .await
+            .unwrap();
+        store
+            .clear_alarms("b", "m", "residual", None)
+            .await
+            .unwrap();
+        let cleared: Vec<_> = store
+            .alarms(&all(100))
+            .await
+            .unwrap()
+            .iter()
+            .map(|a| a.cleared_t)
+            .collect();
+        assert_eq!(
+            cleared,
+            [
+                Some(5.0),
+                Some(9.5),
+                Some(3.0),
+                Some(9.5),
+                Some(1.0),
+                Some(9.5)
+            ],
+            "{backend}"
+        );
+        let late = store.insert_alarm(alarm("a", 7.0, 30.0)).await.unwrap();
+        store.clear_session_alarms("a").await.unwrap();
+
+        // Models: insert, finish, fail, delete.
+        let model = |id: &str, created_ms| StoredModel {
+            id: id.into(),
+            name: Some("label ünïcode".into()),
+            kind: "lssvm".into(),
+            status: "training".into(),
+            params: "{}".into(),
+            n: 10,
+            dim: 2,
+            metrics: None,
+            error: None,
+            model: None,
+            created_ms,
+            finished_ms: None,
+        };
+        for (id, t) in [("m-a", 1), ("m-b", 2), ("m-c", 3), ("m-d", 4)] {
+            store.insert_model(&model(id, t)).await.unwrap();
+        }
+        assert!(
+            store
+                .finish_model_ready("m-a", "{\"g\":1}", "{}", "MODEL", 7)
+                .await
+                .unwrap()
+        );
+        assert!(store.finish_model_failed("m-b", "bad", 8).await.unwrap());
+        assert!(!store.finish_model_failed("m-a", "late", 9).await.unwrap());
+        assert!(store.delete_model("m-d").await.unwrap());
+        assert!(!store.delete_model("m-d").await.unwrap());
+        assert!(store.delete_session("s0").await.unwrap());
+        assert!(!store.delete_session("s0").await.unwrap());
+        store.close().await;
+
+        // Reopened (the migrations again, applied once): everything is there.
+        let store = Store::open(&db).await.unwrap();
+        assert_eq!(
+            store.sessions().await.unwrap(),
+            vec![s1.clone()],
+            "{backend}"
+        );
+        let after = store.alarms(&all(100)).await.unwrap();
+        assert_eq!(after.len(), 7, "{backend}");
+        assert_eq!(after[0].id, late.id);
+        assert_eq!(after[0].cleared_t, Some(7.0));
+        assert_eq!(store.fail_interrupted_models(10).await.unwrap(), 1);
+        let models = store.models().await.unwrap();
+        let summary: Vec<_> = models
+            .iter()
+            .map(|m| (m.id.as_str(), m.status.as_str(), m.finished_ms))
+            .collect();
+        assert_eq!(
+            summary,
+            [
+                ("m-a", "ready", Some(7)),
+                ("m-b", "failed", Some(8)),
+                ("m-c", "failed", Some(10))
+            ],
+            "{backend}"
+        );
+        assert_eq!(models[0].model.as_deref(), Some("MODEL"));
+        assert_eq!(models[0].name.as_deref(), Some("label ünïcode"));
+        // A new alarm after reopening still gets a larger id.
+        let newest = store.insert_alarm(alarm("c", 8.0, 1.0)).await.unwrap();
+        assert!(newest.id > late.id, "{backend}");
+        store.close().await;
+    }
+}
+
+fn frame(session: &str, stream: u64, first_epoch: u64, bytes: usize) -> RecordedFrame {
+    RecordedFrame {
+        session: session.into(),
+        stream,
+        first_epoch,
+        epochs: 2,
+        recorded_at_ms: navguard::service::now_ms(),
+        frame: Arc::from(format!(
+            "{{\"t\":{first_epoch},\"pad\":\"{}\"}}",
+            "x".repeat(bytes)
+        )),
+        events: "[]".into(),
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn recordings_page_summarise_and_evict_oldest_first() {
+    let dir = tempfile::tempdir().unwrap();
+    for (backend, db) in backends(&dir, "rec").await {
+        let retention = Retention {
+            session_bytes: 5_000,
+            total_bytes: 8_000,
+            max_age_ms: 3_600_000,
+        };
+        let store = Store::open_with(&db, retention).await.unwrap();
+        for k in 0..4 {
+            store.record_frame(frame("a", 100, 2 * k, 200)).await;
+        }
+        store.record_frame(frame("a", 200, 0, 200)).await;
+        store.flush_recordings().await;
+        let page = store.recording_page("a", 100, 0, 3).await.unwrap();
+        assert_eq!(
+            page.iter().map(|(_, f)| f.first_epoch).collect::<Vec<_>>(),
+            [0, 2, 4],
+            "{backend}"
+        );
+        assert_eq!(
+            page[1].1,
+            frame("a", 100, 2, 200).clone_with(page[1].1.recorded_at_ms)
+        );
+        let rest = store.recording_page("a", 100, page[2].0, 10).await.unwrap();
+        assert_eq!(
+            rest.iter().map(|(_, f)| f.first_epoch).collect::<Vec<_>>(),
+            [6]
+        );
+        let streams = store.recording_streams("a").await.unwrap();
+        assert_eq!(
+            streams
+                .iter()
+                .map(|s| (s.stream, s.frames, s.epochs))
+                .collect::<Vec<_>>(),
+            [(100, 4, 8), (200, 1, 2)],
+            "{backend}"
+        );
+        let one = frame("a", 100, 0, 200).frame.len() as u64;
+        assert_eq!(streams[0].bytes, 4 * one);
+        assert!(store.recording_streams("nobody").await.unwrap().is_empty());
+
+        // Over the session limit: the oldest frames of that session go first.
+        for k in 0..30 {
+            store.record_frame(frame("b", 300, k, 200)).await;
+        }
+        store.flush_recordings().await;
+        let b = store.recording_streams("b").await.unwrap();
+        assert!(b[0].bytes <= 5_000, "{backend}: {b:?}");
+        assert!(
+            b[0].bytes + one > 5_000,
+            "{backend}: kept as much as fits: {b:?}"
+        );
+        let kept = store.recording_page("b", 300, 0, 100).await.unwrap();
+        assert_eq!(
+            kept.last().unwrap().1.first_epoch,
+            29,
+            "{backend}: newest kept"
+        );
+        // Over the total limit: the oldest frames of all (session a's) go.
+        for k in 0..20 {
+            store.record_frame(frame("c", 400, k, 200)).await;
+        }
+        store.flush_recordings().await;
+        let mut sum = 0;
+        for s in ["a", "b", "c"] {
+            sum += store
+                .recording_streams(s)
+                .await
+                .unwrap()
+                .iter()
+                .map(|x| x.bytes)
+                .sum::<u64>();
+        }
+        assert!(sum <= 8_000, "{backend}: {sum}");
+        assert!(
+            store.recording_streams("a").await.unwrap().is_empty(),
+            "{backend}: the oldest session's frames went first"
+        );
+        store.close().await;
+        // The writer starts from the stored sizes after reopening.
+        let store = Store::open_with(&db, retention).await.unwrap();
+        store.record_frame(frame("c", 400, 99, 200)).await;
+        store.flush_recordings().await;
+        let c = store.recording_page("c", 400, 0, 100).await.unwrap();
+        assert_eq!(c.last().unwrap().1.first_epoch, 99, "{backend}");
+        store.close().await;
+    }
+}
+
+trait CloneWith {
+    fn clone_with(&self, recorded_at_ms: i64) -> Self;
+}
+
+impl CloneWith for RecordedFrame {
+    fn clone_with(&self, recorded_at_ms: i64) -> Self {
+        RecordedFrame {
+            recorded_at_ms,
+            ..self.clone()
+        }
+    }
+}
+
+#[tokio::test]
+async fn a_bad_or_unreachable_postgres_url_is_a_clear_error() {
+    // Port 1 on loopback: nothing listens (connection refused at once).
+    let err = Store::open(std::path::Path::new(
+        "postgres://navguard:s3cret@127.0.0.1:1/navguard",
+    ))
+    .await
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.starts_with("connecting to postgres://navguard@127.0.0.1:1/navguard: "),
+        "{err}"
+    );
+    assert!(
+        !err.contains("s3cret"),
+        "the password stays out of messages: {err}"
+    );
+    assert!(!err.contains('\n'), "{err}");
+    let err = Store::open(std::path::Path::new("postgresql://u@127.0.0.1:port/db"))
+        .await
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("port"), "{err}");
+    assert_eq!(
+        navguard::service::store::display_db(std::path::Path::new("postgres://u:pw@h:5/d?x=1")),
+        "postgres://u@h:5/d?x=1"
+    );
+    assert_eq!(
+        navguard::service::store::display_db(std::path::Path::new("dir/nav.db")),
+        "dir/nav.db"
+    );
+}
