@@ -304,10 +304,16 @@ fn parse_kind(kind: Option<Value>) -> Result<ModelKind, ApiError> {
     })
 }
 
-/// `name`: optional, a string of at most [`MAX_NAME_CHARS`] characters.
+/// `name`: optional, a string of at most [`MAX_NAME_CHARS`] characters and no control
+/// characters U+0000–U+001F (a Postgres TEXT cannot hold U+0000, and a label for people
+/// has no use for the others).
 fn parse_name(name: Option<Value>) -> Result<Option<String>, ApiError> {
     match name {
         None | Some(Value::Null) => Ok(None),
+        Some(Value::String(s)) if s.chars().any(|c| c < ' ') => Err(ApiError::invalid(
+            "name",
+            "must not contain control characters (U+0000 to U+001F)",
+        )),
         Some(Value::String(s)) if s.chars().count() <= MAX_NAME_CHARS => Ok(Some(s)),
         Some(_) => Err(ApiError::invalid(
             "name",
@@ -498,7 +504,11 @@ mod tests {
         assert_eq!(field(linear).0, 202);
         let mut named = ok.clone();
         named["name"] = json!(3);
-        assert_eq!(field(named), (422, Some("name".into())));
+        assert_eq!(field(named.clone()), (422, Some("name".into())));
+        for bad in ["nul\u{0}", "tab\tname", "line\n"] {
+            named["name"] = json!(bad);
+            assert_eq!(field(named.clone()), (422, Some("name".into())), "{bad:?}");
+        }
         let mut extra = ok.clone();
         extra["colour"] = json!(1);
         assert_eq!(field(extra), (422, Some("colour".into())));
