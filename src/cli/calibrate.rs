@@ -87,16 +87,12 @@ fn read_epochs(file: &PathBuf) -> anyhow::Result<Vec<Epoch>> {
     Ok(epochs)
 }
 
-/// A SQLite path (checked to exist, not created), not a Postgres URL.
-fn navguard_store_is_file(db: &std::path::Path) -> bool {
-    navguard::service::store::postgres_url(db).is_none()
-}
-
 async fn model_source(db: Option<&PathBuf>) -> anyhow::Result<Box<dyn ModelSource>> {
     let Some(db) = db else {
         return Ok(Box::new(NoModels));
     };
-    if navguard_store_is_file(db) && !db.exists() {
+    // A SQLite file must exist (calibrate never creates a store); a URL is the server's.
+    if navguard::service::store::postgres_url(db).is_none() && !db.exists() {
         bail!("no store at {}", db.display());
     }
     let store = Store::open(db).await.context("opening the store")?;

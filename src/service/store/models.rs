@@ -9,8 +9,9 @@ use super::{Store, StoreError};
 /// Why a row is marked failed when the server starts.
 pub const RESTARTED: &str = "server restarted during training";
 
-/// A stored model row. `model` is the stored JSON, present only when ready.
-#[derive(Debug, Clone, PartialEq)]
+/// A stored model row. `model` is the stored JSON, present only when ready. Read from
+/// either backend by column name (`sqlx::FromRow`).
+#[derive(Debug, Clone, PartialEq, sqlx::FromRow)]
 pub struct StoredModel {
     /// `m-` + 16 hex digits.
     pub id: String,
@@ -133,64 +134,15 @@ impl Store {
 
     /// Every model row, oldest first, with the model text of ready ones.
     pub async fn models(&self) -> Result<Vec<StoredModel>, StoreError> {
-        let rows: Vec<ModelRow> = with_pool!(&self.pool, p => sqlx::query_as(
+        let rows: Vec<StoredModel> = with_pool!(&self.pool, p => sqlx::query_as(
             "SELECT id, name, kind, status, params, n, dim, metrics, error, model, created_ms, finished_ms
              FROM models ORDER BY created_ms, id",
         )
         .fetch_all(p)
         .await?);
-        Ok(rows
-            .into_iter()
-            .map(
-                |(
-                    id,
-                    name,
-                    kind,
-                    status,
-                    params,
-                    n,
-                    dim,
-                    metrics,
-                    error,
-                    model,
-                    created_ms,
-                    finished_ms,
-                )| {
-                    StoredModel {
-                        id,
-                        name,
-                        kind,
-                        status,
-                        params,
-                        n,
-                        dim,
-                        metrics,
-                        error,
-                        model,
-                        created_ms,
-                        finished_ms,
-                    }
-                },
-            )
-            .collect())
+        Ok(rows)
     }
 }
-
-/// A `models` row in the order [`Store::models`] selects it.
-type ModelRow = (
-    String,
-    Option<String>,
-    String,
-    String,
-    String,
-    i64,
-    i64,
-    Option<String>,
-    Option<String>,
-    Option<String>,
-    i64,
-    Option<i64>,
-);
 
 #[cfg(test)]
 mod tests {
