@@ -9,7 +9,8 @@ use std::sync::Arc;
 
 use navguard::detect::Health;
 use navguard::service::store::{
-    AlarmQuery, RecordedFrame, Retention, Store, StoredModel, StoredSession,
+    Acquire, AlarmKey, AlarmQuery, Checkpoint, Fence, RecordedFrame, Retention, Store, StoreError,
+    StoredModel, StoredSession,
 };
 use navguard::service::wire::{AlarmRecord, Severity};
 
@@ -407,4 +408,278 @@ async fn a_bad_or_unreachable_postgres_url_is_a_clear_error() {
         navguard::service::store::display_db(std::path::Path::new("dir/nav.db")),
         "dir/nav.db"
     );
+}
+
+fn session(id: &str) -> StoredSession {
+    StoredSession {
+        id: id.into(),
+        echo: false,
+        monitors: vec![],
+        created_at_ms: 1,
+        record: None,
+        alarm_level: None,
+    }
+}
+
+fn checkpoint(session: &str, lease_epoch: i64, version: i64) -> Checkpoint {
+    Checkpoint {
+        session: session.into(),
+        lease_epoch,
+        version,
+        epochs: version * 10,
+        t: Some(version as f64),
+        taken_at_ms: 5,
+        state: vec![lease_epoch as u8, version as u8, 0xff],
+    }
+}
+
+/// docs/deployment.md: a lease is taken once, free or expired; every acquisition raises
+/// the epoch; the holder of an old epoch can write nothing more for the session; a
+/// release lets the next node in at once.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn leases_fence_every_write_of_a_node_that_lost_its_session() {
+    let dir = tempfile::tempdir().unwrap();
+    for (backend, db) in backends(&dir, "lease").await {
+        let store = Store::open(&db).await.unwrap();
+        store.put_session(&session("s")).await.unwrap();
+        assert!(
+            store
+                .create_lease("s", "a", "http://a", 10_000)
+                .await
+                .unwrap()
+        );
+        assert!(
+            !store
+                .create_lease("s", "b", "http://b", 10_000)
+                .await
+                .unwrap(),
+            "{backend}: the id is taken"
+        );
+        let a = Fence {
+            session: "s".into(),
+            owner: "a".into(),
+            epoch: 1,
+        };
+        // b cannot take a live lease, but can once it expired (now = 10_000).
+        match store
+            .acquire_lease("s", "b", "http://b", 9_999, 20_000, false)
+            .await
+            .unwrap()
+        {
+            Acquire::Held(l) => assert_eq!(
+                (l.owner.as_str(), l.epoch, l.address.as_str()),
+                ("a", 1, "http://a")
+            ),
+            taken => panic!("{backend}: took a live lease: {taken:?}"),
+        }
+        let Acquire::Taken(epoch) = store
+            .acquire_lease("s", "b", "http://b", 10_000, 20_000, false)
+            .await
+            .unwrap()
+        else {
+            panic!("{backend}: an expired lease is free");
+        };
+        assert_eq!(epoch, 2);
+        let b = Fence {
+            session: "s".into(),
+            owner: "b".into(),
+            epoch,
+        };
+        // a is fenced on every kind of write; b is not.
+        let fenced = |r: Result<(), StoreError>| matches!(r, Err(StoreError::Fenced(_)));
+        assert!(
+            fenced(store.put_session_fenced(&session("s"), Some(&a)).await),
+            "{backend}"
+        );
+        assert!(fenced(
+            store
+                .clear_alarms_fenced("s", "m", "t", None, Some(&a))
+                .await
+        ));
+        assert!(fenced(
+            store.clear_session_alarms_fenced("s", Some(&a)).await
+        ));
+        assert!(fenced(
+            store.put_checkpoint(&a, &checkpoint("s", 1, 1)).await
+        ));
+        assert!(matches!(
+            store
+                .insert_alarm_keyed(
+                    alarm("s", 1.0, 30.0),
+                    AlarmKey {
+                        stream: 7,
+                        epoch_index: 1
+                    },
+                    Some(&a)
+                )
+                .await,
+            Err(StoreError::Fenced(_))
+        ));
+        assert!(matches!(
+            store.delete_session_fenced("s", Some(&a)).await,
+            Err(StoreError::Fenced(_))
+        ));
+        assert!(
+            !store.release_lease(&a).await.unwrap(),
+            "{backend}: only the holder releases"
+        );
+        store
+            .put_session_fenced(&session("s"), Some(&b))
+            .await
+            .unwrap();
+        store
+            .put_checkpoint(&b, &checkpoint("s", 2, 1))
+            .await
+            .unwrap();
+        // Renewal answers what b still holds; a holds nothing.
+        assert_eq!(
+            store.renew_leases("b", 30_000).await.unwrap(),
+            vec![("s".to_owned(), 2)]
+        );
+        assert!(store.renew_leases("a", 30_000).await.unwrap().is_empty());
+        // A release lets c in at once, long before the expiry.
+        assert!(store.release_lease(&b).await.unwrap());
+        assert!(
+            store.renew_leases("b", 40_000).await.unwrap().is_empty(),
+            "a released lease is not renewed"
+        );
+        let Acquire::Taken(3) = store
+            .acquire_lease("s", "c", "http://c", 11_000, 21_000, false)
+            .await
+            .unwrap()
+        else {
+            panic!("{backend}: a released lease is free");
+        };
+        // force takes a live lease (its owner is known to be gone).
+        let Acquire::Taken(4) = store
+            .acquire_lease("s", "d", "http://d", 11_000, 21_000, true)
+            .await
+            .unwrap()
+        else {
+            panic!("{backend}: force takes it");
+        };
+        // The checkpoint is b's; deleting the session takes its lease and checkpoint along.
+        assert_eq!(store.checkpoint("s").await.unwrap().unwrap().lease_epoch, 2);
+        let d = Fence {
+            session: "s".into(),
+            owner: "d".into(),
+            epoch: 4,
+        };
+        assert!(store.delete_session_fenced("s", Some(&d)).await.unwrap());
+        assert!(store.lease("s").await.unwrap().is_none());
+        assert!(store.checkpoint("s").await.unwrap().is_none());
+        store.close().await;
+    }
+}
+
+/// An older checkpoint written late never replaces a newer one, and a new owner's first
+/// checkpoint replaces the old owner's last.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn checkpoints_only_move_forward() {
+    let dir = tempfile::tempdir().unwrap();
+    for (backend, db) in backends(&dir, "ckpt").await {
+        let store = Store::open(&db).await.unwrap();
+        store.put_session(&session("s")).await.unwrap();
+        assert!(store.create_lease("s", "a", "", i64::MAX).await.unwrap());
+        let a = Fence {
+            session: "s".into(),
+            owner: "a".into(),
+            epoch: 1,
+        };
+        store
+            .put_checkpoint(&a, &checkpoint("s", 1, 5))
+            .await
+            .unwrap();
+        store
+            .put_checkpoint(&a, &checkpoint("s", 1, 4))
+            .await
+            .unwrap();
+        assert_eq!(
+            store.checkpoint("s").await.unwrap(),
+            Some(checkpoint("s", 1, 5)),
+            "{backend}"
+        );
+        let Acquire::Taken(2) = store
+            .acquire_lease("s", "b", "", 0, i64::MAX, true)
+            .await
+            .unwrap()
+        else {
+            panic!("{backend}");
+        };
+        let b = Fence {
+            session: "s".into(),
+            owner: "b".into(),
+            epoch: 2,
+        };
+        store
+            .put_checkpoint(&b, &checkpoint("s", 2, 1))
+            .await
+            .unwrap();
+        assert_eq!(
+            store.checkpoint("s").await.unwrap(),
+            Some(checkpoint("s", 2, 1)),
+            "{backend}"
+        );
+        store.close().await;
+    }
+}
+
+/// The same transition raised again on the same stream and epoch (the epochs after a
+/// checkpoint, replayed after a failover) is one log entry; its id is answered again.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_replayed_alarm_is_one_log_entry() {
+    let dir = tempfile::tempdir().unwrap();
+    for (backend, db) in backends(&dir, "once").await {
+        let store = Store::open(&db).await.unwrap();
+        let key = AlarmKey {
+            stream: 1_700_000_000_000,
+            epoch_index: 42,
+        };
+        let first = store
+            .insert_alarm_keyed(alarm("s", 4.2, 30.0), key, None)
+            .await
+            .unwrap();
+        let again = store
+            .insert_alarm_keyed(alarm("s", 4.2, 30.0), key, None)
+            .await
+            .unwrap();
+        assert_eq!(first.id, again.id, "{backend}");
+        // Another epoch, another severity, another stream, or unkeyed: new entries.
+        let other_epoch = AlarmKey {
+            epoch_index: 43,
+            ..key
+        };
+        let other_stream = AlarmKey {
+            stream: key.stream + 1,
+            ..key
+        };
+        let mut warning = alarm("s", 4.2, 30.0);
+        warning.severity = Severity::Warning;
+        let ids = [
+            store
+                .insert_alarm_keyed(alarm("s", 4.3, 30.0), other_epoch, None)
+                .await
+                .unwrap()
+                .id,
+            store
+                .insert_alarm_keyed(warning, key, None)
+                .await
+                .unwrap()
+                .id,
+            store
+                .insert_alarm_keyed(alarm("s", 4.2, 30.0), other_stream, None)
+                .await
+                .unwrap()
+                .id,
+            store.insert_alarm(alarm("s", 4.2, 30.0)).await.unwrap().id,
+            store.insert_alarm(alarm("s", 4.2, 30.0)).await.unwrap().id,
+        ];
+        let mut distinct = ids.to_vec();
+        distinct.push(first.id);
+        distinct.sort_unstable();
+        distinct.dedup();
+        assert_eq!(distinct.len(), 6, "{backend}: {ids:?}");
+        assert_eq!(store.alarms(&all(100)).await.unwrap().len(), 6, "{backend}");
+        store.close().await;
+    }
 }

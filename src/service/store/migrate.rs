@@ -17,17 +17,31 @@ struct Migration {
     sql: &'static str,
 }
 
-const SQLITE: &[Migration] = &[Migration {
-    version: 1,
-    name: "initial",
-    sql: include_str!("migrations/sqlite/0001_initial.sql"),
-}];
+const SQLITE: &[Migration] = &[
+    Migration {
+        version: 1,
+        name: "initial",
+        sql: include_str!("migrations/sqlite/0001_initial.sql"),
+    },
+    Migration {
+        version: 2,
+        name: "cluster",
+        sql: include_str!("migrations/sqlite/0002_cluster.sql"),
+    },
+];
 
-const POSTGRES: &[Migration] = &[Migration {
-    version: 1,
-    name: "initial",
-    sql: include_str!("migrations/postgres/0001_initial.sql"),
-}];
+const POSTGRES: &[Migration] = &[
+    Migration {
+        version: 1,
+        name: "initial",
+        sql: include_str!("migrations/postgres/0001_initial.sql"),
+    },
+    Migration {
+        version: 2,
+        name: "cluster",
+        sql: include_str!("migrations/postgres/0002_cluster.sql"),
+    },
+];
 
 const VERSION_TABLE: &str = "CREATE TABLE IF NOT EXISTS schema_version (
     version BIGINT PRIMARY KEY,
@@ -35,8 +49,10 @@ const VERSION_TABLE: &str = "CREATE TABLE IF NOT EXISTS schema_version (
     applied_at_ms BIGINT NOT NULL
 )";
 
-/// Applies the backend's migrations that the database has not seen yet.
-pub(super) async fn apply(pool: &Pool) -> Result<(), StoreError> {
+/// Applies the backend's migrations that the database has not seen yet, up to version
+/// `until` (`i64::MAX`: all of them; SQLite stops after 1 to add the columns older files
+/// lack before the later migrations use them).
+pub(super) async fn apply(pool: &Pool, until: i64) -> Result<(), StoreError> {
     let list = match pool {
         Pool::Sqlite(_) => SQLITE,
         Pool::Postgres(_) => POSTGRES,
@@ -59,7 +75,7 @@ pub(super) async fn apply(pool: &Pool) -> Result<(), StoreError> {
                 "database schema version {current} is newer than this server's {latest}"
             )));
         }
-        for m in list.iter().filter(|m| m.version > current) {
+        for m in list.iter().filter(|m| m.version > current && m.version <= until) {
             sqlx::raw_sql(m.sql).execute(&mut *tx).await?;
             sqlx::query("INSERT INTO schema_version (version, name, applied_at_ms) VALUES ($1, $2, $3)")
                 .bind(m.version)

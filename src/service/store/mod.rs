@@ -16,6 +16,7 @@ macro_rules! with_pool {
 }
 
 mod alarm_writer;
+pub mod cluster;
 mod migrate;
 pub mod models;
 pub mod recordings;
@@ -31,6 +32,8 @@ use sqlx::sqlite::{
 use crate::detect::Health;
 use crate::service::wire::{AlarmLevel, AlarmRecord, MonitorSpecWire, Severity};
 
+pub use alarm_writer::AlarmKey;
+pub use cluster::{Acquire, Checkpoint, Fence, Lease};
 pub use models::StoredModel;
 pub use recordings::{RecordedFrame, Retention, StreamSummary};
 
@@ -46,6 +49,10 @@ pub enum StoreError {
     /// A stored row could not be decoded.
     #[error("corrupt stored row: {0}")]
     Corrupt(String),
+    /// The write was for a session whose lease this node no longer holds under the
+    /// epoch it carried (docs/deployment.md): another node owns the session now.
+    #[error("session '{0}' is owned by another node now (lease fenced)")]
+    Fenced(String),
 }
 
 /// The format version written with every stored session spec (`"format"` in the row's
@@ -191,10 +198,11 @@ impl Store {
             Some(url) => Pool::Postgres(open_postgres(url).await?),
             None => Pool::Sqlite(open_sqlite(db).await?),
         };
-        migrate::apply(&pool).await?;
         if let Pool::Sqlite(sqlite) = &pool {
+            migrate::apply(&pool, 1).await?;
             add_columns(sqlite).await?;
         }
+        migrate::apply(&pool, i64::MAX).await?;
         let alarms = alarm_writer::AlarmWriter::spawn(pool.clone());
         let recordings = recordings::RecordingWriter::spawn(pool.clone(), retention);
         Ok(Store {
@@ -219,24 +227,127 @@ impl Store {
 
     /// Inserts or replaces a session's spec.
     pub async fn put_session(&self, session: &StoredSession) -> Result<(), StoreError> {
+        self.put_session_fenced(session, None).await
+    }
+
+    /// [`Store::put_session`] by the holder of `fence` only.
+    pub async fn put_session_fenced(
+        &self,
+        session: &StoredSession,
+        fence: Option<&Fence>,
+    ) -> Result<(), StoreError> {
         let spec = StoredSpec::encode(session)?;
-        with_pool!(&self.pool, p => sqlx::query("INSERT INTO sessions (id, spec, created_at_ms) VALUES ($1, $2, $3) ON CONFLICT (id) DO UPDATE SET spec = excluded.spec")
-            .bind(&session.id)
-            .bind(&spec)
-            .bind(session.created_at_ms)
-            .execute(p)
-            .await?.rows_affected());
+        with_pool!(&self.pool, p => {
+            let mut tx = p.begin().await?;
+            cluster::check_fence!(tx, fence);
+            sqlx::query("INSERT INTO sessions (id, spec, created_at_ms) VALUES ($1, $2, $3) ON CONFLICT (id) DO UPDATE SET spec = excluded.spec")
+                .bind(&session.id)
+                .bind(&spec)
+                .bind(session.created_at_ms)
+                .execute(&mut *tx)
+                .await?;
+            tx.commit().await?;
+        });
         Ok(())
     }
 
     /// Deletes a session's spec (its alarms stay in the log).
     pub async fn delete_session(&self, id: &str) -> Result<bool, StoreError> {
-        let done = with_pool!(&self.pool, p => sqlx::query("DELETE FROM sessions WHERE id = $1")
-            .bind(id)
-            .execute(p)
-            .await?
-            .rows_affected());
+        self.delete_session_fenced(id, None).await
+    }
+
+    /// [`Store::delete_session`] by the holder of `fence` only; the session's lease and
+    /// checkpoint go with it.
+    pub async fn delete_session_fenced(
+        &self,
+        id: &str,
+        fence: Option<&Fence>,
+    ) -> Result<bool, StoreError> {
+        let done = with_pool!(&self.pool, p => {
+            let mut tx = p.begin().await?;
+            cluster::check_fence!(tx, fence);
+            let done = sqlx::query("DELETE FROM sessions WHERE id = $1")
+                .bind(id)
+                .execute(&mut *tx)
+                .await?
+                .rows_affected();
+            for sql in cluster::FORGET_SQL {
+                sqlx::query(sql).bind(id).execute(&mut *tx).await?;
+            }
+            tx.commit().await?;
+            done
+        });
         Ok(done > 0)
+    }
+
+    /// The stored spec of session `id`.
+    pub async fn session(&self, id: &str) -> Result<Option<StoredSession>, StoreError> {
+        let spec: Option<String> = with_pool!(&self.pool, p => sqlx::query_scalar(
+            "SELECT spec FROM sessions WHERE id = $1",
+        )
+        .bind(id)
+        .fetch_optional(p)
+        .await?);
+        spec.map(|s| StoredSpec::decode(&s)).transpose()
+    }
+
+    /// The lease of session `id`, if any (docs/deployment.md).
+    pub async fn lease(&self, id: &str) -> Result<Option<Lease>, StoreError> {
+        cluster::lease(&self.pool, id).await
+    }
+
+    /// Takes the lease of a new session; false when the id already has one.
+    pub async fn create_lease(
+        &self,
+        id: &str,
+        owner: &str,
+        address: &str,
+        expires_ms: i64,
+    ) -> Result<bool, StoreError> {
+        cluster::create_lease(&self.pool, id, owner, address, expires_ms).await
+    }
+
+    /// Takes the lease of session `id` if it is free, expired at `now_ms`, `owner`'s
+    /// already, or `force`; its epoch goes up by one.
+    #[allow(clippy::too_many_arguments)]
+    pub async fn acquire_lease(
+        &self,
+        id: &str,
+        owner: &str,
+        address: &str,
+        now_ms: i64,
+        expires_ms: i64,
+        force: bool,
+    ) -> Result<Acquire, StoreError> {
+        cluster::acquire(&self.pool, id, owner, address, now_ms, expires_ms, force).await
+    }
+
+    /// Extends `owner`'s leases; the sessions (and epochs) it still holds.
+    pub async fn renew_leases(
+        &self,
+        owner: &str,
+        expires_ms: i64,
+    ) -> Result<Vec<(String, i64)>, StoreError> {
+        cluster::renew(&self.pool, owner, expires_ms).await
+    }
+
+    /// Releases a lease at once (drain, handover).
+    pub async fn release_lease(&self, fence: &Fence) -> Result<bool, StoreError> {
+        cluster::release(&self.pool, fence).await
+    }
+
+    /// Stores a checkpoint by the holder of `fence` (never over a newer one).
+    pub async fn put_checkpoint(
+        &self,
+        fence: &Fence,
+        checkpoint: &Checkpoint,
+    ) -> Result<(), StoreError> {
+        cluster::put_checkpoint(&self.pool, fence, checkpoint).await
+    }
+
+    /// The latest checkpoint of session `id`.
+    pub async fn checkpoint(&self, id: &str) -> Result<Option<Checkpoint>, StoreError> {
+        cluster::checkpoint(&self.pool, id).await
     }
 
     /// Every stored session, oldest first.
@@ -251,14 +362,34 @@ impl Store {
 
     /// Commits an alarm and returns it with its id. Alarms raised at the same
     /// moment share one transaction (group commit); this returns after the commit.
-    pub async fn insert_alarm(&self, mut alarm: AlarmRecord) -> Result<AlarmRecord, StoreError> {
-        alarm.id = self.alarms.insert(alarm.clone()).await?;
+    pub async fn insert_alarm(&self, alarm: AlarmRecord) -> Result<AlarmRecord, StoreError> {
+        self.insert_alarm_keyed(alarm, AlarmKey::default(), None)
+            .await
+    }
+
+    /// [`Store::insert_alarm`] under `key` (an entry with the same key is not stored
+    /// twice: its id is returned) by the holder of `fence` only.
+    pub async fn insert_alarm_keyed(
+        &self,
+        mut alarm: AlarmRecord,
+        key: AlarmKey,
+        fence: Option<&Fence>,
+    ) -> Result<AlarmRecord, StoreError> {
+        alarm.id = self
+            .alarms
+            .insert(alarm.clone(), key, fence.cloned())
+            .await?;
         Ok(alarm)
     }
 
     /// Queues a frame for the recording (committed by the writer, not awaited).
     pub async fn record_frame(&self, frame: RecordedFrame) {
-        self.recordings.record(frame).await;
+        self.recordings.record(frame, None).await;
+    }
+
+    /// [`Store::record_frame`] by the holder of `fence` only (a fenced frame is dropped).
+    pub async fn record_frame_fenced(&self, frame: RecordedFrame, fence: Option<&Fence>) {
+        self.recordings.record(frame, fence.cloned()).await;
     }
 
     /// Waits until every frame queued for the recording so far is committed.
@@ -292,23 +423,55 @@ impl Store {
         test: &str,
         t: Option<f64>,
     ) -> Result<(), StoreError> {
-        with_pool!(&self.pool, p => sqlx::query("UPDATE alarms SET cleared_t = COALESCE($1, t) WHERE session = $2 AND monitor = $3 AND test = $4 AND cleared_t IS NULL")
-            .bind(t)
-            .bind(session)
-            .bind(monitor)
-            .bind(test)
-            .execute(p)
-            .await?.rows_affected());
+        self.clear_alarms_fenced(session, monitor, test, t, None)
+            .await
+    }
+
+    /// [`Store::clear_alarms`] by the holder of `fence` only.
+    pub async fn clear_alarms_fenced(
+        &self,
+        session: &str,
+        monitor: &str,
+        test: &str,
+        t: Option<f64>,
+        fence: Option<&Fence>,
+    ) -> Result<(), StoreError> {
+        with_pool!(&self.pool, p => {
+            let mut tx = p.begin().await?;
+            cluster::check_fence!(tx, fence);
+            sqlx::query("UPDATE alarms SET cleared_t = COALESCE($1, t) WHERE session = $2 AND monitor = $3 AND test = $4 AND cleared_t IS NULL")
+                .bind(t)
+                .bind(session)
+                .bind(monitor)
+                .bind(test)
+                .execute(&mut *tx)
+                .await?;
+            tx.commit().await?;
+        });
         Ok(())
     }
 
     /// Closes every open alarm of a session whose stream restarted from scratch
     /// (its filters were reset); `cleared_t` is set to the alarm's own `t`.
     pub async fn clear_session_alarms(&self, session: &str) -> Result<(), StoreError> {
-        with_pool!(&self.pool, p => sqlx::query("UPDATE alarms SET cleared_t = t WHERE session = $1 AND cleared_t IS NULL")
-            .bind(session)
-            .execute(p)
-            .await?.rows_affected());
+        self.clear_session_alarms_fenced(session, None).await
+    }
+
+    /// [`Store::clear_session_alarms`] by the holder of `fence` only.
+    pub async fn clear_session_alarms_fenced(
+        &self,
+        session: &str,
+        fence: Option<&Fence>,
+    ) -> Result<(), StoreError> {
+        with_pool!(&self.pool, p => {
+            let mut tx = p.begin().await?;
+            cluster::check_fence!(tx, fence);
+            sqlx::query("UPDATE alarms SET cleared_t = t WHERE session = $1 AND cleared_t IS NULL")
+                .bind(session)
+                .execute(&mut *tx)
+                .await?;
+            tx.commit().await?;
+        });
         Ok(())
     }
 
@@ -685,7 +848,7 @@ mod tests {
             .fetch_all(p)
             .await
             .unwrap());
-        assert_eq!(versions, [1]);
+        assert_eq!(versions, [1, 2]);
         with_pool!(&store.pool, p => sqlx::query("INSERT INTO schema_version (version, name, applied_at_ms) VALUES (99, 'future', 0)")
             .execute(p)
             .await

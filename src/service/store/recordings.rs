@@ -69,7 +69,8 @@ pub struct RecordedFrame {
 }
 
 enum Command {
-    Frame(RecordedFrame),
+    /// A frame, written only while its fence (if any) holds.
+    Frame(RecordedFrame, Option<super::Fence>),
     /// Answered once everything queued before it is committed.
     Flush(oneshot::Sender<()>),
 }
@@ -83,7 +84,7 @@ pub struct RecordingWriter {
 impl std::fmt::Debug for Command {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Command::Frame(r) => write!(f, "Frame({}, {})", r.session, r.first_epoch),
+            Command::Frame(r, _) => write!(f, "Frame({}, {})", r.session, r.first_epoch),
             Command::Flush(_) => write!(f, "Flush"),
         }
     }
@@ -97,9 +98,10 @@ impl RecordingWriter {
         RecordingWriter { tx }
     }
 
-    /// Queues a frame (waits only for room in the queue).
-    pub async fn record(&self, frame: RecordedFrame) {
-        if self.tx.send(Command::Frame(frame)).await.is_err() {
+    /// Queues a frame (waits only for room in the queue), written only while `fence`
+    /// holds.
+    pub async fn record(&self, frame: RecordedFrame, fence: Option<super::Fence>) {
+        if self.tx.send(Command::Frame(frame, fence)).await.is_err() {
             tracing::error!("recording writer stopped; frame not recorded");
         }
     }
@@ -127,15 +129,15 @@ async fn run(pool: Pool, mut rx: mpsc::Receiver<Command>, retention: Retention) 
         let mut frames = Vec::with_capacity(batch.len());
         for c in batch.drain(..) {
             match c {
-                Command::Frame(f) => frames.push(f),
+                Command::Frame(f, fence) => frames.push((f, fence)),
                 Command::Flush(reply) => waiting.push(reply),
             }
         }
         if !frames.is_empty() {
             match commit(&pool, &frames).await {
-                Ok(()) => {
-                    for f in &frames {
-                        bytes.add(&f.session, f.frame.len() as u64);
+                Ok(written) => {
+                    for (f, _) in frames.iter().zip(written).filter(|(_, w)| *w) {
+                        bytes.add(&f.0.session, f.0.frame.len() as u64);
                     }
                 }
                 Err(e) => {
@@ -152,10 +154,31 @@ async fn run(pool: Pool, mut rx: mpsc::Receiver<Command>, retention: Retention) 
     }
 }
 
-async fn commit(pool: &Pool, frames: &[RecordedFrame]) -> Result<(), sqlx::Error> {
+/// Inserts `frames` in one transaction; which were written (a frame whose fence no
+/// longer holds is not).
+async fn commit(
+    pool: &Pool,
+    frames: &[(RecordedFrame, Option<super::Fence>)],
+) -> Result<Vec<bool>, sqlx::Error> {
     with_pool!(pool, p => {
         let mut tx = p.begin().await?;
-        for f in frames {
+        let mut written = Vec::with_capacity(frames.len());
+        for (f, fence) in frames {
+            if let Some(fence) = fence {
+                let held = sqlx::query(super::cluster::FENCE_SQL)
+                    .bind(&fence.session)
+                    .bind(&fence.owner)
+                    .bind(fence.epoch)
+                    .execute(&mut *tx)
+                    .await?
+                    .rows_affected();
+                written.push(held > 0);
+                if held == 0 {
+                    continue;
+                }
+            } else {
+                written.push(true);
+            }
             sqlx::query(
                 "INSERT INTO recording_frames (session, stream, first_epoch, epochs, recorded_at_ms, bytes, frame, events)
                  VALUES ($1, $2, $3, $4, $5, $6, $7, $8)",
@@ -171,7 +194,8 @@ async fn commit(pool: &Pool, frames: &[RecordedFrame]) -> Result<(), sqlx::Error
             .execute(&mut *tx)
             .await?;
         }
-        tx.commit().await
+        tx.commit().await?;
+        Ok(written)
     })
 }
 
