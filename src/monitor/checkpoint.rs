@@ -151,3 +151,8 @@ pub(crate) fn decode<T: DeserializeOwned>(
     }
     Ok(state)
 }
+
+#[cfg(test)]
+mod refusal_tests;
+#[cfg(test)]
+mod tests;
