@@ -69,8 +69,9 @@ pub struct ConsistencySummary {
     pub flag: Option<ConsistencyFlag>,
 }
 
-/// The running diagnostics of one test.
-#[derive(Debug, Clone, PartialEq)]
+/// The running diagnostics of one test (serde: a monitor checkpoint saves them, the
+/// cached bounds included).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Consistency {
     window: usize,
     /// Per epoch in the window: `‖ν‖²` and, when the previous epoch was in it too,
@@ -114,6 +115,35 @@ impl Consistency {
     /// Forgets everything (a new stream).
     pub fn reset(&mut self) {
         *self = Consistency::new(self.window);
+    }
+
+    /// `saved` (read from a checkpoint) as diagnostics of this one's window, with the
+    /// capacity [`Consistency::new`] reserves (so observing allocates nothing); the
+    /// reason when it does not fit: another window, more entries than it, running
+    /// counts that disagree with the entries, a previous ν not of the dof.
+    pub fn restored(&self, mut saved: Consistency) -> Result<Consistency, String> {
+        if saved.window != self.window {
+            return Err(format!(
+                "consistency window {}, the test's is {}",
+                saved.window, self.window
+            ));
+        }
+        let lags = saved.entries.iter().filter(|e| e.1.is_some()).count();
+        let previous_fits = saved
+            .previous
+            .as_ref()
+            .is_none_or(|p| p.len() == saved.dof as usize && !p.is_empty());
+        if saved.entries.len() > saved.window
+            || saved.lag_count != lags
+            || saved.since_resum >= saved.window
+            || !previous_fits
+        {
+            return Err("consistency diagnostics are inconsistent".into());
+        }
+        saved
+            .entries
+            .reserve((saved.window + 1).saturating_sub(saved.entries.len()));
+        Ok(saved)
     }
 
     /// Takes one healthy epoch's normalised innovation. A change of dimension (GNSS with

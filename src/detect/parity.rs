@@ -6,6 +6,7 @@
 //! and the `parity` test of `monitor::rimu`.
 
 use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
 
 /// Why a parity space cannot be built or used; `field` names the input.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -182,7 +183,9 @@ impl ParitySpace {
 /// The FSS (fixed sample size) windowed χ² of seed 002 eq. 7 over the last `l'`
 /// parity residuals: `λ = Rᵀ P_r⁻¹ R` with `R` the stacked residuals and `P_r`
 /// block-diagonal (white gyro noise), i.e. `λ = Σ_t r_tᵀ C⁻¹ r_t ~ χ²(l'·p)`.
-#[derive(Debug, Clone, PartialEq)]
+///
+/// Serde: a monitor checkpoint saves it whole and [`FssWindow::restored`] checks it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FssWindow {
     c_inv: DMatrix<f64>,
     /// `L⁻¹` with `C = L Lᵀ`: whitens one residual.
@@ -253,6 +256,29 @@ impl FssWindow {
     /// Empties the window.
     pub fn clear(&mut self) {
         self.terms.clear();
+    }
+
+    /// `saved` (read from a checkpoint) as the running state of this window: the same
+    /// length and residual covariance (bit for bit: both are computed from the config),
+    /// no more terms than the window; with the capacity [`FssWindow::new`] reserves. The
+    /// reason otherwise.
+    pub fn restored(&self, mut saved: FssWindow) -> Result<FssWindow, String> {
+        if saved.window != self.window || saved.c_inv != self.c_inv || saved.l_inv != self.l_inv {
+            return Err(format!(
+                "FSS window of {} epochs over {} parity components, the monitor's is {} over {}",
+                saved.window,
+                saved.c_inv.nrows(),
+                self.window,
+                self.c_inv.nrows()
+            ));
+        }
+        if saved.terms.len() > saved.window {
+            return Err("FSS window holds more terms than its length".into());
+        }
+        saved
+            .terms
+            .reserve(saved.window.saturating_sub(saved.terms.len()));
+        Ok(saved)
     }
 }
 

@@ -140,8 +140,9 @@ impl Decision {
     }
 }
 
-/// The running state of one test's policy: its counters and current health.
-#[derive(Debug, Clone, PartialEq, Eq)]
+/// The running state of one test's policy: its counters and current health (serde: a
+/// monitor checkpoint saves it, its configuration with it).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct PolicyState {
     config: PolicyConfig,
     t1: u32,
@@ -169,6 +170,28 @@ impl PolicyState {
     /// The policy in force.
     pub fn config(&self) -> PolicyConfig {
         self.config
+    }
+
+    /// Checks a state read from a checkpoint: a valid configuration, counters that the
+    /// policy can reach (zero outside `counters`, `t2 ≤ N1`) and room for the next
+    /// exceedance; the reason otherwise.
+    pub fn check_saved(&self) -> Result<(), String> {
+        self.config.check().map_err(|e| e.to_string())?;
+        let (t1, t2, t3) = (self.t1, self.t2, self.t3);
+        let reachable = match self.config {
+            PolicyConfig::Classic | PolicyConfig::Traditional => (t1, t2, t3) == (0, 0, 0),
+            PolicyConfig::Counters { n1, .. } => {
+                t2 <= n1 && (t1 > 0 || t3 == 0) && t1 < u32::MAX && t3 < u32::MAX
+            }
+        };
+        if reachable {
+            Ok(())
+        } else {
+            Err(format!(
+                "policy counters ({t1}, {t2}, {t3}) cannot occur under {}",
+                self.config.kind_name()
+            ))
+        }
     }
 
     /// The health after the last epoch.

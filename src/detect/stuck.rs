@@ -20,6 +20,8 @@
 
 use std::collections::VecDeque;
 
+use serde::{Deserialize, Serialize};
+
 use super::window::{chi2_equivalent, f_lower_tail};
 
 /// Default differences in the window (a freeze is flagged after about this many
@@ -50,7 +52,7 @@ pub enum StuckError {
 }
 
 /// Parameters of a [`StuckTest`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct StuckParams {
     /// Input dimension (≥ 1).
     pub dim: usize,
@@ -102,8 +104,9 @@ fn effective_dof(k: usize) -> f64 {
     k * k / (k + (k - 1.0) / 2.0)
 }
 
-/// The running variance-collapse test of one signal.
-#[derive(Debug, Clone)]
+/// The running variance-collapse test of one signal (serde: a monitor checkpoint saves it
+/// whole, parameters included, and [`StuckTest::restored`] checks it).
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct StuckTest {
     params: StuckParams,
     /// The previous input and whether its epoch was healthy.
@@ -136,6 +139,32 @@ impl StuckTest {
     /// Back to the state of [`StuckTest::new`].
     pub fn reset(&mut self) {
         *self = StuckTest::new(self.params);
+    }
+
+    /// `saved` (read from a checkpoint) as the running state of this test: the same
+    /// parameters, a previous input of the test's dimension, windows no longer than
+    /// kept; with the capacities [`StuckTest::new`] reserves. The reason otherwise.
+    pub fn restored(&self, mut saved: StuckTest) -> Result<StuckTest, String> {
+        let p = self.params;
+        if saved.params != p {
+            return Err(format!(
+                "stuck test of {} differences in {} dimensions, the test's has {} in {}",
+                saved.params.k, saved.params.dim, p.k, p.dim
+            ));
+        }
+        let fits = saved.last.as_ref().is_none_or(|(x, _)| x.len() == p.dim)
+            && saved.window.len() <= p.k
+            && saved.reference.len() <= p.max_reference;
+        if !fits {
+            return Err("stuck test state does not fit its parameters".into());
+        }
+        saved
+            .window
+            .reserve((p.k + 1).saturating_sub(saved.window.len()));
+        saved
+            .reference
+            .reserve((p.max_reference + 1).saturating_sub(saved.reference.len()));
+        Ok(saved)
     }
 
     fn check(&self, x: &[f64]) -> Result<(), StuckError> {

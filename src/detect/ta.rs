@@ -33,6 +33,7 @@
 use std::collections::VecDeque;
 
 use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
 
 /// Seed 000's window: residuals summed into T_a (see the module doc for the choice).
 pub const DEFAULT_N: usize = 10;
@@ -61,7 +62,7 @@ pub enum TaError {
 }
 
 /// Parameters of T_a.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct TaParams {
     /// Residual dimension (1 for a scalar channel).
     pub dim: usize,
@@ -83,13 +84,14 @@ impl TaParams {
 }
 
 /// One window entry: `V_j⁻¹` and `V_j⁻¹ r_j`, or only `r_j` during warm-up.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 struct Entry {
     weighted: Option<(DMatrix<f64>, DVector<f64>)>,
 }
 
-/// The running T_a of one channel.
-#[derive(Debug, Clone)]
+/// The running T_a of one channel (serde: a monitor checkpoint saves it whole, parameters
+/// included, and [`TaStatistic::restored`] checks it).
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct TaStatistic {
     params: TaParams,
     /// V over the differences used so far (zero before the first).
@@ -140,6 +142,35 @@ impl TaStatistic {
     /// Back to the state of [`TaStatistic::new`].
     pub fn reset(&mut self) {
         *self = TaStatistic::new(self.params);
+    }
+
+    /// `saved` (read from a checkpoint) as the running state of this statistic: the same
+    /// parameters, every matrix and vector of its dimension, no more than `n` residuals;
+    /// with the capacity [`TaStatistic::new`] reserves. The reason otherwise.
+    pub fn restored(&self, mut saved: TaStatistic) -> Result<TaStatistic, String> {
+        let p = self.params;
+        if saved.params != p {
+            return Err(format!(
+                "T_a over {} residuals in {} dimensions, the channel's is over {} in {}",
+                saved.params.n, saved.params.dim, p.n, p.dim
+            ));
+        }
+        let d = p.dim;
+        let square = |m: &DMatrix<f64>| m.shape() == (d, d);
+        let fits = square(&saved.v)
+            && saved.v_inv.as_ref().is_none_or(square)
+            && saved.last_healthy.as_ref().is_none_or(|r| r.len() == d)
+            && saved.window.len() <= p.n
+            && saved.window.iter().all(|e| {
+                e.weighted
+                    .as_ref()
+                    .is_none_or(|(vi, vir)| square(vi) && vir.len() == d)
+            });
+        if !fits {
+            return Err("T_a state does not fit its parameters".into());
+        }
+        saved.window.reserve(p.n.saturating_sub(saved.window.len()));
+        Ok(saved)
     }
 
     fn check(&self, r: &[f64]) -> Result<DVector<f64>, TaError> {

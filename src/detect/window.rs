@@ -31,6 +31,7 @@
 use std::collections::VecDeque;
 
 use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
 
 use super::chi2;
 
@@ -63,7 +64,7 @@ pub enum WindowError {
 }
 
 /// Parameters of a [`WindowTest`].
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct WindowParams {
     /// Input dimension d (≥ 1).
     pub dim: usize,
@@ -159,14 +160,14 @@ pub fn f_lower_tail(x: f64, d1: f64, d2: f64) -> f64 {
 }
 
 /// A completed healthy block: its mean and the sum of `r rᵀ` over its inputs.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 struct Block {
     mean: DVector<f64>,
     sum_sq: DMatrix<f64>,
 }
 
 /// One window length: its block in progress, its kept blocks and their estimate.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 struct Scale {
     n: usize,
     /// Blocks kept, and blocks needed before the scale judges (the params' values, or
@@ -259,6 +260,46 @@ impl Scale {
         self.estimate = second.cholesky().map(|c| (c.inverse(), per_input));
     }
 
+    /// Checks a scale read from a checkpoint against this one (same window and block
+    /// counts, every vector and matrix `d`-dimensional, no more blocks than kept) and gives
+    /// it this one's block capacity.
+    fn restored(&self, mut saved: Scale, d: usize) -> Result<Scale, String> {
+        if (saved.n, saved.max_blocks, saved.min_blocks)
+            != (self.n, self.max_blocks, self.min_blocks)
+        {
+            return Err(format!(
+                "window scale {} keeping {} blocks, the test's is {} keeping {}",
+                saved.n, saved.max_blocks, self.n, self.max_blocks
+            ));
+        }
+        let square = |m: &DMatrix<f64>| m.shape() == (d, d);
+        let fits = saved.partial.0.len() == d
+            && square(&saved.partial.1)
+            && saved.partial.2 < saved.n
+            && saved.blocks.len() <= saved.max_blocks
+            && saved
+                .blocks
+                .iter()
+                .all(|b| b.mean.len() == d && square(&b.sum_sq))
+            && square(&saved.sums.0)
+            && square(&saved.sums.1)
+            && saved.since_recompute < saved.max_blocks
+            && saved
+                .estimate
+                .as_ref()
+                .is_none_or(|(a, b)| square(a) && square(b));
+        if !fits {
+            return Err(format!(
+                "window scale {} does not fit dimension {d}",
+                self.n
+            ));
+        }
+        saved
+            .blocks
+            .reserve((saved.max_blocks + 1).saturating_sub(saved.blocks.len()));
+        Ok(saved)
+    }
+
     /// `(tail, raw, blocks)` of this scale for the window mean `mean`, if it can judge.
     fn judge(
         &self,
@@ -284,8 +325,9 @@ impl Scale {
     }
 }
 
-/// The running windowed-mean test of one signal.
-#[derive(Debug, Clone)]
+/// The running windowed-mean test of one signal (serde: a monitor checkpoint saves it
+/// whole, parameters included, and [`WindowTest::restored`] checks it).
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct WindowTest {
     params: WindowParams,
     /// Covariance of one input under no fault, when known (whitened innovations: I).
@@ -393,6 +435,41 @@ impl WindowTest {
             .iter()
             .find_map(|s| s.estimate.as_ref().map(|(_, c)| c))
             .or(self.known.as_ref())
+    }
+
+    /// `saved` (read from a checkpoint) as the running state of this test: the same
+    /// parameters, scales and known covariance, every input `d`-dimensional and no
+    /// longer window than the longest scale; with the capacities [`WindowTest::new`]
+    /// reserves, so a commit allocates no more than before. The reason when it does
+    /// not fit.
+    pub fn restored(&self, mut saved: WindowTest) -> Result<WindowTest, String> {
+        if saved.params != self.params {
+            return Err(format!(
+                "window test over {:?} in {} dimensions, the test's is over {:?} in {}",
+                saved.params.scales, saved.params.dim, self.params.scales, self.params.dim
+            ));
+        }
+        if saved.known != self.known || saved.known_inv != self.known_inv {
+            return Err("window test with another known covariance".into());
+        }
+        let d = self.params.dim;
+        let longest = self.params.longest();
+        if saved.window.len() > longest || saved.window.iter().any(|x| x.len() != d) {
+            return Err(format!("window test inputs do not fit {longest} × {d}"));
+        }
+        if saved.scales.len() != self.scales.len() {
+            return Err("window test with another number of scales".into());
+        }
+        saved.scales = self
+            .scales
+            .iter()
+            .zip(saved.scales)
+            .map(|(mine, theirs)| mine.restored(theirs, d))
+            .collect::<Result<_, _>>()?;
+        saved
+            .window
+            .reserve((longest + 1).saturating_sub(saved.window.len()));
+        Ok(saved)
     }
 
     /// Back to the state of a fresh test (the known covariance is kept).

@@ -50,6 +50,7 @@
 //! buffers are flipped on commit rather than copied. Nothing is allocated per epoch.
 
 use nalgebra::{SVector, U15};
+use serde::{Deserialize, Serialize};
 
 use super::aiding::AidMeasurement;
 use super::ins::{self, ImuErrors, NavSolution};
@@ -218,8 +219,9 @@ pub struct AidStep {
 }
 
 /// The filter's state: the master (fused) estimate and each local filter's own estimate,
-/// `None` for a local filter that shares the master's (`x_g`, `P_g/β_i`).
-#[derive(Debug, Clone, PartialEq)]
+/// `None` for a local filter that shares the master's (`x_g`, `P_g/β_i`). It is what a
+/// monitor checkpoint saves of the filter ([`FederatedFilter::with_state`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FederatedState {
     /// `(x_g, P_g)` after the last fusion.
     pub master: ErrorEstimate,
@@ -309,6 +311,26 @@ impl FederatedFilter {
             Some(e) => e.clone(),
             None => scaled(self.master(), self.betas[i]),
         }
+    }
+
+    /// A filter with this one's aids and sharing factors whose current state is `state`,
+    /// nothing pending: the restore of a checkpoint, which saves only [`FederatedFilter::state`]
+    /// (the other buffer is scratch, fully rewritten by every step). The reason when `state`
+    /// does not fit (an estimate of its own for an aid the filter does not have).
+    pub fn with_state(&self, state: FederatedState) -> Result<Self, String> {
+        if let Some(i) = (self.n..MAX_AIDS).find(|&i| state.own[i].is_some()) {
+            return Err(format!(
+                "local filter {i} has an estimate of its own, the filter has {} aids",
+                self.n
+            ));
+        }
+        Ok(FederatedFilter {
+            betas: self.betas,
+            n: self.n,
+            states: [state.clone(), state],
+            current: 0,
+            pending_ready: false,
+        })
     }
 
     /// Restarts from `initial`, every local filter sharing it.

@@ -21,6 +21,7 @@
 use nalgebra::allocator::Allocator;
 use nalgebra::storage::RawStorage;
 use nalgebra::{Cholesky, DefaultAllocator, Dim, Matrix, OMatrix, OVector};
+use serde::{Deserialize, Serialize};
 
 /// Why a filter step failed; the caller's state is unchanged whenever one is returned.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -52,8 +53,13 @@ pub enum FilterError {
 /// The Kalman gain `K = P⁻ Hᵀ S⁻¹` (n×m) returned by [`update`].
 pub type Gain<N, M> = OMatrix<f64, N, M>;
 
-/// A Gaussian state estimate: explicit mean `x` and covariance `P`.
-#[derive(Debug, Clone, PartialEq)]
+/// A Gaussian state estimate: explicit mean `x` and covariance `P` (serde: a monitor
+/// checkpoint saves it, every f64 bit for bit).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(bound(
+    serialize = "OVector<f64, N>: Serialize, OMatrix<f64, N, N>: Serialize",
+    deserialize = "OVector<f64, N>: Deserialize<'de>, OMatrix<f64, N, N>: Deserialize<'de>"
+))]
 pub struct StateEstimate<N: Dim>
 where
     DefaultAllocator: Allocator<N, N> + Allocator<N>,

@@ -59,8 +59,9 @@ impl OnlineParams {
     }
 }
 
-/// The sliding-window model.
-#[derive(Debug, Clone)]
+/// The sliding-window model (serde: a monitor checkpoint saves it, parameters included,
+/// scratch buffers not; [`OnlineLsSvm::restored`] checks it).
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct OnlineLsSvm {
     params: OnlineParams,
     kernel: Kernel,
@@ -90,9 +91,13 @@ pub struct OnlineLsSvm {
     /// none): it is folded into the next slide's single pass over `P`.
     pending_u: Vec<f64>,
     pending_s: f64,
-    /// Scratch: kernel column of the newcomer, `u = P k`, leaver's row.
+    /// Scratch: kernel column of the newcomer, `u = P k`, leaver's row (each written in
+    /// full before it is read, so not part of the state).
+    #[serde(skip)]
     k: Vec<f64>,
+    #[serde(skip)]
     u: Vec<f64>,
+    #[serde(skip)]
     q: Vec<f64>,
 }
 
@@ -128,6 +133,47 @@ impl OnlineLsSvm {
     /// The parameters.
     pub fn params(&self) -> &OnlineParams {
         &self.params
+    }
+
+    /// The input dimension, fixed by the first sample (0 before it).
+    pub fn input_dim(&self) -> usize {
+        self.dim
+    }
+
+    /// `saved` (read from a checkpoint) as the running state of this window: the same
+    /// parameters and kernel, every buffer of the window's size, counts within it; the
+    /// scratch buffers are allocated here, as [`OnlineLsSvm::new`] does. The reason
+    /// otherwise.
+    pub fn restored(&self, mut saved: OnlineLsSvm) -> Result<OnlineLsSvm, String> {
+        if saved.params != self.params || saved.kernel != self.kernel {
+            return Err(format!(
+                "online window {:?}, the channel's is {:?}",
+                saved.params, self.params
+            ));
+        }
+        let n = self.params.window;
+        let fits = saved.xs.len() == n * saved.dim
+            && [
+                &saved.ys,
+                &saved.eta,
+                &saved.nu,
+                &saved.alpha,
+                &saved.pending_u,
+            ]
+            .iter()
+            .all(|v| v.len() == n)
+            && saved.p.len() == n * n
+            && saved.len <= n
+            && (saved.dim > 0 || saved.len == 0)
+            && (saved.oldest < n)
+            && saved.since_refresh < self.params.refresh;
+        if !fits {
+            return Err("online window state does not fit its parameters".into());
+        }
+        saved.k = vec![0.0; n];
+        saved.u = vec![0.0; n];
+        saved.q = vec![0.0; n];
+        Ok(saved)
     }
 
     /// Samples in the window.

@@ -13,8 +13,12 @@
 //! for as long as it lasts (the replacements become the history). Callers that must
 //! follow real steps can bound that with [`OutlierFilter::with_max_run`].
 
+use serde::{Deserialize, Serialize};
+
 /// The filter's state: the last accepted values.
-#[derive(Debug, Clone)]
+///
+/// Serde: a monitor checkpoint saves it whole and [`OutlierFilter::restored`] checks it.
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct OutlierFilter {
     c: f64,
     /// Last 4 accepted values, oldest first (fewer at start-up).
@@ -100,6 +104,18 @@ impl OutlierFilter {
     /// Values replaced so far.
     pub fn replaced(&self) -> u64 {
         self.replaced
+    }
+
+    /// `saved` (read from a checkpoint) as the running state of this filter: the same
+    /// factor `c` and run limit; the reason otherwise.
+    pub fn restored(&self, saved: OutlierFilter) -> Result<OutlierFilter, String> {
+        if saved.c.to_bits() != self.c.to_bits() || saved.max_run != self.max_run {
+            return Err(format!(
+                "outlier filter with c = {}, the channel's has c = {}",
+                saved.c, self.c
+            ));
+        }
+        Ok(saved)
     }
 }
 

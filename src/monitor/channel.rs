@@ -50,6 +50,7 @@
 //! prediction that is not finite fails the step (state unchanged).
 
 mod config;
+mod saved;
 #[cfg(test)]
 mod tests;
 
@@ -64,8 +65,8 @@ pub use config::{
 };
 
 use super::{
-    BuildError, EpochError, ModelSource, Monitor, MonitorKind, MonitorReport, Outputs, StepError,
-    TestBank, TestName, TestOutcome,
+    BuildError, CheckpointError, EpochError, ModelSource, Monitor, MonitorKind, MonitorReport,
+    Outputs, StepError, TestBank, TestName, TestOutcome,
 };
 use crate::detect::stuck::{StuckError, StuckTest};
 use crate::detect::window::{WindowError, WindowTest};
@@ -77,6 +78,7 @@ use crate::learn::outlier::OutlierFilter;
 use crate::learn::{AnyModel, LearnError};
 use config::learn_field;
 use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
 
 /// The running predictor of one channel.
 #[derive(Debug, Clone)]
@@ -86,7 +88,7 @@ enum Predictor {
 }
 
 /// The running main test of one channel.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 enum MainTest {
     BatchMeans(WindowTest),
     SuccessiveDifference(TaStatistic),
@@ -592,6 +594,16 @@ impl Monitor for ChannelMonitor {
             },
             integrity: None,
         })
+    }
+
+    fn checkpoint(&self) -> Result<Vec<u8>, CheckpointError> {
+        self.save()
+    }
+
+    /// Checks every channel's state (in config order) and the tests against this monitor's
+    /// before anything is replaced.
+    fn restore(&mut self, bytes: &[u8]) -> Result<(), CheckpointError> {
+        self.load(bytes)
     }
 
     fn reset(&mut self) {

@@ -48,16 +48,17 @@
 
 mod config;
 mod integrity;
+mod saved;
 
 pub use config::*;
 
 use nalgebra::{Matrix2, Vector3};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::guards::{GuardPreview, InnovationGuards, worse};
 use super::{
-    BuildError, ConfigError, EpochError, Integrity, Monitor, MonitorKind, MonitorReport, Outputs,
-    StepError, TestBank, TestOutcome,
+    BuildError, CheckpointError, ConfigError, EpochError, Integrity, Monitor, MonitorKind,
+    MonitorReport, Outputs, StepError, TestBank, TestOutcome,
 };
 use crate::detect::hpl::{self, DetectionNoncentrality, HplError};
 use crate::detect::{Decision, Health, PolicyConfig, PolicyState, ThresholdError, ThresholdSpec};
@@ -97,7 +98,7 @@ fn guard_dim(aid: Aid) -> usize {
 }
 
 /// The corrected navigation solution on the wire: degrees, metres, m/s ENU.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct FederatedSolution {
     /// Latitude, degrees.
     pub lat: f64,
@@ -538,6 +539,17 @@ impl Monitor for FederatedMonitor {
             outputs: self.outputs.clone(),
             integrity: Some(integrity),
         })
+    }
+
+    fn checkpoint(&self) -> Result<Vec<u8>, CheckpointError> {
+        self.save()
+    }
+
+    /// Checks the saved filter state, the tests, each aid's guards, the convergence cap,
+    /// the HPL terms and the isolated aids against this monitor's before anything is
+    /// replaced.
+    fn restore(&mut self, bytes: &[u8]) -> Result<(), CheckpointError> {
+        self.load(bytes)
     }
 
     fn reset(&mut self) {

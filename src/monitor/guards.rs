@@ -270,14 +270,15 @@ fn standing(bank: &TestBank, index: usize) -> Decision {
 }
 
 /// One guard: its index in the bank and its running test.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 struct Guard<T> {
     index: usize,
     test: T,
 }
 
-/// The drift and stuck tests of one guarded test.
-#[derive(Debug, Clone, Default)]
+/// The drift and stuck tests of one guarded test (serde: a monitor checkpoint saves them,
+/// [`InnovationGuards::restored`] checks them).
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct InnovationGuards {
     drift: Option<Guard<WindowTest>>,
     stuck: Option<Guard<StuckTest>>,
@@ -331,6 +332,39 @@ impl InnovationGuards {
             None => None,
         };
         Ok(InnovationGuards { drift, stuck, dim })
+    }
+
+    /// `saved` (read from a checkpoint) as the running state of these guards: the same
+    /// tests at the same bank indices over inputs of the same dimension, each test's state
+    /// fitting its parameters; the reason otherwise.
+    pub fn restored(&self, saved: InnovationGuards) -> Result<InnovationGuards, String> {
+        if saved.dim != self.dim {
+            return Err(format!(
+                "guards over {} components, the monitor's over {}",
+                saved.dim, self.dim
+            ));
+        }
+        let drift = match (&self.drift, saved.drift) {
+            (None, None) => None,
+            (Some(mine), Some(theirs)) if theirs.index == mine.index => Some(Guard {
+                index: mine.index,
+                test: mine.test.restored(theirs.test)?,
+            }),
+            _ => return Err("another drift test".into()),
+        };
+        let stuck = match (&self.stuck, saved.stuck) {
+            (None, None) => None,
+            (Some(mine), Some(theirs)) if theirs.index == mine.index => Some(Guard {
+                index: mine.index,
+                test: mine.test.restored(theirs.test)?,
+            }),
+            _ => return Err("another stuck test".into()),
+        };
+        Ok(InnovationGuards {
+            drift,
+            stuck,
+            dim: self.dim,
+        })
     }
 
     /// True when neither test runs.

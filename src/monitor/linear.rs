@@ -10,12 +10,15 @@
 //! only if every test allows it. The residual test's `ν` feeds its consistency
 //! diagnostics (docs/methods.md §M22).
 
+use std::borrow::Cow;
+
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 use super::guards::{self, DriftConfigWire, GuardConfig, InnovationGuards, StuckConfigWire};
 use super::{
-    ConfigError, EpochError, Monitor, MonitorKind, MonitorReport, Outputs, StepError, TestBank,
+    CheckpointError, ConfigError, EpochError, Monitor, MonitorKind, MonitorReport, Outputs,
+    StepError, TestBank, checkpoint,
 };
 use crate::detect::{PolicyConfig, ThresholdError, ThresholdSpec};
 use crate::epoch::Epoch;
@@ -240,6 +243,14 @@ pub struct LinearMonitor {
 /// Index of the `residual` test in the bank.
 const RESIDUAL: usize = 0;
 
+/// What a checkpoint of a `linear` monitor holds (borrowed to write, owned when read).
+#[derive(Serialize, Deserialize)]
+struct LinearSaved<'a> {
+    estimate: Cow<'a, StateEstimate<nalgebra::Dyn>>,
+    bank: Cow<'a, TestBank>,
+    guards: Cow<'a, InnovationGuards>,
+}
+
 impl LinearMonitor {
     /// Builds the monitor: the test `residual` (dof m) and the guards its config enables,
     /// `residual.drift` (dof m) and `residual.stuck` (dof 1).
@@ -387,6 +398,43 @@ impl Monitor for LinearMonitor {
         self.estimate = self.initial.clone();
         self.bank.reset();
         self.guards.reset();
+    }
+
+    fn checkpoint(&self) -> Result<Vec<u8>, CheckpointError> {
+        checkpoint::encode(
+            MonitorKind::Linear,
+            &LinearSaved {
+                estimate: Cow::Borrowed(&self.estimate),
+                bank: Cow::Borrowed(&self.bank),
+                guards: Cow::Borrowed(&self.guards),
+            },
+        )
+    }
+
+    /// Checks the saved estimate's dimension (x of n, P n × n), the tests and the guards
+    /// against this monitor's before anything is replaced.
+    fn restore(&mut self, bytes: &[u8]) -> Result<(), CheckpointError> {
+        let saved: LinearSaved = checkpoint::decode(MonitorKind::Linear, bytes)?;
+        let estimate = saved.estimate.into_owned();
+        let n = self.initial.x.len();
+        if estimate.x.len() != n || estimate.p.shape() != (n, n) {
+            return Err(CheckpointError::mismatch(format!(
+                "a {}-state estimate, the monitor has {n} states",
+                estimate.x.len()
+            )));
+        }
+        let bank = self
+            .bank
+            .restored(saved.bank.into_owned())
+            .map_err(CheckpointError::Mismatch)?;
+        let guards = self
+            .guards
+            .restored(saved.guards.into_owned())
+            .map_err(CheckpointError::Mismatch)?;
+        self.estimate = estimate;
+        self.bank = bank;
+        self.guards = guards;
+        Ok(())
     }
 }
 

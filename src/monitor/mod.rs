@@ -4,6 +4,7 @@
 
 pub mod calibrate;
 pub mod channel;
+pub mod checkpoint;
 pub mod federated;
 pub mod guards;
 pub mod linear;
@@ -17,6 +18,7 @@ use std::sync::Arc;
 
 use serde::Serialize;
 
+pub use checkpoint::CheckpointError;
 pub use tests_bank::{TestBank, TestName, TestOutcome};
 
 use crate::detect::{PolicyConfig, PolicyError, ThresholdError, ThresholdSpec};
@@ -223,6 +225,17 @@ pub trait Monitor: Send {
     /// Restarts the filter state from the configured initial conditions
     /// (a new stream) and the policies from their initial counters.
     fn reset(&mut self);
+
+    /// The monitor's evolving state (filters, detectors, policies and their counters, test
+    /// health), as bytes for a checkpoint (docs/architecture.md §A10).
+    fn checkpoint(&self) -> Result<Vec<u8>, CheckpointError>;
+
+    /// Replaces the evolving state with one saved by [`Monitor::checkpoint`] on a monitor
+    /// built from the same spec. On `Err` the monitor is unchanged.
+    ///
+    /// The tests' thresholds and policies are the checkpoint's ([`TestBank::restored`]):
+    /// re-apply through [`Monitor::tests_mut`] any change made after the checkpoint.
+    fn restore(&mut self, bytes: &[u8]) -> Result<(), CheckpointError>;
 }
 
 /// Deserialises a monitor's `config` into its typed form, keeping the path of the field

@@ -12,6 +12,7 @@
 //! 96, "wavelet": {"wavelet": "db4", "level": 3, "normalize": true}, "model": "<svm
 //! id>" (optional), "t_i": 0.1}`.
 
+use std::borrow::Cow;
 use std::collections::VecDeque;
 use std::sync::Arc;
 
@@ -19,8 +20,8 @@ use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    BuildError, ConfigError, EpochError, ModelSource, Monitor, MonitorKind, MonitorReport, Outputs,
-    StepError, TestBank,
+    BuildError, CheckpointError, ConfigError, EpochError, ModelSource, Monitor, MonitorKind,
+    MonitorReport, Outputs, StepError, TestBank, checkpoint,
 };
 use crate::detect::parity::{self, FssWindow, ParitySpace};
 use crate::detect::{Health, PolicyConfig, ThresholdError, ThresholdSpec};
@@ -258,6 +259,18 @@ pub fn build(
 /// Index of the `parity` test in the bank.
 const PARITY: usize = 0;
 
+/// What a checkpoint of a `rimu` monitor holds (borrowed to write, owned when read): the
+/// FSS window, each gyro's sample history, the flagged and isolated gyros and the test.
+/// Not the classifier: the monitor built from the spec has it.
+#[derive(Serialize, Deserialize)]
+struct RimuSaved<'a> {
+    fss: Cow<'a, FssWindow>,
+    history: Cow<'a, [VecDeque<f64>]>,
+    flagged: Cow<'a, [usize]>,
+    isolated: Cow<'a, [usize]>,
+    bank: Cow<'a, TestBank>,
+}
+
 /// The `rimu` monitor.
 pub struct RimuMonitor {
     config: RimuConfig,
@@ -410,6 +423,58 @@ impl Monitor for RimuMonitor {
             },
             integrity: None,
         })
+    }
+
+    fn checkpoint(&self) -> Result<Vec<u8>, CheckpointError> {
+        checkpoint::encode(
+            MonitorKind::Rimu,
+            &RimuSaved {
+                fss: Cow::Borrowed(&self.fss),
+                history: Cow::Borrowed(&self.history),
+                flagged: Cow::Borrowed(&self.flagged),
+                isolated: Cow::Borrowed(&self.isolated),
+                bank: Cow::Borrowed(&self.bank),
+            },
+        )
+    }
+
+    /// Checks the FSS window (length and parity covariance), one history per gyro of at
+    /// most `feature_window` samples, gyro indices in range and the test before anything
+    /// is replaced.
+    fn restore(&mut self, bytes: &[u8]) -> Result<(), CheckpointError> {
+        let saved: RimuSaved = checkpoint::decode(MonitorKind::Rimu, bytes)?;
+        let fss = self
+            .fss
+            .restored(saved.fss.into_owned())
+            .map_err(CheckpointError::Mismatch)?;
+        let (m, l) = (self.config.parity.gyros(), self.config.feature_window);
+        let mut history = saved.history.into_owned();
+        if history.len() != m || history.iter().any(|h| h.len() > l) {
+            return Err(CheckpointError::mismatch(format!(
+                "histories of {} gyros, the monitor has {m} gyros of {l} samples",
+                history.len()
+            )));
+        }
+        let (flagged, isolated) = (saved.flagged.into_owned(), saved.isolated.into_owned());
+        if flagged.iter().chain(&isolated).any(|&i| i >= m) {
+            return Err(CheckpointError::mismatch(format!(
+                "a flagged or isolated gyro beyond the monitor's {m}"
+            )));
+        }
+        let bank = self
+            .bank
+            .restored(saved.bank.into_owned())
+            .map_err(CheckpointError::Mismatch)?;
+        // The capacity `new` reserves, so a step allocates no more than before.
+        for h in &mut history {
+            h.reserve(l.saturating_sub(h.len()));
+        }
+        self.fss = fss;
+        self.history = history;
+        self.flagged = flagged;
+        self.isolated = isolated;
+        self.bank = bank;
+        Ok(())
     }
 
     fn reset(&mut self) {

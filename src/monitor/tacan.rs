@@ -50,6 +50,7 @@
 //! the model's training statistics); `decision`: `g`. Both absent until the window
 //! is full.
 
+use std::borrow::Cow;
 use std::collections::VecDeque;
 use std::sync::Arc;
 
@@ -57,8 +58,8 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    BuildError, ConfigError, EpochError, ModelSource, Monitor, MonitorKind, MonitorReport, Outputs,
-    StepError, TestBank,
+    BuildError, CheckpointError, ConfigError, EpochError, ModelSource, Monitor, MonitorKind,
+    MonitorReport, Outputs, StepError, TestBank, checkpoint,
 };
 use crate::detect::{PolicyConfig, ThresholdSpec};
 use crate::epoch::Epoch;
@@ -325,6 +326,18 @@ impl TacanMonitor {
     }
 }
 
+/// What a checkpoint of a `tacan` monitor holds (borrowed to write, owned when read): the
+/// window of range pairs, the time of the last used epoch, the outputs repeated on epochs
+/// it ignores and the test. Not the model: the monitor built from the spec has it.
+#[derive(Serialize, Deserialize)]
+struct TacanSaved<'a> {
+    window: Cow<'a, VecDeque<(f64, f64)>>,
+    last_t: Option<f64>,
+    features: Option<Cow<'a, [f64]>>,
+    decision: Option<f64>,
+    bank: Cow<'a, TestBank>,
+}
+
 fn empty() -> Outputs {
     Outputs::Tacan {
         features: None,
@@ -419,6 +432,58 @@ impl Monitor for TacanMonitor {
             outputs: self.outputs.clone(),
             integrity: None,
         })
+    }
+
+    fn checkpoint(&self) -> Result<Vec<u8>, CheckpointError> {
+        let Outputs::Tacan { features, decision } = &self.outputs else {
+            return Err(CheckpointError::Encode(
+                "tacan monitor without tacan outputs".into(),
+            ));
+        };
+        checkpoint::encode(
+            MonitorKind::Tacan,
+            &TacanSaved {
+                window: Cow::Borrowed(&self.window),
+                last_t: self.last_t,
+                features: features.as_deref().map(Cow::Borrowed),
+                decision: *decision,
+                bank: Cow::Borrowed(&self.bank),
+            },
+        )
+    }
+
+    /// Checks the window (at most `window` pairs), the feature output's dimension and the
+    /// test before anything is replaced.
+    fn restore(&mut self, bytes: &[u8]) -> Result<(), CheckpointError> {
+        let saved: TacanSaved = checkpoint::decode(MonitorKind::Tacan, bytes)?;
+        let k = self.config.features.window;
+        let dim = self.config.features.dim();
+        let mut window = saved.window.into_owned();
+        if window.len() > k {
+            return Err(CheckpointError::mismatch(format!(
+                "a window of {} pairs, the monitor's holds {k}",
+                window.len()
+            )));
+        }
+        let features = saved.features.map(Cow::into_owned);
+        if features.as_ref().is_some_and(|f| f.len() != dim) {
+            return Err(CheckpointError::mismatch(format!(
+                "features of another dimension, the monitor's have {dim}"
+            )));
+        }
+        let bank = self
+            .bank
+            .restored(saved.bank.into_owned())
+            .map_err(CheckpointError::Mismatch)?;
+        window.reserve(k.saturating_sub(window.len()));
+        self.window = window;
+        self.last_t = saved.last_t;
+        self.outputs = Outputs::Tacan {
+            features,
+            decision: saved.decision,
+        };
+        self.bank = bank;
+        Ok(())
     }
 
     fn reset(&mut self) {

@@ -11,6 +11,8 @@
 
 use std::sync::Arc;
 
+use serde::{Deserialize, Serialize};
+
 use crate::detect::consistency::Consistency;
 use crate::detect::{
     Decision, Health, PolicyConfig, PolicyState, Statistic, ThresholdError, ThresholdSpec,
@@ -21,7 +23,7 @@ use crate::detect::{
 pub type TestName = Arc<str>;
 
 /// One test's running state.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct TestSlot {
     /// Test name as on the wire (`residual`, `gnss`, `parity`, …).
     pub name: TestName,
@@ -73,8 +75,9 @@ pub struct TestOutcome {
     pub previous: Health,
 }
 
-/// A monitor's tests.
-#[derive(Debug, Clone)]
+/// A monitor's tests (serde: a monitor checkpoint saves the bank whole,
+/// [`TestBank::restored`] checks it).
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct TestBank {
     spec: ThresholdSpec,
     policy: PolicyConfig,
@@ -190,6 +193,65 @@ impl TestBank {
         slot.alt_dofs = alt;
         slot.own_spec = own_spec;
         Ok(())
+    }
+
+    /// `saved` (read from a checkpoint) as this bank's running state: it must hold the same
+    /// tests in the same order (name, dof, alternative dofs, whether the policy is the
+    /// test's own), with valid policy states; the reason otherwise. Names keep this bank's
+    /// shared [`TestName`]s.
+    ///
+    /// The checkpoint's thresholds, threshold specs (the monitor's and each test's) and
+    /// policies replace this bank's, with the counters they go with: a change made after
+    /// the checkpoint was written is the service's to re-apply through
+    /// [`super::Monitor::tests_mut`] after the restore.
+    pub fn restored(&self, saved: TestBank) -> Result<TestBank, String> {
+        if saved.slots.len() != self.slots.len() {
+            return Err(format!(
+                "{} tests, the monitor has {}",
+                saved.slots.len(),
+                self.slots.len()
+            ));
+        }
+        saved.spec.check().map_err(|e| format!("threshold: {e}"))?;
+        saved.policy.check().map_err(|e| format!("policy: {e}"))?;
+        let slots = self
+            .slots
+            .iter()
+            .zip(saved.slots)
+            .enumerate()
+            .map(|(i, (mine, mut theirs))| {
+                let alt = |s: &TestSlot| s.alt_dofs.iter().map(|&(d, _)| d).collect::<Vec<_>>();
+                if *theirs.name != *mine.name
+                    || theirs.dof != mine.dof
+                    || alt(&theirs) != alt(mine)
+                    || theirs.own_policy != mine.own_policy
+                {
+                    return Err(format!(
+                        "test {i} is '{}' (dof {}), the monitor's is '{}' (dof {})",
+                        theirs.name, theirs.dof, mine.name, mine.dof
+                    ));
+                }
+                theirs
+                    .policy
+                    .check_saved()
+                    .map_err(|e| format!("test '{}': {e}", mine.name))?;
+                if let Some(spec) = theirs.own_spec {
+                    spec.check()
+                        .map_err(|e| format!("test '{}' threshold: {e}", mine.name))?;
+                }
+                theirs.consistency = mine
+                    .consistency
+                    .restored(theirs.consistency)
+                    .map_err(|e| format!("test '{}': {e}", mine.name))?;
+                theirs.name = mine.name.clone();
+                Ok(theirs)
+            })
+            .collect::<Result<Vec<_>, String>>()?;
+        Ok(TestBank {
+            spec: saved.spec,
+            policy: saved.policy,
+            slots,
+        })
     }
 
     /// The index of the test named `name`.

@@ -11,10 +11,12 @@
 //! - Then, every epoch: **available** when `HPL ≤ HAL`, **unavailable** otherwise; a loss
 //!   in mid-run is reported at the epoch it happens, and a return at the epoch it happens.
 
+use serde::{Deserialize, Serialize};
+
 use crate::monitor::{Availability, Integrity};
 
-/// The convergence tracker of one monitor.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// The convergence tracker of one monitor (serde: a checkpoint saves it).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub(super) struct Convergence {
     /// The cap, s.
     max_s: f64,
@@ -59,6 +61,18 @@ impl Convergence {
             alert_limit: hal,
         };
         (integrity, next)
+    }
+
+    /// `saved` (read from a checkpoint) as this tracker's state: the same cap, bit for bit;
+    /// the reason otherwise.
+    pub(super) fn restored(&self, saved: Convergence) -> Result<Convergence, String> {
+        if saved.max_s.to_bits() != self.max_s.to_bits() {
+            return Err(format!(
+                "convergence cap {} s, the monitor's is {} s",
+                saved.max_s, self.max_s
+            ));
+        }
+        Ok(saved)
     }
 
     /// Back to a tracker that has seen no epoch (a new stream).
