@@ -116,11 +116,50 @@ struct ServeArgs {
     #[arg(long, env = "NAVGUARD_IDLE_TIMEOUT_MS", default_value_t = Limits::default().idle_timeout.as_millis() as u64,
           value_parser = clap::value_parser!(u64).range(1..))]
     idle_timeout_ms: u64,
+    /// Join a cluster through this NATS server (`nats://host:port`): sessions are owned
+    /// through leases in the shared store (use a Postgres --db), events cross nodes
+    /// (docs/deployment.md). Unset: a single node.
+    #[arg(long, env = "NAVGUARD_NATS")]
+    nats: Option<String>,
+    /// This node's id in the cluster (default: node-PORT).
+    #[arg(long, env = "NAVGUARD_NODE_ID", requires = "nats")]
+    node_id: Option<String>,
+    /// The URL clients and other nodes reach this node at directly (default: http://BIND).
+    #[arg(long, env = "NAVGUARD_ADVERTISE", requires = "nats")]
+    advertise: Option<String>,
+    /// Milliseconds a session lease holds without renewal (renewed every third of it).
+    #[arg(long, env = "NAVGUARD_LEASE_MS", default_value_t = 5000,
+          value_parser = clap::value_parser!(u64).range(300..=600_000))]
+    lease_ms: u64,
+    /// Milliseconds between two checkpoints of a session whose state changed.
+    #[arg(long, env = "NAVGUARD_CHECKPOINT_MS", default_value_t = 1000,
+          value_parser = clap::value_parser!(u64).range(10..=600_000))]
+    checkpoint_ms: u64,
+    /// On SIGTERM, milliseconds /healthz answers 503 before the sessions are handed over.
+    #[arg(long, env = "NAVGUARD_DRAIN_WAIT_MS", default_value_t = 2000,
+          value_parser = clap::value_parser!(u64).range(0..=600_000))]
+    drain_wait_ms: u64,
 }
 
 impl ServeArgs {
     fn into_config(self) -> ServiceConfig {
+        let cluster = self.nats.as_ref().map(|nats| {
+            let mut c = navguard::service::cluster::ClusterConfig::new(
+                self.node_id
+                    .clone()
+                    .unwrap_or_else(|| format!("node-{}", self.bind.port())),
+                self.advertise
+                    .clone()
+                    .unwrap_or_else(|| format!("http://{}", self.bind)),
+                nats.clone(),
+            );
+            c.lease = Duration::from_millis(self.lease_ms);
+            c.checkpoint_interval = Duration::from_millis(self.checkpoint_ms);
+            c.drain_wait = Duration::from_millis(self.drain_wait_ms);
+            c
+        });
         ServiceConfig {
+            cluster,
             bind: self.bind,
             db_path: self.db,
             // A blank token is refused at start rather than read as "no token".
@@ -154,6 +193,24 @@ impl ServeArgs {
     }
 }
 
+/// Ctrl-C or SIGTERM (what `kill`, systemd and container runtimes send).
+async fn wait_for_stop() -> anyhow::Result<()> {
+    #[cfg(unix)]
+    {
+        let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+            .context("installing the SIGTERM handler")?;
+        tokio::select! {
+            r = tokio::signal::ctrl_c() => r.context("waiting for Ctrl-C")?,
+            _ = term.recv() => {}
+        }
+    }
+    #[cfg(not(unix))]
+    tokio::signal::ctrl_c()
+        .await
+        .context("waiting for Ctrl-C")?;
+    Ok(())
+}
+
 async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     let config = args.into_config();
     let db = navguard::service::store::display_db(&config.db_path);
@@ -162,10 +219,10 @@ async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         "navguard listening on http://{} (store: {db}); dashboard at http://{}/",
         server.addr, server.addr
     );
-    tokio::signal::ctrl_c()
-        .await
-        .context("waiting for Ctrl-C")?;
-    println!("shutting down: closing sockets and flushing the store");
+    wait_for_stop().await?;
+    println!(
+        "shutting down: handing sessions over (cluster), closing sockets and flushing the store"
+    );
     server.shutdown().await;
     Ok(())
 }

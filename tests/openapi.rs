@@ -47,6 +47,7 @@ async fn state(dir: &Path, token: Option<&str>) -> AppState {
         config: Arc::new(config),
         shutdown: tokio::sync::watch::channel(false).1,
         compute: navguard::service::compute::ComputePool::new(2),
+        cluster: None,
     }
 }
 

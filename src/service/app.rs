@@ -10,6 +10,7 @@ use axum::routing::{MethodRouter, get, post};
 use tokio::sync::watch;
 
 use super::api::{alarms, chi2, features, health, models, recording, sessions, thresholds};
+use super::cluster::Cluster;
 use super::compute::ComputePool;
 use super::config::ServiceConfig;
 use super::error::ApiError;
@@ -37,6 +38,8 @@ pub struct AppState {
     pub models: Arc<Models>,
     /// The threads session actors step their monitors on (docs/architecture.md §A3).
     pub compute: Arc<ComputePool>,
+    /// This node's cluster membership (`--nats`), if any (docs/deployment.md).
+    pub cluster: Option<Arc<Cluster>>,
 }
 
 impl AppState {
@@ -50,6 +53,7 @@ impl AppState {
             record_default: self.config.record_default,
             history_samples: (f64::from(self.config.history_s)
                 / crate::service::session::history::PERIOD_S) as usize,
+            cluster: self.cluster.clone(),
         }
     }
 }
@@ -134,10 +138,16 @@ pub fn app(state: AppState) -> Router {
             public = public.route(path, methods);
         }
     }
-    let api = api.route_layer(middleware::from_fn_with_state(
-        state.clone(),
-        auth::require_token,
-    ));
+    // Auth runs first (the outer layer), then a cluster node finds the session's owner.
+    let api = api
+        .route_layer(middleware::from_fn_with_state(
+            state.clone(),
+            super::cluster::own::route,
+        ))
+        .route_layer(middleware::from_fn_with_state(
+            state.clone(),
+            auth::require_token,
+        ));
     public
         .merge(api)
         .fallback(not_found)

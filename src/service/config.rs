@@ -99,6 +99,8 @@ pub struct ServiceConfig {
     /// Seconds of 1 Hz statistics history kept per session for the dashboard
     /// (`GET …/history`, default 900).
     pub history_s: u32,
+    /// Join a cluster (docs/deployment.md); `None`: a single node.
+    pub cluster: Option<crate::service::cluster::ClusterConfig>,
 }
 
 impl ServiceConfig {
@@ -112,6 +114,7 @@ impl ServiceConfig {
             record_default: false,
             retention: Retention::default(),
             history_s: 900,
+            cluster: None,
         }
     }
 }

@@ -46,6 +46,17 @@ pub enum ApiError {
         /// Why.
         message: String,
     },
+    /// 409 `not_owner`: another node owns the session and keeps it (its ingest stream is
+    /// attached there); `location` is that node's address for the same path.
+    #[error("{message}")]
+    NotOwner {
+        /// Why.
+        message: String,
+        /// The owning node's id.
+        owner: String,
+        /// The same request's URL on the owner.
+        location: String,
+    },
     /// 503: the session did not answer in time or the server is shutting down.
     #[error("{0}")]
     Unavailable(String),
@@ -71,6 +82,7 @@ impl ApiError {
             ApiError::MethodNotAllowed(_) => (StatusCode::METHOD_NOT_ALLOWED, "method_not_allowed"),
             ApiError::UpgradeRequired(_) => (StatusCode::UPGRADE_REQUIRED, "upgrade_required"),
             ApiError::Conflict(_) => (StatusCode::CONFLICT, "conflict"),
+            ApiError::NotOwner { .. } => (StatusCode::CONFLICT, "not_owner"),
             ApiError::TooLarge(_) => (StatusCode::PAYLOAD_TOO_LARGE, "too_large"),
             ApiError::UnsupportedMediaType(_) => {
                 (StatusCode::UNSUPPORTED_MEDIA_TYPE, "unsupported_media_type")
@@ -84,7 +96,11 @@ impl ApiError {
 
 impl From<StoreError> for ApiError {
     fn from(e: StoreError) -> Self {
-        ApiError::Internal(e.to_string())
+        match e {
+            // Another node took the session while this one served the request: retry.
+            e @ StoreError::Fenced(_) => ApiError::Unavailable(e.to_string()),
+            e => ApiError::Internal(e.to_string()),
+        }
     }
 }
 
@@ -101,7 +117,9 @@ impl From<SessionError> for ApiError {
             e @ (SessionError::NoMonitor { .. } | SessionError::Stopped(_)) => {
                 ApiError::NotFound(e.to_string())
             }
-            e @ SessionError::Busy(_) => ApiError::Unavailable(e.to_string()),
+            e @ (SessionError::Busy(_) | SessionError::Moved(_)) => {
+                ApiError::Unavailable(e.to_string())
+            }
             SessionError::Store(e) => ApiError::Internal(e),
         }
     }
@@ -142,6 +160,13 @@ impl IntoResponse for ApiError {
         } = &self
         {
             error["field"] = json!(field);
+        }
+        if let ApiError::NotOwner {
+            owner, location, ..
+        } = &self
+        {
+            error["owner"] = json!(owner);
+            error["location"] = json!(location);
         }
         let mut response = (status, Json(json!({ "error": error }))).into_response();
         let headers = response.headers_mut();

@@ -10,7 +10,12 @@ use axum::extract::ws::{CloseFrame, Message, Utf8Bytes, WebSocket, WebSocketUpgr
 use axum::extract::{Path, State};
 use axum::response::Response;
 
+use std::sync::Arc;
+
+use futures_util::StreamExt;
+
 use super::app::AppState;
+use super::cluster::{Cluster, bus, rpc};
 use super::error::ApiError;
 use super::ingest::{SUBPROTOCOL, close_if_too_big, upgrade_rejection};
 use super::session::SessionHandle;
@@ -29,23 +34,147 @@ pub async fn events(
     Path(id): Path<String>,
     ws: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
 ) -> Result<Response, ApiError> {
+    if let Some(cluster) = state.cluster.clone() {
+        // A cluster node: the session's events come over NATS from whichever node owns
+        // it, now or after a failover, so the socket outlives a change of owner.
+        if state.registry.get(&id).is_none() && state.store.session(&id).await?.is_none() {
+            return Err(ApiError::NotFound(format!("no session '{id}'")));
+        }
+        let ws = ws.map_err(upgrade_rejection)?;
+        return Ok(configure(ws).on_upgrade(move |socket| async move {
+            state.metrics.event_sockets.fetch_add(1, Ordering::Relaxed);
+            run_cluster(socket, state.clone(), cluster, id).await;
+            state.metrics.event_sockets.fetch_sub(1, Ordering::Relaxed);
+        }));
+    }
     let handle = state
         .registry
         .get(&id)
         .ok_or_else(|| ApiError::NotFound(format!("no session '{id}'")))?;
     let ws = ws.map_err(upgrade_rejection)?;
-    Ok(ws
-        .protocols([SUBPROTOCOL])
+    Ok(configure(ws).on_upgrade(move |socket| async move {
+        state.metrics.event_sockets.fetch_add(1, Ordering::Relaxed);
+        run(socket, state.clone(), handle).await;
+        state.metrics.event_sockets.fetch_sub(1, Ordering::Relaxed);
+    }))
+}
+
+/// The observer socket's settings.
+fn configure(ws: WebSocketUpgrade) -> WebSocketUpgrade {
+    ws.protocols([SUBPROTOCOL])
         // Observers send almost nothing; the protocol layer zero-fills its read
         // buffer before each read, so the 128 KiB default only costs (see ingest.rs).
         .read_buffer_size(8 << 10)
         .max_message_size(MAX_OBSERVER_MESSAGE_BYTES)
         .max_frame_size(MAX_OBSERVER_MESSAGE_BYTES)
-        .on_upgrade(move |socket| async move {
-            state.metrics.event_sockets.fetch_add(1, Ordering::Relaxed);
-            run(socket, state.clone(), handle).await;
-            state.metrics.event_sockets.fetch_sub(1, Ordering::Relaxed);
-        }))
+}
+
+/// The session's latest statistics for a new observer: from its actor here, or asked of
+/// its owner (none when nobody runs it).
+async fn first_stats(state: &AppState, cluster: &Cluster, id: &str) -> Option<String> {
+    if let Some(handle) = state.registry.get(id) {
+        let snapshot = handle.stats_watch().borrow().clone();
+        return Some(wire::tagged("stats", &*snapshot));
+    }
+    let lease = state.store.lease(id).await.ok()??;
+    if !lease.live(crate::service::now_ms()) {
+        return None;
+    }
+    let call = rpc::Call::Http {
+        method: "GET".into(),
+        uri: format!("/api/v1/sessions/{id}/stats"),
+        authorization: state.config.token.as_ref().map(|t| format!("Bearer {t}")),
+        content_type: None,
+        body: String::new(),
+        from: cluster.node_id().to_owned(),
+    };
+    let answer: rpc::HttpAnswer = rpc::call(cluster, &lease.owner, &call).await.ok()?;
+    let stats: serde_json::Value = serde_json::from_str(&answer.body).ok()?;
+    (answer.status == 200).then(|| wire::tagged("stats", &stats))
+}
+
+async fn close(socket: &mut WebSocket, code: u16, reason: &'static str) {
+    let frame = CloseFrame {
+        code,
+        reason: Utf8Bytes::from_static(reason),
+    };
+    let _ = socket.send(Message::Close(Some(frame))).await;
+}
+
+/// An observer on a cluster node: the session's events and statistics from NATS. A gap
+/// in the events' sequence closes the socket with 1008, as a local subscriber too slow for
+/// its queue is closed: the client re-reads `/api/v1/alarms?after=ID`.
+async fn run_cluster(mut socket: WebSocket, state: AppState, cluster: Arc<Cluster>, id: String) {
+    let nats = cluster.nats();
+    let (Ok(mut events), Ok(mut stats)) = (
+        nats.subscribe(bus::events_subject(&id)).await,
+        nats.subscribe(bus::stats_subject(&id)).await,
+    ) else {
+        close(
+            &mut socket,
+            1011,
+            "cannot subscribe to the session's events",
+        )
+        .await;
+        return;
+    };
+    if let Some(text) = first_stats(&state, &cluster, &id).await
+        && socket.send(Message::Text(text.into())).await.is_err()
+    {
+        return;
+    }
+    let mut shutdown = state.shutdown.clone();
+    let mut ticker = tokio::time::interval(STATS_INTERVAL);
+    ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    let mut latest_stats: Option<bytes::Bytes> = None;
+    let mut order = bus::SeqCheck::default();
+    loop {
+        tokio::select! {
+            biased;
+            _ = shutdown.changed() => {
+                close(&mut socket, 1001, "server shutting down").await;
+                break;
+            }
+            event = events.next() => {
+                let Some(message) = event else {
+                    close(&mut socket, 1011, "the event bus closed; reconnect").await;
+                    break;
+                };
+                if let Some((epoch, seq)) = bus::position(message.headers.as_ref())
+                    && !order.accept(epoch, seq)
+                {
+                    cluster.counters.event_gaps.fetch_add(1, Ordering::Relaxed);
+                    close(&mut socket, 1008, "missed events; reconnect and re-read /api/v1/alarms").await;
+                    break;
+                }
+                let Ok(text) = std::str::from_utf8(&message.payload) else { continue };
+                if socket.send(Message::Text(Utf8Bytes::from(text))).await.is_err() {
+                    break;
+                }
+            }
+            snapshot = stats.next() => {
+                if let Some(message) = snapshot {
+                    latest_stats = Some(message.payload);
+                }
+            }
+            _ = ticker.tick(), if latest_stats.is_some() => {
+                if let Some(payload) = latest_stats.take()
+                    && let Ok(text) = std::str::from_utf8(&payload)
+                    && socket.send(Message::Text(Utf8Bytes::from(text))).await.is_err()
+                {
+                    break;
+                }
+            }
+            incoming = socket.recv() => match incoming {
+                Some(Ok(Message::Close(_))) | None => break,
+                Some(Err(e)) => {
+                    close_if_too_big(&mut socket, e).await;
+                    break;
+                }
+                Some(Ok(_)) => {}
+            },
+        }
+    }
 }
 
 async fn run(mut socket: WebSocket, state: AppState, handle: SessionHandle) {

@@ -7,7 +7,7 @@ use std::time::Instant;
 
 use axum::extract::ws::rejection::WebSocketUpgradeRejection;
 use axum::extract::ws::{CloseFrame, Message, Utf8Bytes, WebSocket, WebSocketUpgrade};
-use axum::extract::{Path, State};
+use axum::extract::{Path, RawQuery, State};
 use axum::response::Response;
 use futures_util::SinkExt;
 use serde_json::json;
@@ -37,18 +37,40 @@ const READ_BUFFER_BYTES: usize = 8 << 10;
 /// Messages for the client written before one flush (one system call).
 const FLUSH_EVERY: usize = 256;
 
+/// `resume=true` (or `1`): carry on from the session's state instead of starting afresh
+/// (docs/deployment.md, Failover); `false`, `0` or absent: a fresh stream. Other
+/// parameters (`token`) are left to others.
+fn resume_param(query: Option<&str>) -> Result<bool, ApiError> {
+    let mut resume = false;
+    for pair in query.unwrap_or("").split('&') {
+        let (key, value) = pair.split_once('=').unwrap_or((pair, ""));
+        if key == "resume" {
+            resume = match value {
+                "true" | "1" => true,
+                "false" | "0" => false,
+                other => {
+                    return Err(ApiError::BadRequest(format!(
+                        "resume={other}: give true or false"
+                    )));
+                }
+            };
+        }
+    }
+    Ok(resume)
+}
+
 /// `GET /api/v1/sessions/{id}/ingest`
 pub async fn ingest(
     State(state): State<AppState>,
     Path(id): Path<String>,
+    RawQuery(query): RawQuery,
     ws: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
 ) -> Result<Response, ApiError> {
-    let handle = state
-        .registry
-        .get(&id)
-        .ok_or_else(|| ApiError::NotFound(format!("no session '{id}'")))?;
+    let resume = resume_param(query.as_deref())?;
+    let path = format!("/api/v1/sessions/{id}/ingest");
+    let handle = super::cluster::own::claim(&state, &id, &path).await?;
     let ws = ws.map_err(upgrade_rejection)?;
-    let link = handle.attach().await?;
+    let link = handle.attach(resume).await?;
     let cap = state
         .config
         .limits
@@ -113,7 +135,12 @@ async fn run(mut socket: WebSocket, state: AppState, handle: SessionHandle, link
     let (stream, record) = (link.stream, link.record);
     let mut outgoing = link.outgoing;
     let mut shutdown = state.shutdown.clone();
-    let ready = json!({"type": "ready", "session": handle.id(), "stream": stream}).to_string();
+    let mut ready =
+        json!({"type": "ready", "session": handle.id(), "stream": stream, "resumed": link.resumed});
+    if let Some(cluster) = &state.cluster {
+        ready["node"] = json!(cluster.node_id());
+    }
+    let ready = ready.to_string();
     if socket.send(Message::Text(ready.into())).await.is_err() {
         handle.detach(stream).await;
         return;

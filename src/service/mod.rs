@@ -4,6 +4,7 @@
 pub mod api;
 pub mod app;
 pub mod auth;
+pub mod cluster;
 pub mod compute;
 pub mod config;
 pub mod error;
@@ -60,6 +61,9 @@ pub enum StartError {
     /// A stored session could not be restarted.
     #[error("stored session '{0}' is invalid: {1}")]
     StoredSession(String, String),
+    /// The cluster could not be joined.
+    #[error("cluster: {0}")]
+    Cluster(#[from] cluster::ClusterError),
     /// The address could not be bound.
     #[error("bind {0}: {1}")]
     Bind(SocketAddr, std::io::Error),
@@ -91,6 +95,10 @@ pub async fn start(config: ServiceConfig) -> Result<Server, StartError> {
     let store = Store::open_with(&config.db_path, config.retention).await?;
     // Models first: restored sessions may name one.
     let models = Arc::new(Models::load(store.clone(), &config.limits).await?);
+    let cluster = match &config.cluster {
+        Some(c) => Some(cluster::Cluster::connect(c.clone()).await?),
+        None => None,
+    };
     let (shutdown_tx, shutdown_rx) = watch::channel(false);
     let state = AppState {
         store: store.clone(),
@@ -100,9 +108,16 @@ pub async fn start(config: ServiceConfig) -> Result<Server, StartError> {
         shutdown: shutdown_rx,
         models,
         compute: compute::ComputePool::per_core(),
+        cluster,
     };
-    // Sessions, their monitors and thresholds persist; filter state starts afresh.
-    for stored in store.sessions().await? {
+    // Sessions, their monitors and thresholds persist; filter state starts afresh. A
+    // cluster node starts none: it takes a session's lease when asked for it.
+    let stored_sessions = if state.cluster.is_some() {
+        Vec::new()
+    } else {
+        store.sessions().await?
+    };
+    for stored in stored_sessions {
         let id = stored.id.clone();
         let handle = match session::actor::spawn(stored, state.actor_deps()) {
             Ok(handle) => handle,
@@ -126,6 +141,14 @@ pub async fn start(config: ServiceConfig) -> Result<Server, StartError> {
         .local_addr()
         .map_err(|e| StartError::Bind(state.config.bind, e))?;
     let router = app(state.clone());
+    if let Some(cluster) = &state.cluster {
+        tokio::spawn(cluster::rpc::serve(
+            cluster.clone(),
+            router.clone(),
+            state.registry.clone(),
+        ));
+        tokio::spawn(cluster::own::renew(state.clone(), cluster.clone()));
+    }
     let edge = serve::EdgeLimits::from(&state.config.limits);
     let task = tokio::spawn(serve::serve(listener, router, edge, state.shutdown.clone()));
     tracing::info!(%addr, "navguard listening");
@@ -146,6 +169,10 @@ impl Server {
     /// Graceful shutdown: closes sockets, stops the session actors, waits for
     /// the HTTP server, and checkpoints and closes the store.
     pub async fn shutdown(self) {
+        if let Some(cluster) = &self.state.cluster {
+            // A cluster node hands its sessions over before it goes.
+            cluster::own::drain(&self.state, cluster).await;
+        }
         let _ = self.shutdown.send(true);
         // Running training jobs stop at their next progress check; their rows
         // stay `training` and are marked failed at the next start.

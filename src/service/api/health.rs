@@ -2,7 +2,7 @@
 
 use axum::Json;
 use axum::extract::{Path, State};
-use axum::http::header;
+use axum::http::{StatusCode, header};
 use axum::response::{Html, IntoResponse};
 use serde_json::{Value, json};
 
@@ -10,11 +10,20 @@ use crate::service::app::AppState;
 use crate::service::error::ApiError;
 use crate::service::metrics::SessionGauges;
 
-/// `GET /healthz`: liveness, with the version and session count.
-pub async fn healthz(State(state): State<AppState>) -> Json<Value> {
-    Json(
-        json!({"status": "ok", "version": env!("CARGO_PKG_VERSION"), "sessions": state.registry.len()}),
-    )
+/// `GET /healthz`: liveness, with the version and session count (and, on a cluster
+/// node, its id); 503 `draining` while the node drains, so the load balancer stops
+/// sending it clients.
+pub async fn healthz(State(state): State<AppState>) -> (StatusCode, Json<Value>) {
+    let mut body = json!({"status": "ok", "version": env!("CARGO_PKG_VERSION"), "sessions": state.registry.len()});
+    let Some(cluster) = &state.cluster else {
+        return (StatusCode::OK, Json(body));
+    };
+    body["node"] = json!(cluster.node_id());
+    if cluster.draining() {
+        body["status"] = json!("draining");
+        return (StatusCode::SERVICE_UNAVAILABLE, Json(body));
+    }
+    (StatusCode::OK, Json(body))
 }
 
 /// `GET /metrics`: Prometheus text exposition, with gauges gathered from every
@@ -29,7 +38,13 @@ pub async fn metrics(State(state): State<AppState>) -> impl IntoResponse {
             header::CONTENT_TYPE,
             "text/plain; version=0.0.4; charset=utf-8",
         )],
-        state.metrics.render(state.registry.len(), &gauges),
+        {
+            let mut text = state.metrics.render(state.registry.len(), &gauges);
+            if let Some(cluster) = &state.cluster {
+                text.push_str(&cluster.metrics_text());
+            }
+            text
+        },
     )
 }
 

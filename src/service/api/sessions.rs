@@ -14,7 +14,7 @@ use crate::service::extract::{JsonBody, from_value, integral_numbers, refuse_nul
 use crate::service::now_ms;
 use crate::service::session::actor;
 use crate::service::session::{SessionHandle, SessionStats, validate_session};
-use crate::service::store::StoredSession;
+use crate::service::store::{Fence, StoredSession};
 use crate::service::wire::{CreateSession, MonitorSpecWire};
 
 /// A test's effective threshold and current state, in a session view.
@@ -44,6 +44,31 @@ pub struct SessionView {
     alarm_level: Option<crate::service::wire::AlarmLevel>,
     record: bool,
     monitors: Vec<MonitorView>,
+    /// The node running it (cluster nodes only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    node: Option<String>,
+}
+
+/// The view of a session another node runs (or nobody does yet): its spec, without the
+/// live test states, which only its owner has (`GET …/{id}` is forwarded there).
+fn view_stored(stored: StoredSession, record_default: bool, node: Option<String>) -> SessionView {
+    SessionView {
+        id: stored.id,
+        echo: stored.echo,
+        created_at_ms: stored.created_at_ms,
+        connected: false,
+        alarm_level: stored.alarm_level,
+        record: stored.record.unwrap_or(record_default),
+        monitors: stored
+            .monitors
+            .into_iter()
+            .map(|spec| MonitorView {
+                spec,
+                tests: Default::default(),
+            })
+            .collect(),
+        node,
+    }
 }
 
 fn view(handle: &SessionHandle, record_default: bool) -> SessionView {
@@ -83,6 +108,7 @@ fn view(handle: &SessionHandle, record_default: bool) -> SessionView {
         alarm_level: stored.alarm_level,
         record: stored.record.unwrap_or(record_default),
         monitors,
+        node: None,
     }
 }
 
@@ -153,7 +179,52 @@ pub async fn create(
         alarm_level: req.alarm_level,
     };
     // Building the actor validates every monitor (422 naming the field).
-    let handle = actor::spawn(stored.clone(), state.actor_deps())?;
+    let handle = match &state.cluster {
+        None => actor::spawn(stored.clone(), state.actor_deps())?,
+        Some(cluster) => {
+            if cluster.draining() {
+                return Err(ApiError::Unavailable(
+                    "this node is draining: create the session on another node".into(),
+                ));
+            }
+            let fence = Fence {
+                session: stored.id.clone(),
+                owner: cluster.node_id().to_owned(),
+                epoch: 1,
+            };
+            let handle = actor::spawn_owned(stored.clone(), state.actor_deps(), fence, None)?;
+            // The id is unique in the whole cluster: its lease row is the claim on it.
+            let created = state
+                .store
+                .create_lease(
+                    &stored.id,
+                    cluster.node_id(),
+                    &cluster.config.advertise,
+                    cluster.expiry(),
+                )
+                .await;
+            match created {
+                Ok(true) => {
+                    cluster
+                        .counters
+                        .leases_acquired
+                        .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    handle
+                }
+                Ok(false) => {
+                    handle.shutdown().await;
+                    return Err(ApiError::Conflict(format!(
+                        "session '{}' already exists",
+                        stored.id
+                    )));
+                }
+                Err(e) => {
+                    handle.shutdown().await;
+                    return Err(e.into());
+                }
+            }
+        }
+    };
     if let Err((handle, duplicate)) = state
         .registry
         .try_insert(handle, state.config.limits.max_sessions)
@@ -191,16 +262,42 @@ pub struct SessionList {
     sessions: Vec<SessionView>,
 }
 
-/// `GET /api/v1/sessions`
-pub async fn list(State(state): State<AppState>) -> Json<SessionList> {
-    Json(SessionList {
-        sessions: state
-            .registry
-            .list()
-            .iter()
-            .map(|h| view(h, state.config.record_default))
-            .collect(),
-    })
+/// `GET /api/v1/sessions`: on a cluster node, every stored session (those another node
+/// runs with their spec and owner, without live test states).
+pub async fn list(State(state): State<AppState>) -> Result<Json<SessionList>, ApiError> {
+    let record_default = state.config.record_default;
+    let Some(cluster) = &state.cluster else {
+        return Ok(Json(SessionList {
+            sessions: state
+                .registry
+                .list()
+                .iter()
+                .map(|h| view(h, record_default))
+                .collect(),
+        }));
+    };
+    let mut sessions = Vec::new();
+    for stored in state.store.sessions().await? {
+        match state.registry.get(&stored.id) {
+            Some(h) => {
+                let mut v = view(&h, record_default);
+                v.node = Some(cluster.node_id().to_owned());
+                sessions.push(v);
+            }
+            None => {
+                let now = now_ms();
+                let node = state
+                    .store
+                    .lease(&stored.id)
+                    .await?
+                    .filter(|l| l.live(now))
+                    .map(|l| l.owner);
+                sessions.push(view_stored(stored, record_default, node));
+            }
+        }
+    }
+    sessions.sort_by(|a, b| a.id.cmp(&b.id));
+    Ok(Json(SessionList { sessions }))
 }
 
 fn lookup(state: &AppState, id: &str) -> Result<SessionHandle, ApiError> {

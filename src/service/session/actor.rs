@@ -3,6 +3,8 @@
 //! monitor, commits alarms to the store before announcing them, and answers
 //! control commands (attach, thresholds, stats) ahead of pending frames.
 
+mod checkpoint;
+
 use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
@@ -12,7 +14,9 @@ use serde::Serialize;
 use tokio::sync::{mpsc, watch};
 
 use super::SessionError;
-use super::handle::{ControlCommand, FrameCommand, IngestLink, SessionHandle, SessionShared};
+use super::handle::{
+    ControlCommand, FrameCommand, IngestLink, Resumed, SessionHandle, SessionShared,
+};
 use super::history::History;
 use super::spec::{NamedMonitors, build_monitors};
 use super::stats::{IntegrityStats, MonitorStats, Position, SessionStats, TestStats, Track};
@@ -21,10 +25,13 @@ use crate::epoch::Epoch;
 use crate::monitor::{
     Availability, Integrity, Monitor, MonitorReport, Outputs, StepError, TestOutcome,
 };
+use crate::service::cluster::{Cluster, bus};
 use crate::service::compute::{ComputePool, SLICE_BUDGET};
 use crate::service::metrics::Metrics;
 use crate::service::now_ms;
-use crate::service::store::{RecordedFrame, Store, StoredSession};
+use crate::service::store::{
+    AlarmKey, Checkpoint, Fence, RecordedFrame, Store, StoreError, StoredSession,
+};
 use crate::service::train::Models;
 use crate::service::wire::{
     self, AlarmLevel, AlarmRecord, AvailabilityChange, ErrorEvent, FrameError, FrameErrorCode,
@@ -55,6 +62,8 @@ pub struct ActorDeps {
     pub record_default: bool,
     /// Samples of statistics history kept (one per second of epoch time).
     pub history_samples: usize,
+    /// The cluster this node belongs to (`--nats`), if any.
+    pub cluster: Option<Arc<Cluster>>,
 }
 
 struct NamedMonitor {
@@ -95,6 +104,28 @@ struct Actor {
     /// the recording.
     frame_events: Vec<String>,
     history: History,
+    /// Cluster ownership: the lease this actor writes under, its checkpoints and events.
+    owned: Option<Owned>,
+    /// The session holds a stream's state that a resuming stream may carry on from.
+    resumable: bool,
+}
+
+/// What an actor that owns its session through a lease keeps (docs/deployment.md).
+struct Owned {
+    cluster: Arc<Cluster>,
+    fence: Fence,
+    /// Sequence number of the last event published to NATS (per lease epoch).
+    event_seq: u64,
+    /// Version of the last checkpoint taken.
+    version: i64,
+    /// When the next checkpoint is due; `None` while nothing changed since the last.
+    due: Option<Instant>,
+    /// When the last checkpoint was taken.
+    last: Instant,
+    /// When statistics were last published to NATS.
+    last_stats: Instant,
+    /// A write was fenced: another node owns the session now; the actor stops.
+    fenced: bool,
 }
 
 /// The built monitors of `stored`, each with its alarm level (its own, else the
@@ -114,11 +145,47 @@ fn with_alarm_levels(monitors: NamedMonitors, stored: &StoredSession) -> Vec<Nam
 
 /// Builds the monitors of `stored` and starts its actor.
 pub fn spawn(stored: StoredSession, deps: ActorDeps) -> Result<SessionHandle, SessionError> {
+    spawn_inner(stored, deps, None, None)
+}
+
+/// Starts the actor of a session this node holds the lease of (cluster), its state
+/// restored from `checkpoint` when there is one (docs/deployment.md, Failover). A
+/// checkpoint that cannot be restored (written by another version, another spec) is
+/// logged and the session starts afresh.
+pub fn spawn_owned(
+    stored: StoredSession,
+    deps: ActorDeps,
+    fence: Fence,
+    checkpoint: Option<Checkpoint>,
+) -> Result<SessionHandle, SessionError> {
+    spawn_inner(stored, deps, Some(fence), checkpoint)
+}
+
+fn spawn_inner(
+    stored: StoredSession,
+    deps: ActorDeps,
+    fence: Option<Fence>,
+    checkpoint: Option<Checkpoint>,
+) -> Result<SessionHandle, SessionError> {
     let monitors = build_monitors(&stored, &*deps.models)?;
     let id: Arc<str> = Arc::from(stored.id.as_str());
     let stats = initial_stats(&id, &monitors);
     let history = History::new(deps.history_samples, &stats);
     let deps_record_default = deps.record_default;
+    let lease_epoch = fence.as_ref().map(|f| f.epoch);
+    let owned = match (&deps.cluster, fence) {
+        (Some(cluster), Some(fence)) => Some(Owned {
+            cluster: cluster.clone(),
+            fence,
+            event_seq: 0,
+            version: 0,
+            due: None,
+            last: Instant::now(),
+            last_stats: Instant::now(),
+            fenced: false,
+        }),
+        _ => None,
+    };
     let (stats_tx, stats_rx) = watch::channel(Arc::new(stats.clone()));
     let (frames_tx, frames_rx) = mpsc::channel(FRAME_QUEUE);
     let (control_tx, control_rx) = mpsc::channel(CONTROL_QUEUE);
@@ -126,7 +193,7 @@ pub fn spawn(stored: StoredSession, deps: ActorDeps) -> Result<SessionHandle, Se
         stored: std::sync::Mutex::new(stored.clone()),
         subscribers: Default::default(),
     });
-    let actor = Actor {
+    let mut actor = Actor {
         id: id.clone(),
         echo: stored.echo,
         monitors: with_alarm_levels(monitors, &stored),
@@ -145,10 +212,31 @@ pub fn spawn(stored: StoredSession, deps: ActorDeps) -> Result<SessionHandle, Se
         recording_stream: 0,
         frame_events: Vec::new(),
         history,
+        owned,
+        resumable: false,
     };
+    if let Some(checkpoint) = checkpoint {
+        match checkpoint::restore(&mut actor, &checkpoint) {
+            Ok(()) => {
+                // A session that never streamed (a handover right after its creation)
+                // has no stream to resume: its first stream starts afresh.
+                actor.resumable = actor.recording_stream > 0;
+                actor.stats_tx.send_replace(Arc::new(actor.stats.clone()));
+                tracing::info!(session = %actor.id, epochs = checkpoint.epochs, t = ?checkpoint.t, "session restored from its checkpoint");
+            }
+            Err(e) => {
+                tracing::warn!(session = %actor.id, error = %e, "checkpoint not restored; the session starts afresh");
+            }
+        }
+    }
     tokio::spawn(actor.run(frames_rx, control_rx));
     Ok(SessionHandle::new(
-        id, frames_tx, control_tx, stats_rx, shared,
+        id,
+        lease_epoch,
+        frames_tx,
+        control_tx,
+        stats_rx,
+        shared,
     ))
 }
 
@@ -261,7 +349,13 @@ impl Actor {
         mut control: mpsc::Receiver<ControlCommand>,
     ) {
         loop {
+            if self.owned.as_ref().is_some_and(|o| o.fenced) {
+                tracing::warn!(session = %self.id, "lease fenced: another node owns the session; stopping here");
+                break;
+            }
             let trailing = tokio::time::Instant::from_std(self.last_published + STATS_PERIOD);
+            let due = self.owned.as_ref().and_then(|o| o.due);
+            let checkpoint_at = tokio::time::Instant::from_std(due.unwrap_or_else(Instant::now));
             tokio::select! {
                 biased;
                 command = control.recv() => match command {
@@ -283,6 +377,9 @@ impl Actor {
                 () = tokio::time::sleep_until(trailing), if self.stats_pending => {
                     self.publish(true);
                 }
+                () = tokio::time::sleep_until(checkpoint_at), if due.is_some() => {
+                    self.checkpoint(false).await;
+                }
             }
         }
         // Close every event subscriber's queue so their sockets end too.
@@ -303,16 +400,28 @@ impl Actor {
                 // docs/architecture.md §A4: the row goes in the session's own order, after
                 // every change acknowledged before; then the actor stops, so nothing can
                 // write the session back.
-                match self.deps.store.delete_session(&self.id).await {
+                let fence = self.fence();
+                match self
+                    .deps
+                    .store
+                    .delete_session_fenced(&self.id, fence.as_ref())
+                    .await
+                {
                     Ok(_) => {
                         let _ = reply.send(Ok(()));
                         Flow::Stop
                     }
                     Err(e) => {
-                        let _ = reply.send(Err(SessionError::Store(e.to_string())));
+                        let _ = reply.send(Err(self.store_error(e)));
                         Flow::Continue
                     }
                 }
+            }
+            ControlCommand::Release(force, reply) => {
+                let answer = self.release(force).await;
+                let stop = answer.is_ok();
+                let _ = reply.send(answer);
+                if stop { Flow::Stop } else { Flow::Continue }
             }
             command => {
                 self.control(command).await;
@@ -323,8 +432,8 @@ impl Actor {
 
     async fn control(&mut self, command: ControlCommand) {
         match command {
-            ControlCommand::Attach(reply) => {
-                let attached = self.attach().await;
+            ControlCommand::Attach(resume, reply) => {
+                let attached = self.attach(resume).await;
                 let _ = reply.send(attached);
             }
             ControlCommand::Detach(stream) => {
@@ -345,12 +454,13 @@ impl Actor {
             }
             ControlCommand::Persist(reply) => {
                 let stored = self.stored();
+                let fence = self.fence();
                 let answer = self
                     .deps
                     .store
-                    .put_session(&stored)
+                    .put_session_fenced(&stored, fence.as_ref())
                     .await
-                    .map_err(|e| SessionError::Store(e.to_string()));
+                    .map_err(|e| self.store_error(e));
                 let _ = reply.send(answer);
             }
             ControlCommand::History(since, reply) => {
@@ -362,7 +472,7 @@ impl Actor {
                 let _ = reply.send(self.stats.clone());
             }
             // Served by `command`, which stops the actor.
-            ControlCommand::Shutdown | ControlCommand::Delete(_) => {}
+            ControlCommand::Shutdown | ControlCommand::Delete(_) | ControlCommand::Release(..) => {}
         }
     }
 
@@ -390,21 +500,32 @@ impl Actor {
             self.stored(),
         );
         let (view, stored) = self.set_threshold(name, update)?;
-        if let Err(e) = self.deps.store.put_session(&stored).await {
+        let fence = self.fence();
+        if let Err(e) = self
+            .deps
+            .store
+            .put_session_fenced(&stored, fence.as_ref())
+            .await
+        {
             let (bank, level, spec) = before;
             let m = &mut self.monitors[index];
             *m.monitor.tests_mut() = bank;
             m.alarm_level = level;
             *self.shared.stored.lock().unwrap_or_else(|p| p.into_inner()) = spec;
-            return Err(SessionError::Store(e.to_string()));
+            return Err(self.store_error(e));
         }
+        self.changed();
         Ok(view)
     }
 
-    async fn attach(&mut self) -> Result<IngestLink, SessionError> {
+    async fn attach(&mut self, resume: bool) -> Result<IngestLink, SessionError> {
         if self.ingest.as_ref().is_some_and(|tx| !tx.is_closed()) {
             return Err(SessionError::AlreadyAttached(self.id.to_string()));
         }
+        if resume && self.resumable {
+            return Ok(self.attach_resumed());
+        }
+        self.resumable = true;
         // docs/architecture.md §A3: filter state starts afresh when a session's stream
         // reconnects. Tests left suspect or isolated by the previous stream
         // return to healthy: say so, and clear their open alarms.
@@ -419,11 +540,12 @@ impl Actor {
             m.availability = None;
         }
         let t = self.last_t;
+        let fence = self.fence();
         for (monitor, test, from) in returned {
             if let Err(e) = self
                 .deps
                 .store
-                .clear_alarms(&self.id, &monitor, &test, t)
+                .clear_alarms_fenced(&self.id, &monitor, &test, t, fence.as_ref())
                 .await
             {
                 tracing::error!(session = %self.id, error = %e, "could not mark alarms cleared");
@@ -441,7 +563,12 @@ impl Actor {
             self.broadcast(&Arc::from(wire::tagged("state", &change)));
         }
         // Alarms left open by a stream that ended before a restart are closed too.
-        if let Err(e) = self.deps.store.clear_session_alarms(&self.id).await {
+        if let Err(e) = self
+            .deps
+            .store
+            .clear_session_alarms_fenced(&self.id, fence.as_ref())
+            .await
+        {
             tracing::error!(session = %self.id, error = %e, "could not mark alarms cleared");
         }
         self.last_t = None;
@@ -467,11 +594,154 @@ impl Actor {
             monitor_stats.integrity = None;
         }
         self.publish(true);
+        // A cluster owner stores the new stream at once: a failover from here on resumes
+        // this stream (its id keys its alarms), never an older one.
+        if self.owned.is_some() {
+            self.checkpoint(false).await;
+        }
         Ok(IngestLink {
+            resumed: None,
             stream: self.stream,
             record: self.record,
             outgoing: rx,
         })
+    }
+
+    /// A stream that carries on from the session's state: nothing is reset, the
+    /// recording stream and epoch count go on, and the client is told where.
+    fn attach_resumed(&mut self) -> IngestLink {
+        self.stream += 1;
+        let (tx, rx) = mpsc::channel(INGEST_QUEUE);
+        self.ingest = Some(tx);
+        self.stats.connected = true;
+        self.publish(true);
+        IngestLink {
+            resumed: Some(Resumed {
+                t: self.last_t,
+                epochs: self.stream_epochs,
+            }),
+            stream: self.stream,
+            record: self.record,
+            outgoing: rx,
+        }
+    }
+
+    /// The fence of this actor's writes (cluster), cloned for a store call.
+    fn fence(&self) -> Option<Fence> {
+        self.owned.as_ref().map(|o| o.fence.clone())
+    }
+
+    /// A store failure as a session error; a fenced write also stops the actor.
+    fn store_error(&mut self, e: StoreError) -> SessionError {
+        if matches!(e, StoreError::Fenced(_)) {
+            if let Some(o) = &mut self.owned {
+                o.fenced = true;
+            }
+            return SessionError::Moved(self.id.to_string());
+        }
+        SessionError::Store(e.to_string())
+    }
+
+    /// Notes that the state changed: a checkpoint is due within the interval.
+    fn changed(&mut self) {
+        if let Some(o) = &mut self.owned
+            && o.due.is_none()
+        {
+            let interval = o.cluster.config.checkpoint_interval;
+            o.due = Some((o.last + interval).max(Instant::now()));
+        }
+    }
+
+    /// Takes a checkpoint and stores it: in the background (`wait` false; a later one
+    /// never loses to an earlier one, they are versioned) or before returning.
+    async fn checkpoint(&mut self, wait: bool) -> bool {
+        let bytes = match checkpoint::encode(self) {
+            Ok(b) => b,
+            Err(e) => {
+                tracing::error!(session = %self.id, error = %e, "checkpoint not taken");
+                return false;
+            }
+        };
+        let (t, epochs) = (self.last_t, self.stream_epochs as i64);
+        let Some(o) = &mut self.owned else {
+            return false;
+        };
+        o.version += 1;
+        o.due = None;
+        o.last = Instant::now();
+        let checkpoint = Checkpoint {
+            session: self.id.to_string(),
+            lease_epoch: o.fence.epoch,
+            version: o.version,
+            epochs,
+            t,
+            taken_at_ms: now_ms(),
+            state: bytes,
+        };
+        let (store, fence, cluster) = (self.deps.store.clone(), o.fence.clone(), o.cluster.clone());
+        let write = async move {
+            let written = store.put_checkpoint(&fence, &checkpoint).await;
+            let counters = &cluster.counters;
+            match &written {
+                Ok(()) => counters.checkpoints.fetch_add(1, Ordering::Relaxed),
+                Err(e) => {
+                    tracing::warn!(session = %fence.session, error = %e, "checkpoint not stored");
+                    counters.checkpoint_failures.fetch_add(1, Ordering::Relaxed)
+                }
+            };
+            written
+        };
+        if wait {
+            match write.await {
+                Ok(()) => true,
+                Err(e) => {
+                    let _ = self.store_error(e);
+                    false
+                }
+            }
+        } else {
+            tokio::spawn(write);
+            true
+        }
+    }
+
+    /// Hands the session over: see [`ControlCommand::Release`].
+    async fn release(&mut self, force: bool) -> Result<(), SessionError> {
+        let attached = self.ingest.as_ref().is_some_and(|tx| !tx.is_closed());
+        if attached && !force {
+            return Err(SessionError::AlreadyAttached(self.id.to_string()));
+        }
+        if self.owned.is_none() {
+            return Ok(());
+        }
+        if !self.checkpoint(true).await {
+            return Err(SessionError::Moved(self.id.to_string()));
+        }
+        if attached {
+            let moved = serde_json::json!({
+                "type": "moved",
+                "session": &*self.id,
+                "resume": {"t": self.last_t, "epochs": self.stream_epochs},
+                "message": "this node hands the session over: reconnect with resume=true and resend the epochs after t",
+            })
+            .to_string();
+            self.send_ingest(moved).await;
+            self.ingest = None;
+        }
+        let Some(o) = &self.owned else {
+            return Ok(());
+        };
+        match self.deps.store.release_lease(&o.fence).await {
+            Ok(_) => {
+                o.cluster
+                    .counters
+                    .leases_released
+                    .fetch_add(1, Ordering::Relaxed);
+                tracing::info!(session = %self.id, "session handed over");
+                Ok(())
+            }
+            Err(e) => Err(self.store_error(e)),
+        }
     }
 
     fn find(&self, name: &str) -> Result<usize, SessionError> {
@@ -634,13 +904,20 @@ impl Actor {
 
     /// Sends to every event subscriber; one whose queue is full is dropped
     /// (its socket closes) rather than silently missing an alarm.
-    fn broadcast(&self, text: &Arc<str>) {
-        let mut subscribers = self
-            .shared
-            .subscribers
-            .lock()
-            .unwrap_or_else(|p| p.into_inner());
-        subscribers.retain(|tx| tx.try_send(text.clone()).is_ok());
+    fn broadcast(&mut self, text: &Arc<str>) {
+        {
+            let mut subscribers = self
+                .shared
+                .subscribers
+                .lock()
+                .unwrap_or_else(|p| p.into_inner());
+            subscribers.retain(|tx| tx.try_send(text.clone()).is_ok());
+        }
+        if let Some(o) = &mut self.owned {
+            o.event_seq += 1;
+            o.cluster
+                .publish(bus::event(&self.id, o.fence.epoch, o.event_seq, text));
+        }
     }
 
     async fn reject(&mut self, error: FrameError) {
@@ -723,7 +1000,7 @@ impl Actor {
                 // delete ends this frame: its later epochs belong to the old stream.
                 self.publish(false);
                 while let Ok(command) = control.try_recv() {
-                    let new_stream = matches!(command, ControlCommand::Attach(_));
+                    let new_stream = matches!(command, ControlCommand::Attach(..));
                     if self.command(command).await == Flow::Stop {
                         return Flow::Stop;
                     }
@@ -769,17 +1046,21 @@ impl Actor {
         };
         let events = format!("[{}]", self.frame_events.join(","));
         self.frame_events.clear();
+        let fence = self.fence();
         self.deps
             .store
-            .record_frame(RecordedFrame {
-                session: self.id.to_string(),
-                stream,
-                first_epoch,
-                epochs: epochs as u64,
-                recorded_at_ms: now_ms(),
-                frame,
-                events,
-            })
+            .record_frame_fenced(
+                RecordedFrame {
+                    session: self.id.to_string(),
+                    stream,
+                    first_epoch,
+                    epochs: epochs as u64,
+                    recorded_at_ms: now_ms(),
+                    frame,
+                    events,
+                },
+                fence.as_ref(),
+            )
             .await;
     }
 
@@ -829,6 +1110,7 @@ impl Actor {
     }
 
     fn finish_frame(&mut self, received: Instant, epochs: usize, changed: bool) {
+        self.changed();
         let now = Instant::now();
         self.rate_window.1 += epochs as u64;
         let elapsed = now.duration_since(self.rate_window.0);
@@ -957,12 +1239,28 @@ impl Actor {
     /// Stores a log entry (committed before it is announced, docs/architecture.md §A2)
     /// and returns it with its id, or with id -1 when the store failed: an operator must
     /// not miss an alarm because the disk did.
-    async fn store_entry(store: &Store, entry: AlarmRecord) -> AlarmRecord {
-        match store.insert_alarm(entry.clone()).await {
-            Ok(stored) => stored,
+    /// A fenced entry (another node owns the session now) is neither stored nor
+    /// announced: `None`, and the actor stops.
+    async fn store_entry(&mut self, entry: AlarmRecord) -> Option<AlarmRecord> {
+        let key = AlarmKey {
+            stream: self.recording_stream,
+            epoch_index: self.stream_epochs.saturating_sub(1),
+        };
+        let fence = self.fence();
+        match self
+            .deps
+            .store
+            .insert_alarm_keyed(entry.clone(), key, fence.as_ref())
+            .await
+        {
+            Ok(stored) => Some(stored),
+            Err(e @ StoreError::Fenced(_)) => {
+                let _ = self.store_error(e);
+                None
+            }
             Err(e) => {
                 tracing::error!(session = %entry.session, error = %e, "could not store alarm");
-                AlarmRecord { id: -1, ..entry }
+                Some(AlarmRecord { id: -1, ..entry })
             }
         }
     }
@@ -977,9 +1275,8 @@ impl Actor {
         let mut alarm_text = None;
         let mut log_id = None;
         if let Some(severity) = severity {
-            let entry = Self::store_entry(
-                &self.deps.store,
-                AlarmRecord {
+            let Some(entry) = self
+                .store_entry(AlarmRecord {
                     id: 0,
                     severity,
                     session: self.id.to_string(),
@@ -994,9 +1291,11 @@ impl Actor {
                     delay_s,
                     raised_at_ms: now_ms(),
                     cleared_t: None,
-                },
-            )
-            .await;
+                })
+                .await
+            else {
+                return;
+            };
             log_id = Some(entry.id);
             if let Some(test) = self
                 .stats
@@ -1015,12 +1314,13 @@ impl Actor {
                     self.deps.metrics.warnings.fetch_add(1, Ordering::Relaxed);
                 }
             }
-        } else if let Err(e) = self
-            .deps
-            .store
-            .clear_alarms(&self.id, &monitor, &outcome.name, Some(t))
-            .await
-        {
+        } else if let Err(e) = {
+            let fence = self.fence();
+            self.deps
+                .store
+                .clear_alarms_fenced(&self.id, &monitor, &outcome.name, Some(t), fence.as_ref())
+                .await
+        } {
             tracing::error!(session = %self.id, error = %e, "could not mark alarms cleared");
         }
         let change = StateChange {
@@ -1102,9 +1402,8 @@ impl Actor {
             };
             let (statistic, threshold) = (stats.last.unwrap_or(0.0), stats.threshold);
             let delay_s = stats.episode_delay(t);
-            let entry = Self::store_entry(
-                &self.deps.store,
-                AlarmRecord {
+            let Some(entry) = self
+                .store_entry(AlarmRecord {
                     id: 0,
                     severity: Severity::Alarm,
                     session: self.id.to_string(),
@@ -1119,9 +1418,11 @@ impl Actor {
                     delay_s,
                     raised_at_ms: now_ms(),
                     cleared_t: None,
-                },
-            )
-            .await;
+                })
+                .await
+            else {
+                return;
+            };
             if let Some(stats) = self
                 .stats
                 .monitors
@@ -1160,7 +1461,15 @@ impl Actor {
             self.stats_pending = false;
             self.refresh_consistency();
             self.stats.published_at_ms = now_ms();
-            self.stats_tx.send_replace(Arc::new(self.stats.clone()));
+            let snapshot = Arc::new(self.stats.clone());
+            if let Some(o) = &mut self.owned
+                && now.duration_since(o.last_stats) >= bus::STATS_PERIOD
+            {
+                o.last_stats = now;
+                o.cluster
+                    .publish(bus::stats(&self.id, wire::tagged("stats", &*snapshot)));
+            }
+            self.stats_tx.send_replace(snapshot);
         } else {
             self.stats_pending = true;
         }

@@ -46,6 +46,10 @@ pub enum SessionError {
     /// The session's actor did not answer in time.
     #[error("session '{0}' is busy")]
     Busy(String),
+    /// The session moved to another node (its lease was taken or handed over); retry,
+    /// the load balancer or the next request finds the new owner.
+    #[error("session '{0}' moved to another node; retry")]
+    Moved(String),
     /// The store refused to record the change; nothing was changed.
     #[error("store: {0}")]
     Store(String),

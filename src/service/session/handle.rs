@@ -33,9 +33,22 @@ pub struct FrameCommand {
     pub text: Option<Arc<str>>,
 }
 
+/// Where a resumed stream carries on: the state includes the stream's epochs up to and
+/// including time `t` (`epochs` of them), so the client resends from the first epoch after
+/// `t` (docs/deployment.md, Failover).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Resumed {
+    /// Time of the last epoch the state includes (`None`: no epoch yet).
+    pub t: Option<f64>,
+    /// Epochs of the stream the state includes.
+    pub epochs: u64,
+}
+
 /// An attached ingest stream: its generation and the messages for its socket.
 #[derive(Debug)]
 pub struct IngestLink {
+    /// Set when the stream resumed the session's state instead of starting afresh.
+    pub resumed: Option<Resumed>,
     /// Generation number; frames carry it.
     pub stream: u64,
     /// The session records its frames: send their text with them.
@@ -47,8 +60,14 @@ pub struct IngestLink {
 /// Commands other than frames; the actor serves them before pending frames.
 #[derive(Debug)]
 pub enum ControlCommand {
-    /// Attach a new ingest stream: filter state starts afresh.
-    Attach(oneshot::Sender<Result<IngestLink, SessionError>>),
+    /// Attach a new ingest stream: filter state starts afresh, unless `resume` (true) and
+    /// the session holds a stream's state (restored from a checkpoint, or left by the
+    /// previous stream), which then carries on.
+    Attach(bool, oneshot::Sender<Result<IngestLink, SessionError>>),
+    /// Hand the session over (cluster): refused while a stream is attached unless
+    /// `force` (a drain: the stream is told `moved` and closed); then a final checkpoint
+    /// is written, the lease released and the actor stops.
+    Release(bool, oneshot::Sender<Result<(), SessionError>>),
     /// The ingest socket of `stream` closed.
     Detach(u64),
     /// Read a monitor's thresholds.
@@ -84,6 +103,7 @@ pub struct SessionShared {
 #[derive(Debug, Clone)]
 pub struct SessionHandle {
     id: Arc<str>,
+    lease_epoch: Option<i64>,
     frames: mpsc::Sender<FrameCommand>,
     control: mpsc::Sender<ControlCommand>,
     stats: watch::Receiver<Arc<SessionStats>>,
@@ -94,6 +114,7 @@ impl SessionHandle {
     /// Assembles a handle (the actor module creates the channels).
     pub(super) fn new(
         id: Arc<str>,
+        lease_epoch: Option<i64>,
         frames: mpsc::Sender<FrameCommand>,
         control: mpsc::Sender<ControlCommand>,
         stats: watch::Receiver<Arc<SessionStats>>,
@@ -101,6 +122,7 @@ impl SessionHandle {
     ) -> Self {
         SessionHandle {
             id,
+            lease_epoch,
             frames,
             control,
             stats,
@@ -111,6 +133,16 @@ impl SessionHandle {
     /// Session id.
     pub fn id(&self) -> &str {
         &self.id
+    }
+
+    /// The lease epoch this actor runs under (cluster nodes), `None` on a single node.
+    pub fn lease_epoch(&self) -> Option<i64> {
+        self.lease_epoch
+    }
+
+    /// True when both handles are of the same actor.
+    pub fn same_actor(&self, other: &SessionHandle) -> bool {
+        self.control.same_channel(&other.control)
     }
 
     /// The frame channel (bounded: a full channel slows the sender's socket).
@@ -159,9 +191,16 @@ impl SessionHandle {
             .map_err(|_| gone())
     }
 
-    /// Attaches an ingest stream (409 if one is already attached).
-    pub async fn attach(&self) -> Result<IngestLink, SessionError> {
-        self.ask(ControlCommand::Attach).await?
+    /// Attaches an ingest stream (409 if one is already attached); `resume` carries on
+    /// from the session's state when it holds one.
+    pub async fn attach(&self, resume: bool) -> Result<IngestLink, SessionError> {
+        self.ask(|tx| ControlCommand::Attach(resume, tx)).await?
+    }
+
+    /// Hands the session over (see [`ControlCommand::Release`]); the actor has stopped
+    /// when this returns `Ok`.
+    pub async fn release(&self, force: bool) -> Result<(), SessionError> {
+        self.ask(|tx| ControlCommand::Release(force, tx)).await?
     }
 
     /// Detaches ingest stream `stream` (best effort: the actor may be gone).

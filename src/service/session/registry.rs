@@ -46,6 +46,18 @@ impl Registry {
         self.lock().remove(id)
     }
 
+    /// Removes `handle`'s session if the registry still holds that same actor (not a
+    /// newer one for the same id); true when it did.
+    pub fn remove_if_same(&self, handle: &SessionHandle) -> bool {
+        let mut map = self.lock();
+        if map.get(handle.id()).is_some_and(|h| h.same_actor(handle)) {
+            map.remove(handle.id());
+            true
+        } else {
+            false
+        }
+    }
+
     /// Every handle, ordered by id.
     pub fn list(&self) -> Vec<SessionHandle> {
         let mut all: Vec<_> = self.lock().values().cloned().collect();

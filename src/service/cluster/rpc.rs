@@ -1,0 +1,290 @@
+//! Node-to-node calls over NATS request/reply, on the subject `navguard.rpc.<node>`:
+//!
+//! - `http`: a REST request for a session this node owns, sent by the node the client
+//!   reached; it is run through this node's own router (auth included) and the answer
+//!   goes back as it is. The request carries `x-navguard-forwarded`, so it is never
+//!   forwarded a second time.
+//! - `release`: another node asks for a session because the load balancer sends its
+//!   ingest stream there. Granted unless a stream is attached here: the actor writes a
+//!   final checkpoint and releases the lease, and the asker takes it at once.
+//!
+//! A request to a node with no subscription (NATS answers "no responders" at once) means
+//! the node's process is gone: the caller takes the session over without waiting for its
+//! lease to expire (fencing keeps that safe even if the node were only cut off).
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use axum::Router;
+use axum::body::Body;
+use axum::http::{HeaderValue, Request, Response, StatusCode};
+use bytes::Bytes;
+use futures_util::StreamExt;
+use serde::{Deserialize, Serialize};
+use tower::ServiceExt;
+
+use super::Cluster;
+use crate::service::session::Registry;
+
+/// The header a forwarded request carries (the forwarding node's id).
+pub const FORWARDED_HEADER: &str = "x-navguard-forwarded";
+
+/// How long a node waits for another node's answer.
+pub const RPC_TIMEOUT: Duration = Duration::from_secs(6);
+
+/// The subject a node serves its calls on.
+pub fn subject(node: &str) -> String {
+    format!("navguard.rpc.{}", super::bus::token(node))
+}
+
+/// A call.
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(tag = "op", rename_all = "snake_case")]
+pub enum Call {
+    /// Run a REST request.
+    Http {
+        /// Method.
+        method: String,
+        /// Path and query.
+        uri: String,
+        /// The caller's `Authorization` header.
+        authorization: Option<String>,
+        /// The caller's `Content-Type` header.
+        content_type: Option<String>,
+        /// The body (REST bodies are JSON text).
+        body: String,
+        /// The node forwarding it.
+        from: String,
+    },
+    /// Hand session `session` over to the caller.
+    Release {
+        /// Session id.
+        session: String,
+    },
+}
+
+/// A REST answer.
+#[derive(Debug, Serialize, Deserialize)]
+pub struct HttpAnswer {
+    /// Status code.
+    pub status: u16,
+    /// `Content-Type`.
+    pub content_type: Option<String>,
+    /// Body text.
+    pub body: String,
+}
+
+/// The answer to `release`.
+#[derive(Debug, Serialize, Deserialize)]
+pub struct ReleaseAnswer {
+    /// Granted: the lease is free now.
+    pub released: bool,
+    /// Why not.
+    pub reason: Option<String>,
+}
+
+/// Why a call got no answer.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum CallError {
+    /// Nobody serves the node's subject: its process is gone.
+    #[error("node '{0}' is gone (no NATS subscription)")]
+    Gone(String),
+    /// The node did not answer in time.
+    #[error("node '{0}' did not answer within {1:?}")]
+    Timeout(String, Duration),
+    /// Anything else (NATS down, a garbled answer).
+    #[error("calling node '{0}': {1}")]
+    Failed(String, String),
+}
+
+/// Sends `call` to `node` and decodes its answer.
+pub async fn call<T: for<'de> Deserialize<'de>>(
+    cluster: &Cluster,
+    node: &str,
+    call: &Call,
+) -> Result<T, CallError> {
+    let payload =
+        serde_json::to_vec(call).map_err(|e| CallError::Failed(node.into(), e.to_string()))?;
+    let request = async_nats::Request::new()
+        .payload(Bytes::from(payload))
+        .timeout(Some(RPC_TIMEOUT));
+    let answer = cluster
+        .nats()
+        .send_request(subject(node), request)
+        .await
+        .map_err(|e| match e.kind() {
+            async_nats::RequestErrorKind::NoResponders => CallError::Gone(node.into()),
+            async_nats::RequestErrorKind::TimedOut => CallError::Timeout(node.into(), RPC_TIMEOUT),
+            _ => CallError::Failed(node.into(), e.to_string()),
+        })?;
+    serde_json::from_slice(&answer.payload)
+        .map_err(|e| CallError::Failed(node.into(), e.to_string()))
+}
+
+/// Forwards a REST request to `node`; its answer as a response.
+pub async fn forward(
+    cluster: &Cluster,
+    node: &str,
+    method: &str,
+    uri: &str,
+    authorization: Option<String>,
+    content_type: Option<String>,
+    body: String,
+) -> Result<Response<Body>, CallError> {
+    let answer: HttpAnswer = call(
+        cluster,
+        node,
+        &Call::Http {
+            method: method.to_owned(),
+            uri: uri.to_owned(),
+            authorization,
+            content_type,
+            body,
+            from: cluster.node_id().to_owned(),
+        },
+    )
+    .await?;
+    cluster
+        .counters
+        .forwarded
+        .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let mut response = Response::new(Body::from(answer.body));
+    *response.status_mut() = StatusCode::from_u16(answer.status).unwrap_or(StatusCode::BAD_GATEWAY);
+    if let Some(ct) = answer
+        .content_type
+        .and_then(|c| HeaderValue::from_str(&c).ok())
+    {
+        response.headers_mut().insert("content-type", ct);
+    }
+    if let Ok(owner) = HeaderValue::from_str(node) {
+        response.headers_mut().insert("x-navguard-owner", owner);
+    }
+    Ok(response)
+}
+
+/// Serves this node's calls until the NATS connection closes: each call in a task of its
+/// own.
+pub async fn serve(cluster: Arc<Cluster>, router: Router, registry: Arc<Registry>) {
+    let mut calls = match cluster.nats().subscribe(subject(cluster.node_id())).await {
+        Ok(s) => s,
+        Err(e) => {
+            tracing::error!(error = %e, "cannot serve node calls over NATS");
+            return;
+        }
+    };
+    while let Some(message) = calls.next().await {
+        let Some(reply) = message.reply.clone() else {
+            continue;
+        };
+        let (cluster, router, registry) = (cluster.clone(), router.clone(), registry.clone());
+        tokio::spawn(async move {
+            let answer = match serde_json::from_slice::<Call>(&message.payload) {
+                Ok(Call::Http {
+                    method,
+                    uri,
+                    authorization,
+                    content_type,
+                    body,
+                    from,
+                }) => {
+                    let a = run_http(
+                        router,
+                        &method,
+                        &uri,
+                        authorization,
+                        content_type,
+                        body,
+                        &from,
+                    )
+                    .await;
+                    serde_json::to_vec(&a)
+                }
+                Ok(Call::Release { session }) => {
+                    let a = release(&registry, &session).await;
+                    serde_json::to_vec(&a)
+                }
+                Err(e) => serde_json::to_vec(&HttpAnswer {
+                    status: 400,
+                    content_type: None,
+                    body: format!("bad node call: {e}"),
+                }),
+            };
+            if let Ok(bytes) = answer {
+                let _ = cluster.nats().publish(reply, Bytes::from(bytes)).await;
+            }
+        });
+    }
+}
+
+async fn run_http(
+    router: Router,
+    method: &str,
+    uri: &str,
+    authorization: Option<String>,
+    content_type: Option<String>,
+    body: String,
+    from: &str,
+) -> HttpAnswer {
+    let mut builder = Request::builder()
+        .method(method)
+        .uri(uri)
+        .header(FORWARDED_HEADER, from);
+    if let Some(a) = authorization {
+        builder = builder.header("authorization", a);
+    }
+    if let Some(c) = content_type {
+        builder = builder.header("content-type", c);
+    }
+    let request = match builder.body(Body::from(body)) {
+        Ok(r) => r,
+        Err(e) => {
+            return HttpAnswer {
+                status: 400,
+                content_type: None,
+                body: e.to_string(),
+            };
+        }
+    };
+    let response = match router.oneshot(request).await {
+        Ok(r) => r,
+        Err(never) => match never {},
+    };
+    let status = response.status().as_u16();
+    let content_type = response
+        .headers()
+        .get("content-type")
+        .and_then(|v| v.to_str().ok())
+        .map(str::to_owned);
+    let body = axum::body::to_bytes(response.into_body(), usize::MAX)
+        .await
+        .map(|b| String::from_utf8_lossy(&b).into_owned())
+        .unwrap_or_default();
+    HttpAnswer {
+        status,
+        content_type,
+        body,
+    }
+}
+
+async fn release(registry: &Registry, session: &str) -> ReleaseAnswer {
+    let Some(handle) = registry.get(session) else {
+        // Not running here: nothing to hand over; the asker takes the lease if it is free.
+        return ReleaseAnswer {
+            released: true,
+            reason: None,
+        };
+    };
+    match handle.release(false).await {
+        Ok(()) => {
+            registry.remove_if_same(&handle);
+            ReleaseAnswer {
+                released: true,
+                reason: None,
+            }
+        }
+        Err(e) => ReleaseAnswer {
+            released: false,
+            reason: Some(e.to_string()),
+        },
+    }
+}

@@ -1,0 +1,131 @@
+//! A session's checkpoint (docs/deployment.md, Failover): every monitor's evolving state
+//! (`Monitor::checkpoint`), its availability, the session's statistics, the stream's
+//! position (last epoch time, epoch count) and its recording stream id, as MessagePack
+//! (exact for every f64). The 1 Hz statistics history is not carried: a resumed session's
+//! history chart starts at the resume.
+//!
+//! Thresholds and policies are part of the spec, which the store holds apart: after a
+//! restore, each monitor's tests take the configuration of the monitors built from the
+//! stored spec, so a threshold changed after the last checkpoint is not undone.
+
+use serde::{Deserialize, Serialize};
+
+use super::Actor;
+use crate::monitor::{Availability, TestBank};
+use crate::service::session::stats::SessionStats;
+use crate::service::store::Checkpoint;
+
+/// The checkpoint format this server writes and reads.
+const FORMAT: u32 = 1;
+
+#[derive(Serialize, Deserialize)]
+struct Envelope {
+    format: u32,
+    monitors: Vec<MonitorState>,
+    stats: SessionStats,
+    last_t: Option<f64>,
+    stream_epochs: u64,
+    recording_stream: u64,
+}
+
+#[derive(Serialize, Deserialize)]
+struct MonitorState {
+    name: String,
+    availability: Option<Availability>,
+    state: Vec<u8>,
+}
+
+/// The actor's state as checkpoint bytes.
+pub(super) fn encode(actor: &Actor) -> Result<Vec<u8>, String> {
+    let mut monitors = Vec::with_capacity(actor.monitors.len());
+    for m in &actor.monitors {
+        monitors.push(MonitorState {
+            name: m.name.clone(),
+            availability: m.availability,
+            state: m
+                .monitor
+                .checkpoint()
+                .map_err(|e| format!("monitor '{}': {e}", m.name))?,
+        });
+    }
+    let envelope = Envelope {
+        format: FORMAT,
+        monitors,
+        stats: actor.stats.clone(),
+        last_t: actor.last_t,
+        stream_epochs: actor.stream_epochs,
+        recording_stream: actor.recording_stream,
+    };
+    rmp_serde::to_vec_named(&envelope).map_err(|e| e.to_string())
+}
+
+/// Restores `checkpoint` into a freshly built actor. On `Err` the actor is as built.
+pub(super) fn restore(actor: &mut Actor, checkpoint: &Checkpoint) -> Result<(), String> {
+    let envelope: Envelope = rmp_serde::from_slice(&checkpoint.state).map_err(|e| e.to_string())?;
+    if envelope.format != FORMAT {
+        return Err(format!(
+            "checkpoint format {} (this server reads {FORMAT})",
+            envelope.format
+        ));
+    }
+    let names: Vec<&str> = actor.monitors.iter().map(|m| m.name.as_str()).collect();
+    let saved: Vec<&str> = envelope.monitors.iter().map(|m| m.name.as_str()).collect();
+    if names != saved {
+        return Err(format!(
+            "checkpoint monitors {saved:?}, the session has {names:?}"
+        ));
+    }
+    for (k, saved) in envelope.monitors.iter().enumerate() {
+        let m = &mut actor.monitors[k];
+        let configured = m.monitor.tests().clone();
+        if let Err(e) = m.monitor.restore(&saved.state) {
+            for m in &mut actor.monitors[..k] {
+                m.monitor.reset();
+                m.availability = None;
+            }
+            return Err(format!("monitor '{}': {e}", saved.name));
+        }
+        reapply_configuration(m.monitor.tests_mut(), &configured);
+        m.availability = saved.availability;
+    }
+    let mut stats = envelope.stats;
+    stats.connected = false;
+    stats.epochs_per_s = 0.0;
+    for m in &actor.monitors {
+        if let Some(ms) = stats.monitors.get_mut(&m.name) {
+            for slot in m.monitor.tests().slots() {
+                if let Some(t) = ms.tests.get_mut(&slot.name) {
+                    t.threshold = slot.threshold;
+                    t.state = slot.policy.health();
+                }
+            }
+        }
+    }
+    actor.stats = stats;
+    actor.last_t = envelope.last_t;
+    actor.stream_epochs = envelope.stream_epochs;
+    actor.recording_stream = envelope.recording_stream;
+    Ok(())
+}
+
+/// Gives `restored` the thresholds and policies of `configured` (built from the stored
+/// spec) where they differ, as a `PUT …/threshold` would, keeping the restored counters
+/// where the configuration did not change.
+fn reapply_configuration(restored: &mut TestBank, configured: &TestBank) {
+    if restored.policy() != configured.policy() {
+        restored.set_policy(configured.policy());
+    }
+    if restored.spec() != configured.spec() {
+        // The configured spec was valid when it was built from; it stays valid here.
+        let _ = restored.set_spec(configured.spec());
+    }
+    for (i, slot) in configured.slots().iter().enumerate() {
+        let differs = restored
+            .slots()
+            .get(i)
+            .is_some_and(|r| r.own_spec != slot.own_spec);
+        if differs {
+            let _ = restored.set_test_spec(i, slot.own_spec);
+        }
+    }
+}
