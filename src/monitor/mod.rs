@@ -227,7 +227,7 @@ pub trait Monitor: Send {
     fn reset(&mut self);
 
     /// The monitor's evolving state (filters, detectors, policies and their counters, test
-    /// health), as bytes for a checkpoint (docs/architecture.md §A10).
+    /// health), as bytes for a checkpoint (docs/architecture.md §A14).
     fn checkpoint(&self) -> Result<Vec<u8>, CheckpointError>;
 
     /// Replaces the evolving state with one saved by [`Monitor::checkpoint`] on a monitor
