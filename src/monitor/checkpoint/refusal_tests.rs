@@ -7,9 +7,13 @@ use proptest::prelude::*;
 use proptest::test_runner::RngSeed;
 use serde_json::json;
 
-use super::tests::{channel_epochs, channel_models, channel_monitor, cv_epochs, cv_monitor, run};
+use super::tests::{
+    channel_epochs, channel_models, channel_monitor, cv_epochs, cv_monitor, rimu_epochs,
+    rimu_monitor, run, ship_epochs, ship_monitor, tacan_case,
+};
 use super::*;
 use crate::detect::{PolicyConfig, ThresholdSpec};
+use crate::epoch::Epoch;
 use crate::monitor::{Monitor, MonitorConfig, MonitorSpec, NoModels, build};
 
 /// A linear monitor with a 3-state constant-acceleration model (position measured).
@@ -150,7 +154,7 @@ fn a_truncated_federated_or_channel_checkpoint_is_refused() {
         let e: Vec<_> = s.epochs.iter().map(|e| e.epoch.clone()).collect();
         (s, e)
     };
-    let mut fed = super::tests::ship_monitor(&scenario);
+    let mut fed = ship_monitor(&scenario);
     run(fed.as_mut(), &epochs);
     let models = channel_models();
     let mut ch = channel_monitor(&models, 50);
@@ -197,14 +201,12 @@ proptest! {
     fn a_corrupted_byte_is_refused_or_fits_and_never_makes_a_step_panic(
         at in any::<proptest::sample::Index>(),
         value in any::<u8>(),
-        channel in any::<bool>(),
+        which in any::<proptest::sample::Index>(),
     ) {
-        let f = fixture();
-        let (mut m, mut bytes, epochs) = if channel {
-            (channel_monitor(&f.models, 50), f.channel.clone(), &f.channel_epochs)
-        } else {
-            (cv_monitor(true), f.linear.clone(), &f.linear_epochs)
-        };
+        let cases = fixture();
+        let case = &cases[which.index(cases.len())];
+        let mut m = (case.build)();
+        let mut bytes = case.bytes.clone();
         let i = at.index(bytes.len());
         bytes[i] = value;
         let before = m.checkpoint().unwrap();
@@ -212,38 +214,63 @@ proptest! {
             prop_assert_eq!(m.checkpoint().unwrap(), before);
         }
         // Whatever was restored fits the monitor: steps may fail numerically, never panic.
-        for e in epochs {
+        for e in &case.epochs {
             let _ = m.step(e);
         }
     }
 }
 
-/// Mid-run checkpoints of a guarded linear monitor and of the two-channel monitor, and the
-/// epochs that follow them, made once for every proptest case.
-struct Fixture {
-    models: std::collections::HashMap<String, std::sync::Arc<crate::learn::AnyModel>>,
-    linear: Vec<u8>,
-    linear_epochs: Vec<crate::epoch::Epoch>,
-    channel: Vec<u8>,
-    channel_epochs: Vec<crate::epoch::Epoch>,
+/// One kind's mid-run checkpoint, how to build a fresh monitor of it, and the epochs that
+/// follow the checkpoint.
+struct Case {
+    build: Box<dyn Fn() -> Box<dyn Monitor> + Send + Sync>,
+    bytes: Vec<u8>,
+    epochs: Vec<Epoch>,
 }
 
-fn fixture() -> &'static Fixture {
-    static FIXTURE: std::sync::OnceLock<Fixture> = std::sync::OnceLock::new();
-    FIXTURE.get_or_init(|| {
-        let models = channel_models();
-        let mut ch = channel_monitor(&models, 50);
-        let e = channel_epochs();
-        run(ch.as_mut(), &e[..260]);
-        let mut lin = cv_monitor(true);
-        let l = cv_epochs(220, 150, 30.0, 5);
-        run(lin.as_mut(), &l[..155]);
-        Fixture {
-            linear: lin.checkpoint().unwrap(),
-            linear_epochs: l[155..].to_vec(),
-            channel: ch.checkpoint().unwrap(),
-            channel_epochs: e[260..320].to_vec(),
-            models,
+impl Case {
+    /// Runs a fresh monitor through `epochs[..n1]`, checkpoints it, keeps the next 60.
+    fn new(
+        build: Box<dyn Fn() -> Box<dyn Monitor> + Send + Sync>,
+        epochs: &[Epoch],
+        n1: usize,
+    ) -> Self {
+        let mut m = build();
+        run(m.as_mut(), &epochs[..n1]);
+        Case {
+            bytes: m.checkpoint().unwrap(),
+            epochs: epochs[n1..(n1 + 60).min(epochs.len())].to_vec(),
+            build,
         }
+    }
+}
+
+/// A mid-run case of every kind, made once for all proptest cases.
+fn fixture() -> &'static [Case] {
+    static FIXTURE: std::sync::OnceLock<Vec<Case>> = std::sync::OnceLock::new();
+    FIXTURE.get_or_init(|| {
+        let channel_models = channel_models();
+        let (scenario, ship) = ship_epochs();
+        let ship_n1 = ship.iter().position(|e| e.t >= 85.0).unwrap();
+        let (tacan_spec, tacan_models, tacan) = tacan_case();
+        vec![
+            Case::new(
+                Box::new(|| cv_monitor(true)),
+                &cv_epochs(220, 150, 30.0, 5),
+                155,
+            ),
+            Case::new(Box::new(move || ship_monitor(&scenario)), &ship, ship_n1),
+            Case::new(
+                Box::new(move || channel_monitor(&channel_models, 50)),
+                &channel_epochs(),
+                262,
+            ),
+            Case::new(Box::new(rimu_monitor), &rimu_epochs(), 330),
+            Case::new(
+                Box::new(move || build(&tacan_spec, &tacan_models).unwrap()),
+                &tacan,
+                405,
+            ),
+        ]
     })
 }

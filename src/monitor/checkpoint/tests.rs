@@ -190,7 +190,7 @@ fn thresholds_and_policies_are_the_checkpoints() {
 
 /// The ship of seed 004 (10 Hz INS, GNSS, DVL, CNS) for 150 s with an 80 m GNSS jump east
 /// on [80, 120) s.
-fn ship_epochs() -> (crate::sim::Scenario, Vec<Epoch>) {
+pub(super) fn ship_epochs() -> (crate::sim::Scenario, Vec<Epoch>) {
     use crate::sim::{Channel, Fault, FaultKind};
     let faults = vec![Fault {
         aid: Aid::Gnss,
@@ -308,7 +308,7 @@ fn a_channel_monitor_restored_mid_fault_steps_as_one_that_never_stopped() {
     assert_resumes_exactly(&|| channel_monitor(&models, 50), &epochs, 262);
 }
 
-fn rimu_monitor() -> Box<dyn Monitor> {
+pub(super) fn rimu_monitor() -> Box<dyn Monitor> {
     // A stand-in for the C-SVC (as in the rimu tests): fault when the lowest wavelet band
     // holds most of the energy.
     let classifier: GyroClassifier = Arc::new(|phi: &[f64]| phi[0] - 0.5);
@@ -324,15 +324,12 @@ fn rimu_monitor() -> Box<dyn Monitor> {
     )
 }
 
-#[test]
-fn a_rimu_monitor_restored_mid_fault_steps_as_one_that_never_stopped() {
+/// Seed 002's steady flight, 22–28 s at 100 Hz, with a 6σ bias on gyro 1 from 25 s.
+pub(super) fn rimu_epochs() -> Vec<Epoch> {
     use crate::sim::rimu::{GyroFaultKind, RimuSimParams, simulate};
-    let sim = simulate(&RimuSimParams::steady(
-        7,
-        Some((1, GyroFaultKind::Bias(6.0))),
-    ))
-    .unwrap();
-    let epochs: Vec<Epoch> = sim
+    let params = RimuSimParams::steady(7, Some((1, GyroFaultKind::Bias(6.0))));
+    simulate(&params)
+        .unwrap()
         .samples
         .iter()
         .map(|s| Epoch {
@@ -340,7 +337,12 @@ fn a_rimu_monitor_restored_mid_fault_steps_as_one_that_never_stopped() {
             gyros: Some(s.gyros.clone()),
             ..Default::default()
         })
-        .collect();
+        .collect()
+}
+
+#[test]
+fn a_rimu_monitor_restored_mid_fault_steps_as_one_that_never_stopped() {
+    let epochs = rimu_epochs();
     // The bias starts at 25 s: checkpoint 20 epochs after gyro 1 is isolated.
     let reports = run(rimu_monitor().as_mut(), &epochs);
     let isolated_at = reports
@@ -370,8 +372,9 @@ fn tacan_model() -> Arc<AnyModel> {
     Arc::new(train_model(&p, 20.0).unwrap().model)
 }
 
-#[test]
-fn a_tacan_monitor_restored_mid_fault_steps_as_one_that_never_stopped() {
+/// A tacan monitor's spec and model (counters), and a clean 20 s flight with a 200 m jump
+/// on samples 400–402 and every 50th epoch without the range (ignored by the monitor).
+pub(super) fn tacan_case() -> (MonitorSpec, HashMap<String, Arc<AnyModel>>, Vec<Epoch>) {
     use crate::sim::tacan::{TacanFlightParams, default_station, simulate_flight};
     let models = HashMap::from([("m".to_owned(), tacan_model())]);
     let station = default_station();
@@ -393,7 +396,6 @@ fn a_tacan_monitor_restored_mid_fault_steps_as_one_that_never_stopped() {
         ..TacanFlightParams::default()
     })
     .unwrap();
-    // A 200 m jump on samples 400–402, and every 50th epoch without the range (ignored).
     for k in 400..403 {
         let r = flight.epochs[k].tacan_range_m.unwrap();
         flight.epochs[k].tacan_range_m = Some(r + 200.0);
@@ -401,7 +403,13 @@ fn a_tacan_monitor_restored_mid_fault_steps_as_one_that_never_stopped() {
     for e in flight.epochs.iter_mut().step_by(50) {
         e.tacan_range_m = None;
     }
-    assert_resumes_exactly(&|| build(&s, &models).unwrap(), &flight.epochs, 405);
+    (s, models, flight.epochs)
+}
+
+#[test]
+fn a_tacan_monitor_restored_mid_fault_steps_as_one_that_never_stopped() {
+    let (s, models, epochs) = tacan_case();
+    assert_resumes_exactly(&|| build(&s, &models).unwrap(), &epochs, 405);
 }
 
 #[test]
