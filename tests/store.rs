@@ -620,6 +620,26 @@ async fn checkpoints_only_move_forward() {
             Some(checkpoint("s", 2, 1)),
             "{backend}"
         );
+        // Written at once (one group commit, several versions of one session, and the
+        // old owner's among them): the newest of b's wins, a's are refused.
+        let writes: Vec<_> = (2..40)
+            .map(|v| {
+                let (store, a, b) = (store.clone(), a.clone(), b.clone());
+                tokio::spawn(async move {
+                    let old = store.put_checkpoint(&a, &checkpoint("s", 1, 100 + v)).await;
+                    assert!(matches!(old, Err(StoreError::Fenced(_))), "{old:?}");
+                    store.put_checkpoint(&b, &checkpoint("s", 2, v)).await
+                })
+            })
+            .collect();
+        for w in writes {
+            w.await.unwrap().unwrap();
+        }
+        assert_eq!(
+            store.checkpoint("s").await.unwrap(),
+            Some(checkpoint("s", 2, 39)),
+            "{backend}"
+        );
         store.close().await;
     }
 }

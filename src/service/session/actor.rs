@@ -174,16 +174,24 @@ fn spawn_inner(
     let deps_record_default = deps.record_default;
     let lease_epoch = fence.as_ref().map(|f| f.epoch);
     let owned = match (&deps.cluster, fence) {
-        (Some(cluster), Some(fence)) => Some(Owned {
-            cluster: cluster.clone(),
-            fence,
-            event_seq: 0,
-            version: 0,
-            due: None,
-            last: Instant::now(),
-            last_stats: Instant::now(),
-            fenced: false,
-        }),
+        (Some(cluster), Some(fence)) => {
+            // Sessions created or taken over together would checkpoint (and publish
+            // their statistics) in step, a burst every interval: a random phase spreads
+            // them over it.
+            let phase = rand::random::<f64>();
+            let now = Instant::now();
+            let back = |d: Duration| now.checked_sub(d.mul_f64(phase)).unwrap_or(now);
+            Some(Owned {
+                cluster: cluster.clone(),
+                fence,
+                event_seq: 0,
+                version: 0,
+                due: None,
+                last: back(cluster.config.checkpoint_interval),
+                last_stats: back(bus::STATS_PERIOD),
+                fenced: false,
+            })
+        }
         _ => None,
     };
     let (stats_tx, stats_rx) = watch::channel(Arc::new(stats.clone()));

@@ -14,6 +14,8 @@
 //! Times are the nodes' own clocks (Unix ms): they must agree to well within a lease
 //! (NTP does).
 
+use tokio::sync::{mpsc, oneshot};
+
 use super::{Pool, StoreError};
 
 /// Matches the lease row while `owner` still holds it under `epoch` (binds: session,
@@ -203,36 +205,192 @@ pub(super) async fn release(pool: &Pool, fence: &Fence) -> Result<bool, StoreErr
     Ok(n == 1)
 }
 
-/// Writes `checkpoint` unless the lease moved on (fenced) or a newer one is stored.
-pub(super) async fn put_checkpoint(
+/// Checkpoints taken into one transaction at most.
+const CHECKPOINT_GROUP: usize = 256;
+/// Checkpoints waiting for the writer before owners wait for room.
+const CHECKPOINT_QUEUE: usize = 4096;
+
+type CheckpointReply = oneshot::Sender<Result<(), StoreError>>;
+
+/// Group commit for checkpoints: a thousand sessions checkpointing once a second each
+/// would be a thousand transactions a second; one writer task takes every checkpoint
+/// queued at the moment into one transaction (each still fenced on its own) and answers
+/// each owner after the commit.
+#[derive(Debug, Clone)]
+pub(super) struct CheckpointWriter {
+    tx: mpsc::Sender<(Fence, Checkpoint, CheckpointReply)>,
+}
+
+impl CheckpointWriter {
+    /// Starts the writer task on the current runtime.
+    pub(super) fn spawn(pool: Pool) -> Self {
+        let (tx, rx) = mpsc::channel(CHECKPOINT_QUEUE);
+        tokio::spawn(run_checkpoints(pool, rx));
+        CheckpointWriter { tx }
+    }
+
+    /// Writes `checkpoint` unless the lease moved on (fenced) or a newer one is stored;
+    /// returns after the commit.
+    pub(super) async fn put(
+        &self,
+        fence: &Fence,
+        checkpoint: Checkpoint,
+    ) -> Result<(), StoreError> {
+        let (reply, answer) = oneshot::channel();
+        let closed = || StoreError::Db(sqlx::Error::PoolClosed);
+        self.tx
+            .send((fence.clone(), checkpoint, reply))
+            .await
+            .map_err(|_| closed())?;
+        answer.await.map_err(|_| closed())?
+    }
+}
+
+async fn run_checkpoints(pool: Pool, mut rx: mpsc::Receiver<(Fence, Checkpoint, CheckpointReply)>) {
+    let mut batch = Vec::with_capacity(CHECKPOINT_GROUP);
+    while rx.recv_many(&mut batch, CHECKPOINT_GROUP).await > 0 {
+        match commit_checkpoints(&pool, &batch).await {
+            Ok(held) => {
+                for ((fence, _, reply), held) in batch.drain(..).zip(held) {
+                    let answer = if held {
+                        Ok(())
+                    } else {
+                        Err(StoreError::Fenced(fence.session))
+                    };
+                    let _ = reply.send(answer);
+                }
+            }
+            Err(e) => {
+                let message = e.to_string();
+                tracing::error!(error = %message, checkpoints = batch.len(), "checkpoint commit failed");
+                for (_, _, reply) in batch.drain(..) {
+                    let _ = reply.send(Err(StoreError::Corrupt(format!(
+                        "checkpoint commit failed: {message}"
+                    ))));
+                }
+            }
+        }
+    }
+}
+
+/// The upsert of one checkpoint, never over a newer one.
+const UPSERT_CHECKPOINT: &str = "INSERT INTO checkpoints (session, lease_epoch, version, epochs, t, taken_at_ms, state)
+     VALUES ($1, $2, $3, $4, $5, $6, $7)
+     ON CONFLICT (session) DO UPDATE SET lease_epoch = excluded.lease_epoch,
+         version = excluded.version, epochs = excluded.epochs, t = excluded.t,
+         taken_at_ms = excluded.taken_at_ms, state = excluded.state
+     WHERE checkpoints.lease_epoch < excluded.lease_epoch
+        OR (checkpoints.lease_epoch = excluded.lease_epoch AND checkpoints.version < excluded.version)";
+
+/// Postgres: the fence check of a whole batch in one statement (arrays of session,
+/// owner, epoch; one prepared statement whatever the batch size).
+const PG_FENCE_BATCH: &str = "UPDATE leases AS l SET epoch = l.epoch
+     FROM UNNEST($1::text[], $2::text[], $3::bigint[]) AS f(session, owner, epoch)
+     WHERE l.session = f.session AND l.owner = f.owner AND l.epoch = f.epoch
+     RETURNING l.session, l.owner, l.epoch";
+
+/// Postgres: the upsert of a batch (one row per session) in one statement.
+const PG_UPSERT_BATCH: &str = "INSERT INTO checkpoints (session, lease_epoch, version, epochs, t, taken_at_ms, state)
+     SELECT * FROM UNNEST($1::text[], $2::bigint[], $3::bigint[], $4::bigint[], $5::float8[], $6::bigint[], $7::bytea[])
+     ON CONFLICT (session) DO UPDATE SET lease_epoch = excluded.lease_epoch,
+         version = excluded.version, epochs = excluded.epochs, t = excluded.t,
+         taken_at_ms = excluded.taken_at_ms, state = excluded.state
+     WHERE checkpoints.lease_epoch < excluded.lease_epoch
+        OR (checkpoints.lease_epoch = excluded.lease_epoch AND checkpoints.version < excluded.version)";
+
+/// Upserts every checkpoint of `batch` in one transaction; for each, whether its fence
+/// held (a fenced one is not written). Postgres takes the batch in two statements (one
+/// fence check, one upsert of the newest checkpoint per session); SQLite, whose
+/// statements cost no round trip, row by row.
+async fn commit_checkpoints(
     pool: &Pool,
-    fence: &Fence,
-    c: &Checkpoint,
-) -> Result<(), StoreError> {
-    with_pool!(pool, p => {
-        let mut tx = p.begin().await?;
-        check_fence!(tx, Some(fence));
-        sqlx::query(
-            "INSERT INTO checkpoints (session, lease_epoch, version, epochs, t, taken_at_ms, state)
-             VALUES ($1, $2, $3, $4, $5, $6, $7)
-             ON CONFLICT (session) DO UPDATE SET lease_epoch = excluded.lease_epoch,
-                 version = excluded.version, epochs = excluded.epochs, t = excluded.t,
-                 taken_at_ms = excluded.taken_at_ms, state = excluded.state
-             WHERE checkpoints.lease_epoch < excluded.lease_epoch
-                OR (checkpoints.lease_epoch = excluded.lease_epoch AND checkpoints.version < excluded.version)",
-        )
-        .bind(&c.session)
+    batch: &[(Fence, Checkpoint, CheckpointReply)],
+) -> Result<Vec<bool>, sqlx::Error> {
+    match pool {
+        Pool::Postgres(p) => commit_checkpoints_pg(p, batch).await,
+        Pool::Sqlite(p) => {
+            let mut tx = p.begin().await?;
+            let mut held = Vec::with_capacity(batch.len());
+            for (f, c, _) in batch {
+                let n = sqlx::query(FENCE_SQL)
+                    .bind(&f.session)
+                    .bind(&f.owner)
+                    .bind(f.epoch)
+                    .execute(&mut *tx)
+                    .await?
+                    .rows_affected();
+                held.push(n > 0);
+                if n > 0 {
+                    bind_checkpoint(sqlx::query(UPSERT_CHECKPOINT), c)
+                        .execute(&mut *tx)
+                        .await?;
+                }
+            }
+            tx.commit().await?;
+            Ok(held)
+        }
+    }
+}
+
+fn bind_checkpoint<'q, DB: sqlx::Database>(
+    q: sqlx::query::Query<'q, DB, <DB as sqlx::Database>::Arguments<'q>>,
+    c: &'q Checkpoint,
+) -> sqlx::query::Query<'q, DB, <DB as sqlx::Database>::Arguments<'q>>
+where
+    String: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
+    i64: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
+    Option<f64>: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
+    Vec<u8>: sqlx::Encode<'q, DB> + sqlx::Type<DB>,
+{
+    q.bind(&c.session)
         .bind(c.lease_epoch)
         .bind(c.version)
         .bind(c.epochs)
         .bind(c.t)
         .bind(c.taken_at_ms)
         .bind(&c.state)
-        .execute(&mut *tx)
-        .await?;
-        tx.commit().await?;
-    });
-    Ok(())
+}
+
+async fn commit_checkpoints_pg(
+    pool: &sqlx::PgPool,
+    batch: &[(Fence, Checkpoint, CheckpointReply)],
+) -> Result<Vec<bool>, sqlx::Error> {
+    let mut tx = pool.begin().await?;
+    let sessions: Vec<&str> = batch.iter().map(|(f, _, _)| f.session.as_str()).collect();
+    let owners: Vec<&str> = batch.iter().map(|(f, _, _)| f.owner.as_str()).collect();
+    let epochs: Vec<i64> = batch.iter().map(|(f, _, _)| f.epoch).collect();
+    let held: std::collections::HashSet<(String, String, i64)> = sqlx::query_as(PG_FENCE_BATCH)
+        .bind(&sessions)
+        .bind(&owners)
+        .bind(&epochs)
+        .fetch_all(&mut *tx)
+        .await?
+        .into_iter()
+        .collect();
+    let holds = |f: &Fence| held.contains(&(f.session.clone(), f.owner.clone(), f.epoch));
+    // The newest checkpoint of each session whose fence held: one row is upserted once.
+    let mut newest: std::collections::HashMap<&str, &Checkpoint> = Default::default();
+    for (f, c, _) in batch.iter().filter(|(f, _, _)| holds(f)) {
+        let slot = newest.entry(f.session.as_str()).or_insert(c);
+        if (c.lease_epoch, c.version) > (slot.lease_epoch, slot.version) {
+            *slot = c;
+        }
+    }
+    if !newest.is_empty() {
+        let rows: Vec<&Checkpoint> = newest.into_values().collect();
+        sqlx::query(PG_UPSERT_BATCH)
+            .bind(rows.iter().map(|c| c.session.as_str()).collect::<Vec<_>>())
+            .bind(rows.iter().map(|c| c.lease_epoch).collect::<Vec<_>>())
+            .bind(rows.iter().map(|c| c.version).collect::<Vec<_>>())
+            .bind(rows.iter().map(|c| c.epochs).collect::<Vec<_>>())
+            .bind(rows.iter().map(|c| c.t).collect::<Vec<_>>())
+            .bind(rows.iter().map(|c| c.taken_at_ms).collect::<Vec<_>>())
+            .bind(rows.iter().map(|c| c.state.as_slice()).collect::<Vec<_>>())
+            .execute(&mut *tx)
+            .await?;
+    }
+    tx.commit().await?;
+    Ok(batch.iter().map(|(f, _, _)| holds(f)).collect())
 }
 
 /// The latest checkpoint of `session`.

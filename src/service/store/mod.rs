@@ -176,6 +176,8 @@ pub struct Store {
     alarms: alarm_writer::AlarmWriter,
     /// Recorded frames go through another (not awaited per frame).
     recordings: recordings::RecordingWriter,
+    /// Checkpoints through a third (group commit, awaited).
+    checkpoints: cluster::CheckpointWriter,
 }
 
 /// Columns added to SQLite's first schema before migrations were versioned, with their
@@ -205,10 +207,12 @@ impl Store {
         migrate::apply(&pool, i64::MAX).await?;
         let alarms = alarm_writer::AlarmWriter::spawn(pool.clone());
         let recordings = recordings::RecordingWriter::spawn(pool.clone(), retention);
+        let checkpoints = cluster::CheckpointWriter::spawn(pool.clone());
         Ok(Store {
             pool,
             alarms,
             recordings,
+            checkpoints,
         })
     }
 
@@ -336,13 +340,14 @@ impl Store {
         cluster::release(&self.pool, fence).await
     }
 
-    /// Stores a checkpoint by the holder of `fence` (never over a newer one).
+    /// Stores a checkpoint by the holder of `fence` (never over a newer one); checkpoints
+    /// written at the same moment share one transaction.
     pub async fn put_checkpoint(
         &self,
         fence: &Fence,
         checkpoint: &Checkpoint,
     ) -> Result<(), StoreError> {
-        cluster::put_checkpoint(&self.pool, fence, checkpoint).await
+        self.checkpoints.put(fence, checkpoint.clone()).await
     }
 
     /// The latest checkpoint of session `id`.
