@@ -126,6 +126,10 @@ struct Owned {
     last_stats: Instant,
     /// A write was fenced: another node owns the session now; the actor stops.
     fenced: bool,
+    /// A background checkpoint is still being written: the next one waits for it, so a
+    /// session never has more than one queued (the memory stays bounded when the store
+    /// falls behind).
+    in_flight: Arc<std::sync::atomic::AtomicBool>,
 }
 
 /// The built monitors of `stored`, each with its alarm level (its own, else the
@@ -175,20 +179,16 @@ fn spawn_inner(
     let lease_epoch = fence.as_ref().map(|f| f.epoch);
     let owned = match (&deps.cluster, fence) {
         (Some(cluster), Some(fence)) => {
-            // Sessions created or taken over together would checkpoint (and publish
-            // their statistics) in step, a burst every interval: a random phase spreads
-            // them over it.
-            let phase = rand::random::<f64>();
             let now = Instant::now();
-            let back = |d: Duration| now.checked_sub(d.mul_f64(phase)).unwrap_or(now);
             Some(Owned {
                 cluster: cluster.clone(),
                 fence,
                 event_seq: 0,
                 version: 0,
                 due: None,
-                last: back(cluster.config.checkpoint_interval),
-                last_stats: back(bus::STATS_PERIOD),
+                last: now,
+                last_stats: now,
+                in_flight: Arc::default(),
                 fenced: false,
             })
         }
@@ -663,6 +663,13 @@ impl Actor {
     /// Takes a checkpoint and stores it: in the background (`wait` false; a later one
     /// never loses to an earlier one, they are versioned) or before returning.
     async fn checkpoint(&mut self, wait: bool) -> bool {
+        if let Some(o) = &mut self.owned
+            && !wait
+            && o.in_flight.load(Ordering::Acquire)
+        {
+            o.due = Some(Instant::now() + o.cluster.config.checkpoint_interval / 4);
+            return false;
+        }
         let bytes = match checkpoint::encode(self) {
             Ok(b) => b,
             Err(e) => {
@@ -687,8 +694,15 @@ impl Actor {
             state: bytes,
         };
         let (store, fence, cluster) = (self.deps.store.clone(), o.fence.clone(), o.cluster.clone());
+        let in_flight = o.in_flight.clone();
+        if !wait {
+            in_flight.store(true, Ordering::Release);
+        }
         let write = async move {
             let written = store.put_checkpoint(&fence, &checkpoint).await;
+            if !wait {
+                in_flight.store(false, Ordering::Release);
+            }
             let counters = &cluster.counters;
             match &written {
                 Ok(()) => counters.checkpoints.fetch_add(1, Ordering::Relaxed),
