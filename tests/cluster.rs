@@ -144,9 +144,16 @@ fn start_cluster() -> Cluster {
     cluster
 }
 
-/// The log entries an uninterrupted monitor raises over `z`: (epoch index, state,
-/// severity), in order.
-fn reference(model: &CvModel, z: &[f64]) -> Vec<(usize, Health, &'static str)> {
+/// What an uninterrupted monitor does over `z`: the log entries it raises (epoch
+/// index, state, severity), in order, and its residual test's epochs, mean and max.
+struct Reference {
+    entries: Vec<(usize, Health, &'static str)>,
+    epochs: u64,
+    mean: f64,
+    max: f64,
+}
+
+fn reference(model: &CvModel, z: &[f64]) -> Reference {
     let spec = MonitorSpec {
         kind: MonitorKind::Linear,
         config: MonitorConfig::parse(MonitorKind::Linear, &model.config()).unwrap(),
@@ -155,6 +162,7 @@ fn reference(model: &CvModel, z: &[f64]) -> Vec<(usize, Health, &'static str)> {
     };
     let mut m = navguard::monitor::build(&spec, &NoModels).unwrap();
     let mut out = Vec::new();
+    let (mut epochs, mut sum, mut max) = (0u64, 0.0, f64::NEG_INFINITY);
     for (k, z) in z.iter().enumerate() {
         let epoch = Epoch {
             t: k as f64,
@@ -162,6 +170,11 @@ fn reference(model: &CvModel, z: &[f64]) -> Vec<(usize, Health, &'static str)> {
             ..Default::default()
         };
         for outcome in m.step(&epoch).unwrap().tests {
+            if &*outcome.name == "residual" {
+                epochs += 1;
+                sum += outcome.statistic.value;
+                max = max.max(outcome.statistic.value);
+            }
             let to = outcome.decision.health;
             if outcome.previous != to {
                 match to {
@@ -172,7 +185,12 @@ fn reference(model: &CvModel, z: &[f64]) -> Vec<(usize, Health, &'static str)> {
             }
         }
     }
-    out
+    Reference {
+        entries: out,
+        epochs,
+        mean: sum / epochs as f64,
+        max,
+    }
 }
 
 /// One session's client: its measurements, where it has got to, its socket.
@@ -552,6 +570,7 @@ async fn a_cluster_survives_a_killed_node_and_a_drain_without_losing_or_repeatin
             .collect();
         got.reverse();
         let want: Vec<(usize, String, String)> = expected[&c.id]
+            .entries
             .iter()
             .map(|(k, h, s)| (*k, h.as_str().to_owned(), (*s).to_owned()))
             .collect();
@@ -575,6 +594,40 @@ async fn a_cluster_survives_a_killed_node_and_a_drain_without_losing_or_repeatin
                 cluster.logs()
             );
         }
+        // The statistics carried across the failover and the drain too (the PUT's
+        // target decides, and so filters, differently after its threshold change).
+        if c.id == target_id {
+            continue;
+        }
+        let stats: Value = http
+            .get(format!("{lb}/api/v1/sessions/{}/stats", c.id))
+            .send()
+            .await
+            .unwrap()
+            .json()
+            .await
+            .unwrap();
+        let residual = &stats["monitors"]["cv"]["tests"]["residual"];
+        let r = &expected[&c.id];
+        assert_eq!(
+            residual["epochs"].as_u64(),
+            Some(r.epochs),
+            "{}: {residual}",
+            c.id
+        );
+        assert_eq!(
+            residual["max"].as_f64(),
+            Some(r.max),
+            "{}: {residual}",
+            c.id
+        );
+        let mean = residual["mean"].as_f64().unwrap();
+        assert!(
+            (mean - r.mean).abs() <= 1e-12 * r.mean.abs(),
+            "{}: mean {mean} against {} uninterrupted",
+            c.id,
+            r.mean
+        );
         assert!(
             want.iter().filter(|e| e.2 == "alarm").count() >= 3,
             "{}: the scenario raises an alarm in every phase",

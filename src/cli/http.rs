@@ -143,6 +143,14 @@ impl Endpoint {
     /// Opens the socket at `path` (offering the `navguard` subprotocol and the
     /// token) and waits for the server's `ready` message.
     pub(crate) async fn connect(&self, path: &str) -> anyhow::Result<Socket> {
+        Ok(self.connect_ready(path).await?.0)
+    }
+
+    /// [`Endpoint::connect`], also giving the server's `ready` message.
+    pub(crate) async fn connect_ready(
+        &self,
+        path: &str,
+    ) -> anyhow::Result<(Socket, serde_json::Value)> {
         let url = self.ws_url(path);
         let mut request = url.as_str().into_client_request()?;
         request.headers_mut().insert(
@@ -186,7 +194,9 @@ impl Endpoint {
         .await
         .context("no `ready` from the server within 10 s")??;
         match ready {
-            Some(text) if text.contains("\"ready\"") => Ok(socket),
+            Some(text) if text.contains("\"ready\"") => {
+                Ok((socket, serde_json::from_str(&text).unwrap_or_default()))
+            }
             Some(text) => bail!("expected `ready` from the server, got {text}"),
             None => bail!("the server closed the socket before `ready`"),
         }

@@ -138,6 +138,11 @@ pub(crate) struct ReplayArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// When the ingest socket drops (a cluster node killed or drained), reconnect with
+    /// `resume=true` (within 30 s) and resend from the first epoch after the one the
+    /// session resumed from (docs/deployment.md, Failover), instead of stopping.
+    #[arg(long)]
+    pub resume: bool,
 }
 
 const SPEC_HELP: &str = "\
@@ -475,9 +480,14 @@ pub(crate) async fn run(args: ReplayArgs) -> anyhow::Result<()> {
         !args.quiet,
     );
     let started = Instant::now();
-    let outcome = stream_file(&args, &scan, sink, &tally, &progress).await;
+    let link = Link {
+        endpoint: &endpoint,
+        path: &path,
+        baseline,
+    };
+    let outcome = stream_file(&args, &scan, sink, &tally, &progress, link).await;
     progress.finish_and_clear();
-    let (mut sink, sent) = match outcome {
+    let (mut sink, sent, baseline) = match outcome {
         Ok(done) => done,
         Err(e) => {
             reader.abort();
@@ -597,17 +607,64 @@ struct Sent {
     frames: u64,
 }
 
+/// The session the replay streams to, and its statistics when the current socket
+/// attached (the drain counts what was sent on it from there).
+struct Link<'a> {
+    endpoint: &'a Endpoint,
+    path: &'a str,
+    baseline: SessionStats,
+}
+
+/// How long `--resume` keeps trying to reconnect.
+const RESUME_WINDOW: Duration = Duration::from_secs(30);
+
+/// `--resume`: reconnects (`resume=true`) until a socket attaches, within
+/// [`RESUME_WINDOW`]; the new sink and the time the session resumed after (`ready`'s
+/// `resumed.t`; `None`: a fresh stream, resend everything).
+async fn reconnect(
+    link: &mut Link<'_>,
+    tally: &Arc<Mutex<Tally>>,
+) -> anyhow::Result<(SplitSink<Socket, Message>, Option<f64>)> {
+    let deadline = Instant::now() + RESUME_WINDOW;
+    let mut last_error = String::new();
+    while Instant::now() < deadline {
+        match link
+            .endpoint
+            .connect_ready(&format!("{}/ingest?resume=true", link.path))
+            .await
+        {
+            Ok((socket, ready)) => {
+                let (sink, stream) = socket.split();
+                tally.lock().unwrap_or_else(|p| p.into_inner()).closed = None;
+                tokio::spawn(read_events(stream, tally.clone()));
+                link.baseline = stats(link.endpoint, link.path).await?;
+                return Ok((sink, ready["resumed"]["t"].as_f64()));
+            }
+            Err(e) => last_error = format!("{e:#}"),
+        }
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+    bail!("could not resume the stream within {RESUME_WINDOW:?}: {last_error}")
+}
+
+async fn open_lines(
+    path: &Path,
+) -> anyhow::Result<tokio::io::Lines<tokio::io::BufReader<tokio::fs::File>>> {
+    let file = tokio::fs::File::open(path)
+        .await
+        .with_context(|| format!("opening {}", path.display()))?;
+    Ok(tokio::io::BufReader::new(file).lines())
+}
+
 async fn stream_file(
     args: &ReplayArgs,
     scan: &FileScan,
     mut sink: SplitSink<Socket, Message>,
     tally: &Arc<Mutex<Tally>>,
     progress: &ProgressBar,
-) -> anyhow::Result<(SplitSink<Socket, Message>, Sent)> {
-    let file = tokio::fs::File::open(&args.file)
-        .await
-        .with_context(|| format!("opening {}", args.file.display()))?;
-    let mut lines = tokio::io::BufReader::new(file).lines();
+    mut link: Link<'_>,
+) -> anyhow::Result<(SplitSink<Socket, Message>, Sent, SessionStats)> {
+    let mut lines = open_lines(&args.file).await?;
     let mut number = 0usize;
     let start = Instant::now();
     let due = |t: f64| match args.speed {
@@ -642,17 +699,46 @@ async fn stream_file(
         } else {
             format!("[{}]", batch.join(","))
         };
-        if let Err(e) = sink.send(Message::Text(text.into())).await {
-            let closed = tally
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .closed
-                .clone();
-            bail!(
-                "the server dropped the ingest socket after {} epochs: {}",
-                sent.epochs,
-                closed.unwrap_or_else(|| e.to_string())
-            );
+        let closed_before = tally
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .closed
+            .clone();
+        let failed = match closed_before {
+            Some(reason) => Some(reason),
+            None => sink
+                .send(Message::Text(text.into()))
+                .await
+                .err()
+                .map(|e| e.to_string()),
+        };
+        if let Some(reason) = failed {
+            if !args.resume {
+                bail!(
+                    "the server dropped the ingest socket after {} epochs: {reason} (--resume reconnects)",
+                    sent.epochs
+                );
+            }
+            progress.println(format!("ingest socket lost ({reason}); resuming"));
+            let (new_sink, resumed_t) = reconnect(&mut link, tally).await?;
+            sink = new_sink;
+            // Resend from the first epoch after the resume point (all of the file when
+            // the session starts afresh); what is sent from here is counted afresh.
+            lines = open_lines(&args.file).await?;
+            number = 0;
+            pending = next_epoch(&mut lines, &mut number).await?;
+            while let (Some(after), Some((t, _))) = (resumed_t, &pending) {
+                if *t > after {
+                    break;
+                }
+                pending = next_epoch(&mut lines, &mut number).await?;
+            }
+            sent = Sent::default();
+            progress.println(match resumed_t {
+                Some(t) => format!("resumed after t = {t}; resending from there"),
+                None => "resumed with a fresh stream; resending from the start".to_owned(),
+            });
+            continue;
         }
         sent.frames += 1;
         sent.epochs += batch.len() as u64;
@@ -669,7 +755,7 @@ async fn stream_file(
         progress.set_position(sent.epochs);
         progress.set_message(extra);
     }
-    Ok((sink, sent))
+    Ok((sink, sent, link.baseline))
 }
 
 async fn next_epoch(

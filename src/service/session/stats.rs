@@ -72,7 +72,33 @@ pub struct TestStats {
     episode_start_t: Option<f64>,
 }
 
+/// The running values a test's statistics keep off the wire (the sum behind `mean`, the
+/// last epoch time behind `time_in_state_s`, the episode start behind the delays), for a
+/// session checkpoint.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct TestRunning {
+    sum: f64,
+    last_t: Option<f64>,
+    episode_start_t: Option<f64>,
+}
+
 impl TestStats {
+    /// The running values behind the published ones (for a checkpoint).
+    pub fn running(&self) -> TestRunning {
+        TestRunning {
+            sum: self.sum,
+            last_t: self.last_t,
+            episode_start_t: self.episode_start_t,
+        }
+    }
+
+    /// Restores the running values of a checkpoint.
+    pub fn set_running(&mut self, r: TestRunning) {
+        self.sum = r.sum;
+        self.last_t = r.last_t;
+        self.episode_start_t = r.episode_start_t;
+    }
+
     /// Empty statistics for a test.
     pub fn new(dof: u32, threshold: f64) -> Self {
         TestStats {
@@ -204,6 +230,16 @@ pub struct IntegrityStats {
 }
 
 impl IntegrityStats {
+    /// The last epoch time behind `time_s` (kept off the wire; for a checkpoint).
+    pub fn running_t(&self) -> f64 {
+        self.last_t
+    }
+
+    /// Restores [`IntegrityStats::running_t`] from a checkpoint.
+    pub fn set_running_t(&mut self, t: f64) {
+        self.last_t = t;
+    }
+
     /// The statistics of a stream whose first integrity epoch is `integrity` at `t`.
     pub fn new(t: f64, integrity: &Integrity) -> Self {
         let mut stats = IntegrityStats {

@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use super::Actor;
 use crate::monitor::{Availability, TestBank};
-use crate::service::session::stats::SessionStats;
+use crate::service::session::stats::{SessionStats, TestRunning};
 use crate::service::store::Checkpoint;
 
 /// The checkpoint format this server writes and reads.
@@ -23,6 +23,10 @@ struct Envelope {
     format: u32,
     monitors: Vec<MonitorState>,
     stats: SessionStats,
+    /// The statistics' running values the wire form leaves out: per monitor and test,
+    /// and per monitor the integrity timeline's last epoch time.
+    running: Vec<(String, String, TestRunning)>,
+    integrity_t: Vec<(String, f64)>,
     last_t: Option<f64>,
     stream_epochs: u64,
     recording_stream: u64,
@@ -48,10 +52,22 @@ pub(super) fn encode(actor: &Actor) -> Result<Vec<u8>, String> {
                 .map_err(|e| format!("monitor '{}': {e}", m.name))?,
         });
     }
+    let mut running = Vec::new();
+    let mut integrity_t = Vec::new();
+    for (monitor, m) in &actor.stats.monitors {
+        for (test, t) in &m.tests {
+            running.push((monitor.clone(), test.to_string(), t.running()));
+        }
+        if let Some(i) = &m.integrity {
+            integrity_t.push((monitor.clone(), i.running_t()));
+        }
+    }
     let envelope = Envelope {
         format: FORMAT,
         monitors,
         stats: actor.stats.clone(),
+        running,
+        integrity_t,
         last_t: actor.last_t,
         stream_epochs: actor.stream_epochs,
         recording_stream: actor.recording_stream,
@@ -89,6 +105,24 @@ pub(super) fn restore(actor: &mut Actor, checkpoint: &Checkpoint) -> Result<(), 
         m.availability = saved.availability;
     }
     let mut stats = envelope.stats;
+    for (monitor, test, r) in &envelope.running {
+        if let Some(t) = stats
+            .monitors
+            .get_mut(monitor)
+            .and_then(|m| m.tests.get_mut(test.as_str()))
+        {
+            t.set_running(*r);
+        }
+    }
+    for (monitor, t) in &envelope.integrity_t {
+        if let Some(i) = stats
+            .monitors
+            .get_mut(monitor)
+            .and_then(|m| m.integrity.as_mut())
+        {
+            i.set_running_t(*t);
+        }
+    }
     stats.connected = false;
     stats.epochs_per_s = 0.0;
     for m in &actor.monitors {
