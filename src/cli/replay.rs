@@ -719,7 +719,7 @@ async fn stream_file(
                     sent.epochs
                 );
             }
-            progress.println(format!("ingest socket lost ({reason}); resuming"));
+            progress.suspend(|| eprintln!("ingest socket lost ({reason}); resuming"));
             let (new_sink, resumed_t) = reconnect(&mut link, tally).await?;
             sink = new_sink;
             // Resend from the first epoch after the resume point (all of the file when
@@ -734,9 +734,9 @@ async fn stream_file(
                 pending = next_epoch(&mut lines, &mut number).await?;
             }
             sent = Sent::default();
-            progress.println(match resumed_t {
-                Some(t) => format!("resumed after t = {t}; resending from there"),
-                None => "resumed with a fresh stream; resending from the start".to_owned(),
+            progress.suspend(|| match resumed_t {
+                Some(t) => eprintln!("resumed after t = {t}; resending from there"),
+                None => eprintln!("resumed with a fresh stream; resending from the start"),
             });
             continue;
         }
