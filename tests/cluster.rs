@@ -656,4 +656,24 @@ async fn a_cluster_survives_a_killed_node_and_a_drain_without_losing_or_repeatin
             );
         }
     }
+
+    // Deleting a session (through the load balancer, on whichever node owns it) ends its
+    // events socket on node1 as a local one ends: close 1008.
+    let resp = http
+        .delete(format!("{lb}/api/v1/sessions/{}", watched[0]))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), 204);
+    let closed = tokio::time::timeout(Duration::from_secs(5), async {
+        while let Some(Ok(msg)) = observers[0].next().await {
+            if let Message::Close(frame) = msg {
+                return frame.map(|f| u16::from(f.code));
+            }
+        }
+        None
+    })
+    .await
+    .expect("the observer of a deleted session is closed within 5 s");
+    assert_eq!(closed, Some(1008));
 }

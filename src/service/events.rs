@@ -140,6 +140,10 @@ async fn run_cluster(mut socket: WebSocket, state: AppState, cluster: Arc<Cluste
                     close(&mut socket, 1011, "the event bus closed; reconnect").await;
                     break;
                 };
+                if bus::is_end(message.headers.as_ref()) {
+                    close(&mut socket, 1008, "subscriber too slow or session gone; reconnect and re-read /api/v1/alarms").await;
+                    break;
+                }
                 if let Some((epoch, seq)) = bus::position(message.headers.as_ref())
                     && !order.accept(epoch, seq)
                 {

@@ -69,6 +69,25 @@ pub fn event(session: &str, epoch: i64, seq: u64, text: &str) -> Outgoing {
     }
 }
 
+/// Header: the session ended (deleted); its events sockets close.
+pub const END_HEADER: &str = "Navguard-End";
+
+/// The last message on a deleted session's events subject.
+pub fn end(session: &str) -> Outgoing {
+    let mut headers = HeaderMap::new();
+    headers.insert(END_HEADER, "deleted");
+    Outgoing {
+        subject: events_subject(session),
+        headers: Some(headers),
+        payload: Bytes::from_static(b"{}"),
+    }
+}
+
+/// True for [`end`]'s message.
+pub fn is_end(headers: Option<&HeaderMap>) -> bool {
+    headers.is_some_and(|h| h.get(END_HEADER).is_some())
+}
+
 /// A statistics message.
 pub fn stats(session: &str, text: String) -> Outgoing {
     Outgoing {

@@ -416,6 +416,11 @@ impl Actor {
                     .await
                 {
                     Ok(_) => {
+                        if let Some(o) = &self.owned {
+                            // Observers on other nodes hear of it as local ones do
+                            // (their queue closes): the events socket ends.
+                            o.cluster.publish(bus::end(&self.id));
+                        }
                         let _ = reply.send(Ok(()));
                         Flow::Stop
                     }
