@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-use common::{CvModel, Socket, cv_session};
+use common::{CvModel, Socket, cv_session, get_json};
 use futures_util::{SinkExt, StreamExt};
 use navguard::detect::{Health, PolicyConfig, ThresholdSpec};
 use navguard::epoch::Epoch;
@@ -483,32 +483,22 @@ async fn a_cluster_survives_a_killed_node_and_a_drain_without_losing_or_repeatin
         .await
         .unwrap();
     assert_eq!(resp.status(), 200, "{}", resp.text().await.unwrap());
-    let owner_view: Value = http
-        .get(format!(
-            "{}/api/v1/sessions/{target_id}/monitors/cv/threshold",
-            cluster.node_url(&target_node)
-        ))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let owner_view: Value = get_json(&format!(
+        "{}/api/v1/sessions/{target_id}/monitors/cv/threshold",
+        cluster.node_url(&target_node)
+    ))
+    .await
+    .1;
     assert_eq!(owner_view["p_fa"], 0.0005, "{owner_view}");
     let threshold = owner_view["tests"]["residual"]["threshold"]
         .as_f64()
         .unwrap();
-    let live: Value = http
-        .get(format!(
-            "{}/api/v1/sessions/{target_id}/stats",
-            cluster.node_url(&target_node)
-        ))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let live: Value = get_json(&format!(
+        "{}/api/v1/sessions/{target_id}/stats",
+        cluster.node_url(&target_node)
+    ))
+    .await
+    .1;
     assert_eq!(
         live["monitors"]["cv"]["tests"]["residual"]["threshold"].as_f64(),
         Some(threshold),
@@ -548,14 +538,9 @@ async fn a_cluster_survives_a_killed_node_and_a_drain_without_losing_or_repeatin
 
     // The log holds exactly the reference entries, each once.
     for c in &clients {
-        let log: Value = http
-            .get(format!("{lb}/api/v1/alarms?session={}&limit=1000", c.id))
-            .send()
+        let log: Value = get_json(&format!("{lb}/api/v1/alarms?session={}&limit=1000", c.id))
             .await
-            .unwrap()
-            .json()
-            .await
-            .unwrap();
+            .1;
         let mut got: Vec<(usize, String, String)> = log["alarms"]
             .as_array()
             .unwrap()
@@ -599,14 +584,9 @@ async fn a_cluster_survives_a_killed_node_and_a_drain_without_losing_or_repeatin
         if c.id == target_id {
             continue;
         }
-        let stats: Value = http
-            .get(format!("{lb}/api/v1/sessions/{}/stats", c.id))
-            .send()
+        let stats: Value = get_json(&format!("{lb}/api/v1/sessions/{}/stats", c.id))
             .await
-            .unwrap()
-            .json()
-            .await
-            .unwrap();
+            .1;
         let residual = &stats["monitors"]["cv"]["tests"]["residual"];
         let r = &expected[&c.id];
         assert_eq!(
@@ -638,16 +618,11 @@ async fn a_cluster_survives_a_killed_node_and_a_drain_without_losing_or_repeatin
     // node1's observers saw the alarms of the sessions the other nodes owned.
     let seen = alarms_seen(&mut observers, Duration::from_millis(500)).await;
     for id in &watched {
-        let log: Value = http
-            .get(format!(
-                "{lb}/api/v1/alarms?session={id}&severity=alarm&limit=1000"
-            ))
-            .send()
-            .await
-            .unwrap()
-            .json()
-            .await
-            .unwrap();
+        let log: Value = get_json(&format!(
+            "{lb}/api/v1/alarms?session={id}&severity=alarm&limit=1000"
+        ))
+        .await
+        .1;
         for a in log["alarms"].as_array().unwrap() {
             let aid = a["id"].as_i64().unwrap();
             assert!(

@@ -1498,3 +1498,59 @@ async fn consistency_diagnostics_name_a_mis_tuned_model() {
     );
     server.shutdown().await;
 }
+
+/// `resume` on a single node (docs/deployment.md, Failover): a bad value is a 400 JSON
+/// error before any upgrade; `resume=true` on a session with no stream yet starts afresh
+/// (`resumed` null); after a stream, it carries on from the last epoch, nothing reset.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_ingest_stream_resumes_where_the_previous_one_left_off() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = start(&dir.path().join("r.db"), None, Limits::default()).await;
+    create_session(
+        &client(),
+        &server,
+        &cv_session("rs", &MODEL, json!({"kind": "classic"}), json!({}), false),
+    )
+    .await;
+    let (status, body) = get_json(&format!(
+        "{}/api/v1/sessions/rs/ingest?resume=maybe",
+        http(&server)
+    ))
+    .await;
+    assert_eq!(
+        (status, body["error"]["code"].as_str()),
+        (400, Some("bad_request"))
+    );
+    let url = format!("{}/api/v1/sessions/rs/ingest?resume=true", ws(&server));
+    let mut socket = connect(&url).await;
+    let ready = recv(&mut socket).await;
+    assert_eq!(
+        (ready["type"].as_str(), &ready["resumed"]),
+        (Some("ready"), &Value::Null)
+    );
+    let z = MODEL.measurements(20, 7, |_| 0.0);
+    send(&mut socket, &Value::from(epochs(&z, 0))).await;
+    wait_for_epochs(&server, "rs", 20).await;
+    drop(socket);
+    // The server sees the old stream's close asynchronously (409 until then).
+    let mut socket = None;
+    for _ in 0..250 {
+        if let Ok((s, _)) = tokio_tungstenite::connect_async(&url).await {
+            socket = Some(s);
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    let mut socket = socket.expect("the stream reattaches within 5 s");
+    let ready = recv(&mut socket).await;
+    assert_eq!(
+        ready["resumed"],
+        json!({"t": 19.0, "epochs": 20}),
+        "{ready}"
+    );
+    // Time goes on from 19: an epoch before it is refused, as within one stream.
+    send(&mut socket, &json!({"t": 5.0, "z": [0.0]})).await;
+    let refused = recv(&mut socket).await;
+    assert_eq!(refused["code"], "time_backwards", "{refused}");
+    server.shutdown().await;
+}

@@ -46,11 +46,9 @@ pub async fn locate(state: &AppState, id: &str) -> Result<Owner, ApiError> {
     };
     let lock = cluster.lock_for(id);
     let _guard = lock.lock().await;
-    if let Some(h) = state.registry.get(id) {
-        return Ok(Owner::Local(h));
-    }
-    let Some(stored) = state.store.session(id).await? else {
-        return Ok(Owner::Missing);
+    let stored = match settled(state, id).await? {
+        Ok(stored) => stored,
+        Err(owner) => return Ok(owner),
     };
     match state.store.lease(id).await? {
         Some(lease) if lease.live(now_ms()) && lease.owner != cluster.node_id() => {
@@ -60,6 +58,15 @@ pub async fn locate(state: &AppState, id: &str) -> Result<Owner, ApiError> {
     }
 }
 
+/// Under the session's lock: the session running here now (another request took it
+/// meanwhile) or gone (`Err` with that answer), else its stored spec to take it with.
+async fn settled(state: &AppState, id: &str) -> Result<Result<StoredSession, Owner>, ApiError> {
+    if let Some(h) = state.registry.get(id) {
+        return Ok(Err(Owner::Local(h)));
+    }
+    Ok(state.store.session(id).await?.ok_or(Owner::Missing))
+}
+
 /// Takes the lease of `id` whatever its state, because its owner released it or is gone.
 async fn take_over(state: &AppState, id: &str, gone: bool) -> Result<Owner, ApiError> {
     let Some(cluster) = cluster(state) else {
@@ -67,11 +74,9 @@ async fn take_over(state: &AppState, id: &str, gone: bool) -> Result<Owner, ApiE
     };
     let lock = cluster.lock_for(id);
     let _guard = lock.lock().await;
-    if let Some(h) = state.registry.get(id) {
-        return Ok(Owner::Local(h));
-    }
-    let Some(stored) = state.store.session(id).await? else {
-        return Ok(Owner::Missing);
+    let stored = match settled(state, id).await? {
+        Ok(stored) => stored,
+        Err(owner) => return Ok(owner),
     };
     if gone {
         cluster.counters.takeovers.fetch_add(1, Ordering::Relaxed);
