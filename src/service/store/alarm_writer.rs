@@ -1,10 +1,12 @@
-//! Group commit for alarms. Every alarm is committed before it is announced
+//! Group commit for the alarm log. Every alarm is committed before it is announced
 //! (docs/architecture.md §A4), but when many sessions raise alarms at once (1,000 federated
 //! sessions all fail the same epoch), one transaction per alarm serialises them
-//! on SQLite's single writer (and pay one fsync each on Postgres). One writer task takes every alarm queued at the
-//! moment, inserts them in one transaction, and answers each caller with its id
+//! on SQLite's single writer (and pay one fsync each on Postgres). One writer task takes every
+//! write queued at the moment, runs them in one transaction, and answers each caller
 //! only after the commit: the durability guarantee is unchanged, the commits
-//! are shared.
+//! are shared. Clearing entries (a test back to healthy, a stream starting afresh) goes
+//! through the same queue, so a burst of returns to healthy or of streams attaching is a
+//! few shared commits too, in each session's order.
 
 use tokio::sync::{mpsc, oneshot};
 
@@ -16,8 +18,6 @@ use crate::service::wire::AlarmRecord;
 const GROUP: usize = 512;
 /// Alarms waiting for the writer before callers wait for room.
 const QUEUE: usize = 4096;
-
-type Reply = oneshot::Sender<Result<i64, StoreError>>;
 
 /// Where an entry was raised: the stream (its attach time, Unix ms) and the epoch's index
 /// in it. With the session, monitor, test, state and severity it names the entry, so the
@@ -31,12 +31,41 @@ pub struct AlarmKey {
     pub epoch_index: u64,
 }
 
-/// One queued entry.
+/// What a queued write does: insert an entry, or close open entries (one test's, or a
+/// whole session's). Clears go through the same queue as inserts so that they share the
+/// inserts' commits and keep their order per session: a burst of sessions returning to
+/// healthy, or a thousand streams attaching at once, is a few transactions, not one each
+/// (SQLite has one writer; every extra transaction waits for the previous one).
+#[derive(Debug)]
+enum Op {
+    Insert {
+        alarm: AlarmRecord,
+        key: AlarmKey,
+    },
+    /// `UPDATE … SET cleared_t = COALESCE(t_clear, t)` for `(monitor, test)` of the
+    /// session, or (`test: None`) every open entry of the session with `cleared_t = t`.
+    Clear {
+        session: String,
+        test: Option<(String, String)>,
+        t: Option<f64>,
+    },
+}
+
+/// What became of one queued write.
+enum Done {
+    /// The entry's id (the stored one when its key named an entry already there).
+    Id(i64),
+    /// The clear ran.
+    Cleared,
+    /// The fence no longer holds: nothing was written.
+    Fenced,
+}
+
+/// One queued write.
 struct Pending {
-    alarm: AlarmRecord,
-    key: AlarmKey,
+    op: Op,
     fence: Option<Fence>,
-    reply: Reply,
+    reply: oneshot::Sender<Result<Done, StoreError>>,
 }
 
 /// The handle callers hold: a queue to the writer task.
@@ -53,6 +82,17 @@ impl AlarmWriter {
         AlarmWriter { tx }
     }
 
+    async fn submit(&self, op: Op, fence: Option<Fence>) -> Result<Done, StoreError> {
+        let (reply, answer) = oneshot::channel();
+        self.tx
+            .send(Pending { op, fence, reply })
+            .await
+            .map_err(|_| StoreError::Db(sqlx::Error::PoolClosed))?;
+        answer
+            .await
+            .map_err(|_| StoreError::Db(sqlx::Error::PoolClosed))?
+    }
+
     /// Commits `alarm` (with whatever else is queued) and returns its id (the existing
     /// entry's id when `key` names one already stored).
     pub(super) async fn insert(
@@ -61,19 +101,33 @@ impl AlarmWriter {
         key: AlarmKey,
         fence: Option<Fence>,
     ) -> Result<i64, StoreError> {
-        let (reply, answer) = oneshot::channel();
-        self.tx
-            .send(Pending {
-                alarm,
-                key,
-                fence,
-                reply,
-            })
-            .await
-            .map_err(|_| StoreError::Db(sqlx::Error::PoolClosed))?;
-        answer
-            .await
-            .map_err(|_| StoreError::Db(sqlx::Error::PoolClosed))?
+        let session = alarm.session.clone();
+        match self.submit(Op::Insert { alarm, key }, fence).await? {
+            Done::Id(id) => Ok(id),
+            Done::Fenced => Err(StoreError::Fenced(session)),
+            Done::Cleared => Err(StoreError::Corrupt("an insert answered as a clear".into())),
+        }
+    }
+
+    /// Closes the open entries of `(monitor, test)` of `session` (`test: Some`) at
+    /// `t` (`None`: each entry's own `t`), or every open entry of the session
+    /// (`test: None`, at each entry's own `t`); returns after the commit.
+    pub(super) async fn clear(
+        &self,
+        session: &str,
+        test: Option<(&str, &str)>,
+        t: Option<f64>,
+        fence: Option<Fence>,
+    ) -> Result<(), StoreError> {
+        let op = Op::Clear {
+            session: session.to_owned(),
+            test: test.map(|(m, t)| (m.to_owned(), t.to_owned())),
+            t,
+        };
+        match self.submit(op, fence).await? {
+            Done::Fenced => Err(StoreError::Fenced(session.to_owned())),
+            Done::Cleared | Done::Id(_) => Ok(()),
+        }
     }
 }
 
@@ -81,15 +135,14 @@ async fn run(pool: Pool, mut rx: mpsc::Receiver<Pending>) {
     let mut batch = Vec::with_capacity(GROUP);
     while rx.recv_many(&mut batch, GROUP).await > 0 {
         match commit(&pool, &batch).await {
-            Ok(ids) => {
-                for (pending, id) in batch.drain(..).zip(ids) {
-                    let answer = id.ok_or_else(|| StoreError::Fenced(pending.alarm.session));
-                    let _ = pending.reply.send(answer);
+            Ok(done) => {
+                for (pending, done) in batch.drain(..).zip(done) {
+                    let _ = pending.reply.send(Ok(done));
                 }
             }
             Err(e) => {
                 let message = e.to_string();
-                tracing::error!(error = %message, alarms = batch.len(), "alarm commit failed");
+                tracing::error!(error = %message, writes = batch.len(), "alarm commit failed");
                 for pending in batch.drain(..) {
                     let _ = pending.reply.send(Err(StoreError::Corrupt(format!(
                         "alarm commit failed: {message}"
@@ -100,13 +153,14 @@ async fn run(pool: Pool, mut rx: mpsc::Receiver<Pending>) {
     }
 }
 
-/// Inserts every alarm of `batch` in one transaction; ids in order, `None` for an entry
-/// whose fence no longer holds (not written; the others are).
-async fn commit(pool: &Pool, batch: &[Pending]) -> Result<Vec<Option<i64>>, sqlx::Error> {
+/// Runs every write of `batch` in one transaction, in order; what became of each, in
+/// order ([`Done::Fenced`] for a write whose fence no longer holds: not written, the
+/// others are).
+async fn commit(pool: &Pool, batch: &[Pending]) -> Result<Vec<Done>, sqlx::Error> {
     with_pool!(pool, p => {
         let mut tx = p.begin().await?;
-        let mut ids = Vec::with_capacity(batch.len());
-        for Pending { alarm, key, fence, .. } in batch {
+        let mut done = Vec::with_capacity(batch.len());
+        for Pending { op, fence, .. } in batch {
             if let Some(f) = fence {
                 let held = sqlx::query(FENCE_SQL)
                     .bind(&f.session)
@@ -116,10 +170,32 @@ async fn commit(pool: &Pool, batch: &[Pending]) -> Result<Vec<Option<i64>>, sqlx
                     .await?
                     .rows_affected();
                 if held == 0 {
-                    ids.push(None);
+                    done.push(Done::Fenced);
                     continue;
                 }
             }
+            let (alarm, key) = match op {
+                Op::Insert { alarm, key } => (alarm, key),
+                Op::Clear { session, test: Some((monitor, test)), t } => {
+                    sqlx::query("UPDATE alarms SET cleared_t = COALESCE($1, t) WHERE session = $2 AND monitor = $3 AND test = $4 AND cleared_t IS NULL")
+                        .bind(t)
+                        .bind(session)
+                        .bind(monitor)
+                        .bind(test)
+                        .execute(&mut *tx)
+                        .await?;
+                    done.push(Done::Cleared);
+                    continue;
+                }
+                Op::Clear { session, test: None, .. } => {
+                    sqlx::query("UPDATE alarms SET cleared_t = t WHERE session = $1 AND cleared_t IS NULL")
+                        .bind(session)
+                        .execute(&mut *tx)
+                        .await?;
+                    done.push(Done::Cleared);
+                    continue;
+                }
+            };
             let inserted: Option<i64> = sqlx::query_scalar(
                 "INSERT INTO alarms (session, monitor, test, state, t, statistic, threshold, dof, delay_s, raised_at_ms, cleared_t, severity, stream, epoch_index)
                  VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, NULL, $11, $12, $13)
@@ -157,9 +233,9 @@ async fn commit(pool: &Pool, batch: &[Pending]) -> Result<Vec<Option<i64>>, sqlx
                 .fetch_one(&mut *tx)
                 .await?,
             };
-            ids.push(Some(id));
+            done.push(Done::Id(id));
         }
         tx.commit().await?;
-        Ok(ids)
+        Ok(done)
     })
 }

@@ -441,19 +441,9 @@ impl Store {
         t: Option<f64>,
         fence: Option<&Fence>,
     ) -> Result<(), StoreError> {
-        with_pool!(&self.pool, p => {
-            let mut tx = p.begin().await?;
-            cluster::check_fence!(tx, fence);
-            sqlx::query("UPDATE alarms SET cleared_t = COALESCE($1, t) WHERE session = $2 AND monitor = $3 AND test = $4 AND cleared_t IS NULL")
-                .bind(t)
-                .bind(session)
-                .bind(monitor)
-                .bind(test)
-                .execute(&mut *tx)
-                .await?;
-            tx.commit().await?;
-        });
-        Ok(())
+        self.alarms
+            .clear(session, Some((monitor, test)), t, fence.cloned())
+            .await
     }
 
     /// Closes every open alarm of a session whose stream restarted from scratch
@@ -468,16 +458,7 @@ impl Store {
         session: &str,
         fence: Option<&Fence>,
     ) -> Result<(), StoreError> {
-        with_pool!(&self.pool, p => {
-            let mut tx = p.begin().await?;
-            cluster::check_fence!(tx, fence);
-            sqlx::query("UPDATE alarms SET cleared_t = t WHERE session = $1 AND cleared_t IS NULL")
-                .bind(session)
-                .execute(&mut *tx)
-                .await?;
-            tx.commit().await?;
-        });
-        Ok(())
+        self.alarms.clear(session, None, None, fence.cloned()).await
     }
 
     /// The alarm log, newest first.
@@ -707,6 +688,53 @@ mod tests {
             ..AlarmQuery::default()
         };
         assert_eq!(reopened.alarms(&q).await.unwrap().len(), 1000);
+    }
+
+    /// Clears share the inserts' queue and commits: raised and cleared by 300 sessions at
+    /// once, each session's entries end in the order its calls made them (the last one
+    /// of each session, raised after the clears, stays open).
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn clears_raised_together_keep_their_order_per_session() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = Store::open(&dir.path().join("c.db")).await.unwrap();
+        let tasks: Vec<_> = (0..300)
+            .map(|s| {
+                let store = store.clone();
+                tokio::spawn(async move {
+                    let session = format!("s{s}");
+                    store.insert_alarm(alarm(&session, 1.0)).await.unwrap();
+                    store
+                        .clear_alarms(&session, "m", "residual", Some(2.0))
+                        .await
+                        .unwrap();
+                    store.insert_alarm(alarm(&session, 3.0)).await.unwrap();
+                    if s % 2 == 0 {
+                        store.clear_session_alarms(&session).await.unwrap();
+                    }
+                })
+            })
+            .collect();
+        for task in tasks {
+            task.await.unwrap();
+        }
+        let entries = store
+            .alarms(&AlarmQuery {
+                limit: 1000,
+                ..AlarmQuery::default()
+            })
+            .await
+            .unwrap();
+        assert_eq!(entries.len(), 600);
+        for a in entries {
+            let s: usize = a.session[1..].parse().unwrap();
+            let expected = match (a.t, s % 2) {
+                (1.0, _) => Some(2.0), // cleared by the test's clear at t = 2
+                (3.0, 0) => Some(3.0), // closed by the session clear at its own t
+                (3.0, _) => None,      // raised after the clear: open
+                other => panic!("unexpected entry {other:?}"),
+            };
+            assert_eq!(a.cleared_t, expected, "{} t = {}", a.session, a.t);
+        }
     }
 
     #[tokio::test]
