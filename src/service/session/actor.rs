@@ -26,7 +26,7 @@ use crate::monitor::{
     Availability, Integrity, Monitor, MonitorReport, Outputs, StepError, TestOutcome,
 };
 use crate::service::cluster::{Cluster, bus};
-use crate::service::compute::{ComputePool, SLICE_BUDGET};
+use crate::service::compute::{ComputeError, ComputePool, SLICE_BUDGET};
 use crate::service::metrics::Metrics;
 use crate::service::now_ms;
 use crate::service::store::{
@@ -108,7 +108,21 @@ struct Actor {
     owned: Option<Owned>,
     /// The session holds a stream's state that a resuming stream may carry on from.
     resumable: bool,
+    /// Compute time per epoch of the last slice stepped (all monitors), `None` before
+    /// the first: decides whether a frame is stepped on the actor's task or on the
+    /// compute pool (see [`INLINE_BUDGET`]).
+    epoch_cost: Option<Duration>,
 }
+
+/// A frame whose epochs are expected to take at most this much compute (from the
+/// session's last measured cost per epoch) is stepped on the actor's own task instead of
+/// the compute pool. The hop to the pool and back (a queue, a thread wake-up, a task
+/// wake-up) costs more than a 10 Hz single-epoch federated step, and at 1,000 sessions it
+/// is 10,000 hops a second competing for the same cores; a runtime worker held for at
+/// most this long delays no other task noticeably. Anything heavier (large models, long
+/// batches, a session's first frame) still goes to the pool, so a heavy session cannot
+/// hold a runtime worker (docs/architecture.md §A2).
+const INLINE_BUDGET: Duration = Duration::from_micros(100);
 
 /// What an actor that owns its session through a lease keeps (docs/deployment.md).
 struct Owned {
@@ -215,6 +229,7 @@ fn spawn_inner(
         stream: 0,
         last_t: None,
         rate_window: (Instant::now(), 0),
+        epoch_cost: None,
         record: stored.record.unwrap_or(deps_record_default),
         stream_epochs: 0,
         recording_stream: 0,
@@ -299,6 +314,8 @@ struct Slice {
     epochs: Vec<Epoch>,
     stepped: Vec<Vec<Option<MonitorReport>>>,
     failure: Option<(usize, String, StepError)>,
+    /// Compute time the slice took.
+    elapsed: Duration,
 }
 
 /// Steps every monitor through the epochs from `from`, until the frame ends, a monitor
@@ -329,6 +346,7 @@ fn step_slice(mut monitors: Vec<NamedMonitor>, epochs: Vec<Epoch>, from: usize) 
         epochs,
         stepped,
         failure,
+        elapsed: start.elapsed(),
     }
 }
 
@@ -992,13 +1010,7 @@ impl Actor {
         let mut from = 0;
         let mut changed = false;
         while from < total {
-            let monitors = std::mem::take(&mut self.monitors);
-            let slice = match self
-                .deps
-                .compute
-                .run(move || step_slice(monitors, epochs, from))
-                .await
-            {
+            let slice = match self.step(epochs, from).await {
                 Ok(slice) => slice,
                 Err(e) => {
                     // The monitors went with the job: start them afresh from the spec.
@@ -1056,6 +1068,36 @@ impl Actor {
             .await;
         self.finish_frame(received, total, changed);
         Flow::Continue
+    }
+
+    /// Steps the session's monitors through `epochs[from..]` (one slice): on this task
+    /// when the session's measured cost says it fits in [`INLINE_BUDGET`], else on the
+    /// compute pool. A panic is caught either way (the monitors are then lost, as on the
+    /// pool).
+    async fn step(&mut self, epochs: Vec<Epoch>, from: usize) -> Result<Slice, ComputeError> {
+        let monitors = std::mem::take(&mut self.monitors);
+        let remaining = u32::try_from(epochs.len() - from).unwrap_or(u32::MAX);
+        let inline = self
+            .epoch_cost
+            .is_some_and(|cost| cost.saturating_mul(remaining) <= INLINE_BUDGET);
+        let slice = if inline {
+            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                step_slice(monitors, epochs, from)
+            }))
+            .map_err(|_| ComputeError::Panicked)
+        } else {
+            self.deps
+                .compute
+                .run(move || step_slice(monitors, epochs, from))
+                .await
+        };
+        if let Ok(slice) = &slice
+            && let Ok(n) = u32::try_from(slice.stepped.len())
+            && n > 0
+        {
+            self.epoch_cost = Some(slice.elapsed / n);
+        }
+        slice
     }
 
     /// Queues the frame for the recording: its text as sent, the epochs that were
