@@ -101,7 +101,8 @@ impl Consistency {
         let window = window.max(MIN_SAMPLES);
         Consistency {
             window,
-            entries: VecDeque::with_capacity(window + 1),
+            // Grown as epochs come: an idle session holds no window.
+            entries: VecDeque::new(),
             nis_sum: 0.0,
             lag_sum: 0.0,
             lag_count: 0,

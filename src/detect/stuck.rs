@@ -124,8 +124,8 @@ impl StuckTest {
         let params = params.normalised();
         StuckTest {
             last: None,
-            window: VecDeque::with_capacity(params.k + 1),
-            reference: VecDeque::with_capacity(params.max_reference + 1),
+            window: VecDeque::new(),
+            reference: VecDeque::new(),
             reference_sum: 0.0,
             params,
         }

@@ -194,7 +194,7 @@ impl Scale {
             max_blocks,
             min_blocks,
             partial: (DVector::zeros(d), DMatrix::zeros(d, d), 0),
-            blocks: VecDeque::with_capacity(max_blocks + 1),
+            blocks: VecDeque::new(),
             sums: (DMatrix::zeros(d, d), DMatrix::zeros(d, d)),
             since_recompute: 0,
             estimate: None,
@@ -350,7 +350,7 @@ impl WindowTest {
         WindowTest {
             known: None,
             known_inv: None,
-            window: VecDeque::with_capacity(params.longest() + 1),
+            window: VecDeque::new(),
             scales,
             params,
         }
