@@ -95,6 +95,14 @@ const LN_UNDERFLOW: f64 = -750.0;
 pub fn threshold(dof: u32, p_fa: f64) -> Result<f64, Chi2Error> {
     check_dof(dof)?;
     check_probability(p_fa)?;
+    // Closed forms (every detector's χ²(1) and χ²(2) equivalent takes one per epoch):
+    // χ²(2) is 2·Exp(1), Q(1, y) = e^{−y}; χ²(1) is Z², Q(½, y) = erfc(√y). `ln` and
+    // `erfc_inv` keep full relative accuracy over (0, 1), down to subnormal p_fa.
+    match dof {
+        1 => return Ok(2.0 * erfc_inv(p_fa).powi(2)),
+        2 => return Ok(-2.0 * p_fa.ln()),
+        _ => {}
+    }
     let a = f64::from(dof) / 2.0;
     let y = if p_fa < 0.5 {
         upper_quantile(a, p_fa)
@@ -809,6 +817,26 @@ mod tests {
                 rel_err(got, want) <= 2e-15,
                 "dof {dof} p_fa {p_fa}: {got} vs {want}"
             );
+        }
+    }
+
+    #[test]
+    fn the_one_and_two_dof_closed_forms_equal_the_general_inversion() {
+        for p_fa in [0.999_999, 0.9, 0.5, 0.3, 0.1, 1e-3, 1e-7, 1e-12, 1e-50, 1e-300] {
+            for dof in [1u32, 2] {
+                let a = f64::from(dof) / 2.0;
+                let general = 2.0
+                    * if p_fa < 0.5 {
+                        upper_quantile(a, p_fa)
+                    } else {
+                        lower_quantile(a, 1.0 - p_fa)
+                    };
+                let got = threshold(dof, p_fa).unwrap();
+                assert!(
+                    rel_err(got, general) <= 1e-14,
+                    "dof {dof} p_fa {p_fa}: {got} vs {general}"
+                );
+            }
         }
     }
 
