@@ -822,7 +822,9 @@ mod tests {
 
     #[test]
     fn the_one_and_two_dof_closed_forms_equal_the_general_inversion() {
-        for p_fa in [0.999_999, 0.9, 0.5, 0.3, 0.1, 1e-3, 1e-7, 1e-12, 1e-50, 1e-300] {
+        for p_fa in [
+            0.999_999, 0.9, 0.5, 0.3, 0.1, 1e-3, 1e-7, 1e-12, 1e-50, 1e-300,
+        ] {
             for dof in [1u32, 2] {
                 let a = f64::from(dof) / 2.0;
                 let general = 2.0

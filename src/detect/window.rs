@@ -612,7 +612,10 @@ mod tests {
             let got = f_upper_tail(x, 2.0, d2);
             // exp of an exponent of size |ln tail| rounds to about |ln tail| ulp.
             let tol = 2e-16 * (1.0 - f64::ln(want)) + 1e-16;
-            assert!((got / want - 1.0).abs() <= tol, "F(2, {d2}) at {x}: {got} vs {want}");
+            assert!(
+                (got / want - 1.0).abs() <= tol,
+                "F(2, {d2}) at {x}: {got} vs {want}"
+            );
         }
     }
 
