@@ -5,12 +5,10 @@
 
 mod checkpoint;
 
-use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
-use serde::Serialize;
 use tokio::sync::{mpsc, watch};
 
 use super::SessionError;
@@ -35,7 +33,7 @@ use crate::service::store::{
 use crate::service::train::Models;
 use crate::service::wire::{
     self, AlarmLevel, AlarmRecord, AvailabilityChange, ErrorEvent, FrameError, FrameErrorCode,
-    MonitorResultWire, Severity, StateChange, TestThreshold, ThresholdUpdate, ThresholdView,
+    Severity, StateChange, TestThreshold, ThresholdUpdate, ThresholdView,
 };
 
 /// Frames queued per session before the ingest socket stops reading.
@@ -357,15 +355,6 @@ fn unknown_test(test: &str, bank: &crate::monitor::TestBank) -> String {
         "no test '{test}' in this monitor; its tests are {}",
         names.join(", ")
     )
-}
-
-/// The `result` frame of one epoch.
-#[derive(Serialize)]
-struct ResultFrame<'a> {
-    #[serde(rename = "type")]
-    kind: &'static str,
-    t: f64,
-    monitors: BTreeMap<&'a str, MonitorResultWire<'a>>,
 }
 
 impl Actor {
@@ -1194,18 +1183,11 @@ impl Actor {
     }
 
     fn result_frame(&self, t: f64, reports: &[Option<MonitorReport>]) -> String {
-        let monitors = self
-            .monitors
-            .iter()
-            .zip(reports)
-            .filter_map(|(m, r)| Some((m.name.as_str(), wire::monitor_result(r.as_ref()?))))
-            .collect();
-        serde_json::to_string(&ResultFrame {
-            kind: "result",
+        let monitors = self.monitors.iter().zip(reports);
+        wire::result_frame(
             t,
-            monitors,
-        })
-        .unwrap_or_default()
+            monitors.filter_map(|(m, r)| Some((m.name.as_str(), r.as_ref()?))),
+        )
     }
 
     /// Updates statistics; announces state changes, alarms and availability changes.

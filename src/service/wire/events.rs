@@ -122,6 +122,34 @@ pub fn monitor_result(report: &MonitorReport) -> MonitorResultWire<'_> {
     }
 }
 
+/// The `result` frame of one epoch.
+#[derive(Serialize)]
+struct ResultFrame<'a> {
+    #[serde(rename = "type")]
+    kind: &'static str,
+    t: f64,
+    monitors: BTreeMap<&'a str, MonitorResultWire<'a>>,
+}
+
+/// The text of one epoch's `result` frame: its time and each reporting monitor's result
+/// by name (a monitor that failed on the epoch is left out by the caller).
+pub fn result_frame<'a>(
+    t: f64,
+    monitors: impl IntoIterator<Item = (&'a str, &'a MonitorReport)>,
+) -> String {
+    let monitors = monitors
+        .into_iter()
+        .map(|(name, report)| (name, monitor_result(report)))
+        .collect();
+    // Serialising numbers, strings and maps of strings to a String cannot fail.
+    serde_json::to_string(&ResultFrame {
+        kind: "result",
+        t,
+        monitors,
+    })
+    .unwrap_or_default()
+}
+
 /// An entry of the alarm log: a test's transition into suspect or isolated, as stored
 /// (alarms and warnings) and sent (alarms, as the `alarm` event).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
