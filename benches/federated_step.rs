@@ -7,7 +7,11 @@
 //! - `federated_monitor/step_ins_gnss_dvl_cns`: the whole `federated` monitor step (aid
 //!   models, the filter, the policies, the HPL, the corrected solution, the report);
 //! - `federated_filter/step_ins_gnss_dvl_cns`: the filter step alone (transition, tests,
-//!   fusion), decisions always healthy.
+//!   fusion), decisions always healthy;
+//! - `federated_monitor/step_ship_seed004`: the whole monitor on the simulated ship as
+//!   `loadgen` streams it (INS every epoch, GNSS and DVL at 1 Hz, CNS at 0.1 Hz), the
+//!   epochs simulated before the bench; the stream restarts on a fresh monitor every
+//!   20,000 epochs (not timed).
 //!
 //! Run: `cargo bench --bench federated_step`
 
@@ -27,6 +31,7 @@ use navguard::filter::ins::{ImuErrors, NavSolution};
 use navguard::geo::{self, Lla};
 use navguard::monitor::Monitor;
 use navguard::monitor::federated::{FederatedConfig, FederatedConfigWire, FederatedMonitor};
+use navguard::sim;
 
 const DT: f64 = 0.1;
 
@@ -130,6 +135,40 @@ fn bench(c: &mut Criterion) {
             let trans = ins_transition(&nav, &imu, DT).expect("transition");
             black_box(filter.step(&trans, &obs, |_, _| healthy).expect("step"));
             filter.commit();
+        })
+    });
+    group.finish();
+
+    let mut group = c.benchmark_group("federated_monitor");
+    group.throughput(Throughput::Elements(1));
+    let ship = sim::ship_with(4, Vec::new(), 1999.9).expect("ship scenario");
+    let ship_config = FederatedConfig::try_from(ship.monitor_config()).expect("config");
+    let ship_monitor = || {
+        FederatedMonitor::new(
+            ship_config.clone(),
+            PolicyConfig::counters_default(),
+            ThresholdSpec::Threshold(20.0),
+        )
+        .expect("monitor")
+    };
+    let (mut monitor, mut next) = (ship_monitor(), 0);
+    group.bench_function("step_ship_seed004", |b| {
+        b.iter_custom(|iters| {
+            let mut timed = std::time::Duration::ZERO;
+            let mut left = iters as usize;
+            while left > 0 {
+                if next == ship.epochs.len() {
+                    (monitor, next) = (ship_monitor(), 0);
+                }
+                let n = left.min(ship.epochs.len() - next);
+                let start = std::time::Instant::now();
+                for e in &ship.epochs[next..next + n] {
+                    black_box(monitor.step(black_box(&e.epoch)).expect("step"));
+                }
+                timed += start.elapsed();
+                (next, left) = (next + n, left - n);
+            }
+            timed
         })
     });
     group.finish();
