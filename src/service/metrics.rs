@@ -212,6 +212,13 @@ impl Metrics {
                 rss as f64,
             );
         }
+        if let Some(cpu) = process_cpu_seconds() {
+            let name = "process_cpu_seconds_total";
+            let _ = writeln!(
+                out,
+                "# HELP {name} User and system CPU time of the process.\n# TYPE {name} counter\n{name} {cpu}"
+            );
+        }
         out
     }
 }
@@ -236,6 +243,27 @@ fn resident_memory_bytes() -> Option<u64> {
     let statm = std::fs::read_to_string("/proc/self/statm").ok()?;
     let pages: u64 = statm.split_whitespace().nth(1)?.parse().ok()?;
     Some(pages * 4096)
+}
+
+/// Clock ticks per second of the times in `/proc/PID/stat` (`USER_HZ`, fixed at 100
+/// by the Linux ABI whatever the kernel's own tick rate).
+const USER_HZ: f64 = 100.0;
+
+/// User plus system CPU time of this process, all threads, from `/proc/self/stat`
+/// (Linux); `None` elsewhere. Also read by `navguard loadgen` for its own share.
+pub fn process_cpu_seconds() -> Option<f64> {
+    cpu_seconds_of_stat(&std::fs::read_to_string("/proc/self/stat").ok()?)
+}
+
+/// `utime + stime` of a `/proc/PID/stat` line, seconds. The command name (field 2)
+/// may hold spaces and parentheses, so fields are counted after its last `)`.
+fn cpu_seconds_of_stat(stat: &str) -> Option<f64> {
+    let after_name = &stat[stat.rfind(')')? + 1..];
+    // After the name come field 3 (state) onwards; utime and stime are fields 14, 15.
+    let mut fields = after_name.split_whitespace().skip(11);
+    let utime: u64 = fields.next()?.parse().ok()?;
+    let stime: u64 = fields.next()?.parse().ok()?;
+    Some((utime + stime) as f64 / USER_HZ)
 }
 
 #[cfg(test)]
@@ -270,5 +298,15 @@ mod tests {
             "{text}"
         );
         assert!(text.contains("navguard_sessions 3"));
+    }
+
+    #[test]
+    fn cpu_time_is_utime_plus_stime_after_the_command_name() {
+        // A real line from proc(5)'s layout; the name holds a space and a parenthesis.
+        let stat = "4242 (nav guard)) S 1 4242 4242 0 -1 4194560 2870 0 0 0 \
+                    1234 56 0 0 20 0 9 0 123456 987654321 4321 18446744073709551615";
+        assert_eq!(cpu_seconds_of_stat(stat), Some(12.9));
+        assert_eq!(cpu_seconds_of_stat("4242 (x) S 1"), None);
+        assert_eq!(cpu_seconds_of_stat("no name here"), None);
     }
 }
