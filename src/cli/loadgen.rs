@@ -2,8 +2,10 @@
 //! creates N sessions (`echo: true`) over REST, streams simulated epochs into
 //! each one's ingest socket at a set rate or as fast as the server takes them,
 //! and reports throughput, frame-to-result and alarm-to-event latency, errors,
-//! per-epoch ordering, and the server's resident memory (idle and loaded, from
-//! `/metrics`); then deletes its sessions.
+//! per-epoch ordering, the server's resident memory (idle and loaded, from
+//! `/metrics`) and the CPU time the server and the generator itself spent; then
+//! deletes its sessions. `--ramp` repeats the run with more sessions each step
+//! until the p99 crosses a limit ([`ramp`]).
 //!
 //! The workload is generated once and shared by every session: the `ship`
 //! scenario of [`navguard::sim`] for `federated`, a constant-velocity track for
@@ -14,6 +16,7 @@
 //! the last answers.
 
 use std::ops::Range;
+use std::path::PathBuf;
 use std::str::FromStr;
 use std::sync::Arc;
 use std::time::Duration;
@@ -24,6 +27,7 @@ use navguard::detect::PolicyConfig;
 use navguard::epoch::Aid;
 use navguard::monitor::MonitorKind;
 use navguard::monitor::linear::LinearConfigWire;
+use navguard::service::metrics::process_cpu_seconds;
 use navguard::service::wire::{CreateSession, MonitorSpecWire, epoch_to_wire};
 use navguard::sim::{self, Channel, Fault, FaultKind};
 use rand::SeedableRng;
@@ -36,10 +40,11 @@ use tokio_tungstenite::tungstenite::Utf8Bytes;
 use super::http::Endpoint;
 use super::{progress_bar, thousands};
 
+mod ramp;
 mod report;
 mod stream;
 
-use report::{Report, percentiles, render};
+use report::{CpuShare, Report, percentiles, render};
 use stream::{Tally, run_session};
 
 /// Most epochs generated for one pass (a pass is replayed on a fresh socket).
@@ -123,6 +128,22 @@ pub(crate) struct LoadgenArgs {
     /// Print the report as JSON instead of a table.
     #[arg(long)]
     pub json: bool,
+    /// Ramp: after a first step of --sessions, add this many sessions per step
+    /// (each step streams every session for --duration s) until the
+    /// frame-to-result p99 reaches --ramp-p99-ms or --ramp-max is streamed.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=100_000))]
+    pub ramp: Option<u64>,
+    /// The frame-to-result p99 that ends a ramp, milliseconds.
+    #[arg(long, default_value_t = 5.0, requires = "ramp")]
+    pub ramp_p99_ms: f64,
+    /// Most sessions a ramp streams.
+    #[arg(long, default_value_t = 10_000, requires = "ramp",
+          value_parser = clap::value_parser!(u64).range(1..=100_000))]
+    pub ramp_max: u64,
+    /// Write the ramp's curve (sessions against frame-to-result p50 and p99) to
+    /// this SVG file.
+    #[arg(long, requires = "ramp")]
+    pub svg: Option<PathBuf>,
 }
 
 const LOADGEN_HELP: &str = "\
@@ -130,12 +151,18 @@ Examples (server in another terminal: cargo run --release -- serve --db /tmp/lg.
   navguard loadgen --sessions 1 --rate max --batch 200 --duration 10
   navguard loadgen --sessions 1000 --rate 10 --batch 1 --duration 30
   navguard loadgen --sessions 1 --rate 10 --fault-at 20 --duration 30
+  navguard loadgen --sessions 250 --ramp 250 --duration 10 --svg ramp.svg
 Latency: frame-to-result is from just before a frame is written to the socket
 to the arrival of the `result` of its last epoch; alarm-to-event is from the
 sending of the frame holding the epoch an alarm names to the alarm's arrival.
 Idle memory per session is (RSS after creating the sessions − RSS before) / N,
-read from the server's process_resident_memory_bytes. Sessions are named
-loadgen-PID-I and deleted at the end.";
+read from the server's process_resident_memory_bytes; loaded memory per
+session is (RSS at the end of the stream − RSS before) / N. CPU is the server's
+process_cpu_seconds_total and the generator's own over the stream, in cores
+(CPU s / wall s). A ramp's steps keep the sessions of the steps before and
+stream all of them again; it reports the largest count whose p99 stayed under
+the limit with every frame answered. Sessions are named loadgen-PID-I and
+deleted at the end.";
 
 /// The workload shared by every session: pre-serialised frames of one pass.
 struct Workload {
@@ -319,16 +346,37 @@ fn diagonal(d: &[f64]) -> Vec<Vec<f64>> {
         .collect()
 }
 
-/// Reads `process_resident_memory_bytes` from the server's `/metrics`.
-async fn server_rss(endpoint: &Endpoint) -> anyhow::Result<Option<u64>> {
+/// The server's resident memory and CPU time at one moment, from `/metrics`
+/// (`None` where the server does not export them, as off Linux).
+#[derive(Debug, Clone, Copy, Default)]
+struct ServerSample {
+    /// `process_resident_memory_bytes`.
+    rss: Option<u64>,
+    /// `process_cpu_seconds_total`.
+    cpu_s: Option<f64>,
+}
+
+/// Reads the server's `/metrics`.
+async fn server_sample(endpoint: &Endpoint) -> anyhow::Result<ServerSample> {
     let (status, body) = endpoint.call("GET", "/metrics").await?;
     if status != 200 {
         bail!("GET /metrics: HTTP {status}");
     }
-    Ok(body.lines().find_map(|line| {
-        let value = line.strip_prefix("process_resident_memory_bytes ")?;
-        value.trim().parse::<f64>().ok().map(|v| v as u64)
-    }))
+    Ok(sample_of_metrics(&body))
+}
+
+/// The two process metrics of a Prometheus text page.
+fn sample_of_metrics(body: &str) -> ServerSample {
+    let value = |name: &str| {
+        body.lines().find_map(|line| {
+            let v = line.strip_prefix(name)?.strip_prefix(' ')?;
+            v.trim().parse::<f64>().ok()
+        })
+    };
+    ServerSample {
+        rss: value("process_resident_memory_bytes").map(|v| v as u64),
+        cpu_s: value("process_cpu_seconds_total"),
+    }
 }
 
 /// Runs `f` over `items` with at most [`REST_CONCURRENCY`] at a time.
@@ -358,6 +406,20 @@ async fn create_session(endpoint: &Endpoint, spec: &CreateSession, id: &str) -> 
     }
 }
 
+/// Creates every session of `ids` (at most [`REST_CONCURRENCY`] at a time); the
+/// first failure, if any. The caller deletes what was created.
+async fn create_sessions(
+    endpoint: &Endpoint,
+    spec: &CreateSession,
+    ids: &[String],
+) -> anyhow::Result<()> {
+    let created = each_concurrently(ids.to_vec(), |id| async move {
+        create_session(endpoint, spec, &id).await
+    })
+    .await;
+    created.into_iter().find(Result::is_err).unwrap_or(Ok(()))
+}
+
 async fn delete_sessions(endpoint: &Endpoint, ids: Vec<String>) -> usize {
     let results = each_concurrently(ids, |id| async move {
         let (status, text) = endpoint
@@ -382,6 +444,9 @@ pub(crate) async fn run(args: LoadgenArgs) -> anyhow::Result<()> {
     {
         bail!("--fault-at must be a non-negative epoch time, s");
     }
+    if !(args.ramp_p99_ms.is_finite() && args.ramp_p99_ms > 0.0) {
+        bail!("--ramp-p99-ms must be a positive number of milliseconds");
+    }
     let endpoint = Arc::new(Endpoint::parse(&args.url, args.token.clone())?);
     let work = Arc::new(Workload::build(&args)?);
     if !args.json {
@@ -392,47 +457,21 @@ pub(crate) async fn run(args: LoadgenArgs) -> anyhow::Result<()> {
             args.batch
         );
     }
-    let rss_baseline = server_rss(&endpoint).await?;
-    let ids: Vec<String> = (0..args.sessions)
-        .map(|i| format!("loadgen-{}-{i}", std::process::id()))
-        .collect();
-    let created = each_concurrently(ids.clone(), |id| {
-        let (endpoint, spec) = (&endpoint, &work.spec);
-        async move { create_session(endpoint, spec, &id).await }
-    })
-    .await;
-    if let Some(Err(e)) = created.into_iter().find(Result::is_err) {
+    if let Some(step) = args.ramp {
+        return ramp::run(&args, step, &endpoint, &work).await;
+    }
+    let baseline = server_sample(&endpoint).await?;
+    let ids = session_ids(0..args.sessions);
+    if let Err(e) = create_sessions(&endpoint, &work.spec, &ids).await {
         delete_sessions(&endpoint, ids).await;
         return Err(e.context("creating the sessions (the ones created were deleted)"));
     }
-    tokio::time::sleep(Duration::from_secs_f64(args.settle.max(0.0))).await;
-    let rss_idle = server_rss(&endpoint).await?;
-    let progress = progress_bar(
-        (args.duration * 10.0).ceil() as u64,
-        "[{bar:24}] {percent:>3}% {elapsed} of the run  {msg}",
-        !args.json,
-    );
-    progress.set_message(format!("{} session(s)", args.sessions));
-    let ticker = {
-        let progress = progress.clone();
-        tokio::spawn(async move {
-            let start = Instant::now();
-            loop {
-                progress.set_position((start.elapsed().as_secs_f64() * 10.0) as u64);
-                tokio::time::sleep(Duration::from_millis(100)).await;
-            }
-        })
-    };
-    let outcome = stream(&args, &endpoint, &work, &ids).await;
-    ticker.abort();
-    progress.finish_and_clear();
-    let rss_loaded = server_rss(&endpoint).await.ok().flatten();
+    let measured = measure(&args, &endpoint, &work, &ids, baseline).await;
     let undeleted = delete_sessions(&endpoint, ids).await;
     if undeleted > 0 {
         eprintln!("warning: {undeleted} sessions could not be deleted");
     }
-    let (tally, wall_s) = outcome;
-    let report = report(&args, tally, wall_s, [rss_baseline, rss_idle, rss_loaded]);
+    let report = measured?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
@@ -443,6 +482,65 @@ pub(crate) async fn run(args: LoadgenArgs) -> anyhow::Result<()> {
     } else {
         bail!("{} session(s) failed", report.failures.len())
     }
+}
+
+/// Session names `loadgen-PID-I` for `I` in `range`.
+fn session_ids(range: Range<u64>) -> Vec<String> {
+    range
+        .map(|i| format!("loadgen-{}-{i}", std::process::id()))
+        .collect()
+}
+
+/// One measured run over the sessions `ids` (already created): settles, reads
+/// the idle server, streams every session for `--duration`, and reports
+/// against `baseline` (the server before any session was created).
+async fn measure(
+    args: &LoadgenArgs,
+    endpoint: &Arc<Endpoint>,
+    work: &Arc<Workload>,
+    ids: &[String],
+    baseline: ServerSample,
+) -> anyhow::Result<Report> {
+    tokio::time::sleep(Duration::from_secs_f64(args.settle.max(0.0))).await;
+    let idle = server_sample(endpoint).await?;
+    let progress = progress_bar(
+        (args.duration * 10.0).ceil() as u64,
+        "[{bar:24}] {percent:>3}% {elapsed} of the run  {msg}",
+        !args.json,
+    );
+    progress.set_message(format!("{} session(s)", ids.len()));
+    let ticker = {
+        let progress = progress.clone();
+        tokio::spawn(async move {
+            let start = Instant::now();
+            loop {
+                progress.set_position((start.elapsed().as_secs_f64() * 10.0) as u64);
+                tokio::time::sleep(Duration::from_millis(100)).await;
+            }
+        })
+    };
+    let own_before = process_cpu_seconds();
+    let (tally, wall_s) = stream(args, endpoint, work, ids).await;
+    let own_after = process_cpu_seconds();
+    ticker.abort();
+    progress.finish_and_clear();
+    let loaded = server_sample(endpoint).await.unwrap_or_default();
+    let cores = |before: Option<f64>, after: Option<f64>| match (before, after) {
+        (Some(b), Some(a)) if wall_s > 0.0 => Some((a - b) / wall_s),
+        _ => None,
+    };
+    let cpu = CpuShare::new(
+        cores(idle.cpu_s, loaded.cpu_s),
+        cores(own_before, own_after),
+    );
+    Ok(report(
+        args,
+        ids.len() as u64,
+        tally,
+        wall_s,
+        [baseline, idle, loaded],
+        cpu,
+    ))
 }
 
 async fn stream(
@@ -485,13 +583,24 @@ async fn stream(
     (total, (end - started).as_secs_f64())
 }
 
-fn report(args: &LoadgenArgs, mut t: Tally, wall_s: f64, rss: [Option<u64>; 3]) -> Report {
+fn report(
+    args: &LoadgenArgs,
+    sessions: u64,
+    mut t: Tally,
+    wall_s: f64,
+    samples: [ServerSample; 3],
+    cpu: CpuShare,
+) -> Report {
     let per_s = |n: u64| if wall_s > 0.0 { n as f64 / wall_s } else { 0.0 };
-    let [baseline, idle, loaded] = rss;
+    let [baseline, idle, loaded] = samples.map(|s| s.rss);
+    let per_session = |after: Option<u64>| match (baseline, after) {
+        (Some(b), Some(a)) => Some((a as f64 - b as f64) / sessions as f64),
+        _ => None,
+    };
     Report {
         url: args.url.clone(),
         monitor: format!("{:?}", args.monitor).to_lowercase(),
-        sessions: args.sessions,
+        sessions,
         rate_hz: match args.rate {
             Rate::Max => None,
             Rate::Hz(hz) => Some(hz),
@@ -515,10 +624,9 @@ fn report(args: &LoadgenArgs, mut t: Tally, wall_s: f64, rss: [Option<u64>; 3]) 
         rss_baseline_bytes: baseline,
         rss_idle_bytes: idle,
         rss_loaded_bytes: loaded,
-        idle_bytes_per_session: match (baseline, idle) {
-            (Some(b), Some(i)) => Some((i as f64 - b as f64) / args.sessions as f64),
-            _ => None,
-        },
+        idle_bytes_per_session: per_session(idle),
+        loaded_bytes_per_session: per_session(loaded),
+        cpu,
     }
 }
 
@@ -554,6 +662,18 @@ mod tests {
             Some(12.5)
         );
         assert_eq!(result_t(r#"{"type":"alarm","t":12.5}"#), None);
+    }
+
+    #[test]
+    fn the_process_metrics_are_read_by_their_exact_names() {
+        let page = "# TYPE process_resident_memory_bytes gauge\n\
+                    process_resident_memory_bytes 1048576\n\
+                    process_cpu_seconds_total_other 9\n\
+                    process_cpu_seconds_total 12.5\n";
+        let s = sample_of_metrics(page);
+        assert_eq!((s.rss, s.cpu_s), (Some(1_048_576), Some(12.5)));
+        let none = sample_of_metrics("navguard_sessions 3\n");
+        assert_eq!((none.rss, none.cpu_s), (None, None));
     }
 
     #[test]

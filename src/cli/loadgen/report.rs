@@ -40,6 +40,33 @@ pub(super) fn percentiles(samples: &mut [u32]) -> Percentiles {
     }
 }
 
+/// CPU spent over the stream, in cores (CPU seconds / wall seconds): the
+/// server's and the load generator's own, which shares the machine in a
+/// same-host run.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub(super) struct CpuShare {
+    /// Server cores (`process_cpu_seconds_total`); `None` if it does not export it.
+    pub server_cores: Option<f64>,
+    /// Load generator cores (its `/proc/self/stat`); `None` off Linux.
+    pub loadgen_cores: Option<f64>,
+    /// loadgen / (server + loadgen), when both are known.
+    pub loadgen_fraction: Option<f64>,
+}
+
+impl CpuShare {
+    pub(super) fn new(server_cores: Option<f64>, loadgen_cores: Option<f64>) -> Self {
+        let loadgen_fraction = match (server_cores, loadgen_cores) {
+            (Some(s), Some(l)) if s + l > 0.0 => Some(l / (s + l)),
+            _ => None,
+        };
+        CpuShare {
+            server_cores,
+            loadgen_cores,
+            loadgen_fraction,
+        }
+    }
+}
+
 /// The report (`--json` prints it as is).
 #[derive(Debug, Clone, Serialize)]
 pub(super) struct Report {
@@ -91,6 +118,10 @@ pub(super) struct Report {
     pub rss_loaded_bytes: Option<u64>,
     /// (idle − baseline) / sessions, bytes.
     pub idle_bytes_per_session: Option<f64>,
+    /// (loaded − baseline) / sessions, bytes: memory per streaming session.
+    pub loaded_bytes_per_session: Option<f64>,
+    /// CPU over the stream.
+    pub cpu: CpuShare,
 }
 
 pub(super) fn ms(us: u32) -> String {
@@ -178,11 +209,29 @@ pub(super) fn render(r: &Report) -> String {
             mib(r.rss_loaded_bytes)
         ),
     );
+    let kib = |b: Option<f64>| b.map_or("-".into(), |b| format!("{:.1} KiB", b / 1024.0));
     row(
         &mut out,
-        "idle memory per session",
-        r.idle_bytes_per_session
-            .map_or("-".into(), |b| format!("{:.1} KiB", b / 1024.0)),
+        "memory per session idle/loaded",
+        format!(
+            "{} / {}",
+            kib(r.idle_bytes_per_session),
+            kib(r.loaded_bytes_per_session)
+        ),
+    );
+    let cores = |c: Option<f64>| c.map_or("-".into(), |c| format!("{c:.2}"));
+    row(
+        &mut out,
+        "CPU cores server/loadgen",
+        format!(
+            "{} / {}{}",
+            cores(r.cpu.server_cores),
+            cores(r.cpu.loadgen_cores),
+            r.cpu.loadgen_fraction.map_or(String::new(), |f| format!(
+                "  (loadgen {:.0} % of the two)",
+                100.0 * f
+            ))
+        ),
     );
     for f in &r.failures {
         row(&mut out, "failure", f.clone());
