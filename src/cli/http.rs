@@ -165,7 +165,8 @@ impl Endpoint {
         }
         let (mut socket, _) = tokio::time::timeout(
             CONNECT_TIMEOUT,
-            tokio_tungstenite::connect_async_with_config(request, Some(socket_config()), false),
+            // `true`: TCP_NODELAY, so small frames are not held back by Nagle's algorithm.
+            tokio_tungstenite::connect_async_with_config(request, Some(socket_config()), true),
         )
         .await
         .with_context(|| format!("{url}: no WebSocket handshake within 10 s"))?

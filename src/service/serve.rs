@@ -80,7 +80,16 @@ pub(crate) async fn serve(
             _ = stopped(&mut shutdown) => break,
         };
         let stream = match accepted {
-            Ok((stream, _peer)) => stream,
+            Ok((stream, _peer)) => {
+                // Results and alarms are small writes that must go out at once:
+                // with Nagle's algorithm, a write made while an earlier one awaits
+                // its ACK waits for it, and a client's delayed ACK holds that up
+                // to 40 ms (docs/performance.md, "Where the tail came from").
+                if let Err(e) = stream.set_nodelay(true) {
+                    tracing::debug!(error = %e, "TCP_NODELAY not set on an accepted socket");
+                }
+                stream
+            }
             Err(e) => {
                 accept_error(&e);
                 tokio::time::sleep(ACCEPT_ERROR_PAUSE).await;
