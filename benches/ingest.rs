@@ -15,9 +15,9 @@ use futures_util::{SinkExt, StreamExt};
 use navguard::detect::PolicyConfig;
 use navguard::monitor::MonitorKind;
 use navguard::monitor::linear::LinearConfigWire;
-use navguard::service::wire::{CreateSession, MonitorSpecWire};
-use navguard::service::{self, ServiceConfig};
 use serde_json::json;
+
+mod common;
 use tokio_tungstenite::tungstenite::Message;
 
 const BATCH: usize = 100;
@@ -61,39 +61,14 @@ fn bench(c: &mut Criterion) {
         .enable_all()
         .build()
         .expect("runtime");
-    let dir = tempfile::tempdir().expect("tempdir");
-    let server = runtime
-        .block_on(service::start(ServiceConfig::new(
-            "127.0.0.1:0".parse().unwrap(),
-            dir.path().join("bench.db"),
-        )))
-        .expect("server");
+    let (server, _dir) = common::server_with_echo_session(
+        &runtime,
+        "track",
+        MonitorKind::Linear,
+        serde_json::to_value(model()).expect("config"),
+        PolicyConfig::Classic,
+    );
     let addr = server.addr;
-    let body = CreateSession {
-        id: Some("bench".to_owned()),
-        monitors: vec![MonitorSpecWire {
-            name: "track".to_owned(),
-            kind: MonitorKind::Linear,
-            config: serde_json::to_value(model()).expect("config"),
-            policy: PolicyConfig::Classic,
-            p_fa: None,
-            threshold: None,
-            alarm_level: None,
-            tests: Default::default(),
-        }],
-        echo: true,
-        alarm_level: None,
-        record: None,
-    };
-    runtime.block_on(async {
-        let resp = reqwest::Client::new()
-            .post(format!("http://{addr}/api/v1/sessions"))
-            .json(&body)
-            .send()
-            .await
-            .expect("create session");
-        assert_eq!(resp.status(), 201);
-    });
     let (socket, _) = runtime
         .block_on(tokio_tungstenite::connect_async(format!(
             "ws://{addr}/api/v1/sessions/bench/ingest"

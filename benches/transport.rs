@@ -26,18 +26,20 @@ use std::time::{Duration, Instant};
 use axum::Router;
 use axum::extract::ws::{Message as AxumMessage, WebSocket, WebSocketUpgrade};
 use axum::routing::get;
+use axum::serve::ListenerExt;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use futures_util::{SinkExt, StreamExt};
 use navguard::detect::PolicyConfig;
 use navguard::monitor::MonitorKind;
-use navguard::service::wire::{CreateSession, MonitorSpecWire, epoch_to_wire};
-use navguard::service::{self, ServiceConfig};
+use navguard::service::wire::epoch_to_wire;
 use navguard::sim;
 use serde::Deserialize;
 use tokio::net::TcpStream;
 use tokio::runtime::Runtime;
 use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};
+
+mod common;
 
 type Socket = WebSocketStream<MaybeTlsStream<TcpStream>>;
 
@@ -261,6 +263,10 @@ fn bench(c: &mut Criterion) {
         .block_on(tokio::net::TcpListener::bind("127.0.0.1:0"))
         .expect("bind");
     let ceiling_addr = listener.local_addr().expect("address");
+    // TCP_NODELAY on accepted sockets, as navguard's own server sets it.
+    let listener = listener.tap_io(|tcp| {
+        let _ = tcp.set_nodelay(true);
+    });
     let app = Router::new().route(
         "/ws",
         get(|ws: WebSocketUpgrade| async move { ws.on_upgrade(ceiling_socket) }),
@@ -272,39 +278,14 @@ fn bench(c: &mut Criterion) {
     };
 
     // navguard, with one federated session on the same ship.
-    let dir = tempfile::tempdir().expect("tempdir");
-    let server = runtime
-        .block_on(service::start(ServiceConfig::new(
-            "127.0.0.1:0".parse().expect("address"),
-            dir.path().join("bench.db"),
-        )))
-        .expect("server");
+    let (server, _dir) = common::server_with_echo_session(
+        &runtime,
+        "federated",
+        MonitorKind::Federated,
+        serde_json::to_value(scenario.monitor_config()).expect("config"),
+        PolicyConfig::Counters { n1: 10, n2: 5 },
+    );
     let addr = server.addr;
-    let body = CreateSession {
-        id: Some("bench".to_owned()),
-        monitors: vec![MonitorSpecWire {
-            name: "federated".to_owned(),
-            kind: MonitorKind::Federated,
-            config: serde_json::to_value(scenario.monitor_config()).expect("config"),
-            policy: PolicyConfig::Counters { n1: 10, n2: 5 },
-            p_fa: None,
-            threshold: None,
-            alarm_level: None,
-            tests: Default::default(),
-        }],
-        echo: true,
-        alarm_level: None,
-        record: None,
-    };
-    runtime.block_on(async {
-        let resp = reqwest::Client::new()
-            .post(format!("http://{addr}/api/v1/sessions"))
-            .json(&body)
-            .send()
-            .await
-            .expect("create session");
-        assert_eq!(resp.status(), 201);
-    });
     let navguard = Target {
         url: format!("ws://{addr}/api/v1/sessions/bench/ingest"),
         answer: navguard_answer,
