@@ -9,7 +9,8 @@
 //! the binary (its engine measures, it does not assert per epoch), and the
 //! shared target directory's `navguard` binary may be another build. Small
 //! numbers, correctness only: no assertion depends on time except generous
-//! timeouts that turn a deadlock into a failure.
+//! timeouts that turn a deadlock into a failure. The last test runs the real
+//! `navguard loadgen --ramp` (`CARGO_BIN_EXE_navguard`, this build) against the server.
 
 use std::time::Duration;
 
@@ -245,4 +246,71 @@ async fn a_flooding_session_slows_only_its_own_socket_and_every_epoch_is_answere
     flood.close(None).await.unwrap();
     steady.close(None).await.unwrap();
     server.shutdown().await;
+}
+
+/// `navguard loadgen --ramp` end to end against a real server: with a limit no
+/// run can reach, the ramp must take every step up to `--ramp-max`, answer every
+/// epoch of every step in order, report memory and CPU, draw its curve, and
+/// leave no session behind. Nothing here depends on how fast the machine is.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_ramp_streams_every_step_to_its_maximum_and_draws_the_curve() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = service::start(ServiceConfig::new(
+        "127.0.0.1:0".parse().unwrap(),
+        dir.path().join("ramp.db"),
+    ))
+    .await
+    .unwrap();
+    let svg = dir.path().join("ramp.svg");
+    let output = tokio::process::Command::new(env!("CARGO_BIN_EXE_navguard"))
+        .arg("loadgen")
+        .args(["--url", &format!("ws://{}", server.addr)])
+        .args(["--monitor", "linear", "--sessions", "2", "--ramp", "3"])
+        .args(["--ramp-max", "5", "--ramp-p99-ms", "600000"])
+        .args(["--duration", "1", "--settle", "0", "--json", "--svg"])
+        .arg(&svg)
+        .output()
+        .await
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "loadgen failed: {stderr}");
+    let report: Value = serde_json::from_slice(&output.stdout).unwrap();
+    let steps = report["steps"].as_array().unwrap();
+    let sessions: Vec<u64> = steps
+        .iter()
+        .map(|s| s["sessions"].as_u64().unwrap())
+        .collect();
+    // 2, then 2 + 3 = 5, which is the maximum.
+    assert_eq!(sessions, [2, 5]);
+    for step in steps {
+        let n = step["sessions"].as_u64().unwrap();
+        assert_eq!(step["within_limit"], true, "{step}");
+        assert_eq!(step["results"], step["epochs_sent"], "{step}");
+        assert_eq!(step["unanswered_frames"], 0, "{step}");
+        assert_eq!(step["out_of_order"], 0, "{step}");
+        // 10 Hz for 1 s: at most the pass's 11 single-epoch frames per session
+        // (fewer if the machine delays the send clock), at least one.
+        let sent = step["epochs_sent"].as_u64().unwrap();
+        assert!((n..=11 * n).contains(&sent), "{n} sessions sent {sent}");
+        assert_eq!(step["passes"], n, "{step}");
+        assert_eq!(step["frame_latency"]["count"], step["frames_sent"]);
+        assert!(step["loaded_bytes_per_session"].is_number(), "{step}");
+        assert!(
+            step["cpu"]["server_cores"].as_f64().unwrap() > 0.0,
+            "{step}"
+        );
+    }
+    assert_eq!(report["largest_within_limit"], 5);
+    assert_eq!(report["stopped"], "reached --ramp-max 5 within the limit");
+    let drawn = std::fs::read_to_string(&svg).unwrap();
+    assert!(drawn.starts_with("<svg") && drawn.contains("p99 limit 600000 ms"));
+    let (_, body) = get(&format!("http://{}/api/v1/sessions", server.addr)).await;
+    assert_eq!(body["sessions"].as_array().map(Vec::len), Some(0), "{body}");
+    server.shutdown().await;
+}
+
+async fn get(url: &str) -> (u16, Value) {
+    let resp = reqwest::get(url).await.unwrap();
+    let status = resp.status().as_u16();
+    (status, resp.json().await.unwrap())
 }
