@@ -56,11 +56,7 @@ fn model() -> LinearConfigWire {
 }
 
 fn bench(c: &mut Criterion) {
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .expect("runtime");
+    let runtime = common::runtime();
     let (server, _dir) = common::server_with_echo_session(
         &runtime,
         "track",

@@ -243,11 +243,7 @@ fn bench_target(
 }
 
 fn bench(c: &mut Criterion) {
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .expect("runtime");
+    let runtime = common::runtime();
     let duration = (PASS_EPOCHS - 1) as f64 / sim::SHIP_INS_RATE_HZ;
     let scenario = sim::ship_with(4, Vec::new(), duration).expect("ship scenario");
     let lines: Vec<String> = scenario

@@ -25,6 +25,8 @@ use tokio::net::{TcpSocket, TcpStream};
 use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};
 
+mod common;
+
 type Socket = WebSocketStream<MaybeTlsStream<TcpStream>>;
 
 /// Epochs per frame of the flooding client.
@@ -304,13 +306,7 @@ async fn a_ramp_streams_every_step_to_its_maximum_and_draws_the_curve() {
     assert_eq!(report["stopped"], "reached --ramp-max 5 within the limit");
     let drawn = std::fs::read_to_string(&svg).unwrap();
     assert!(drawn.starts_with("<svg") && drawn.contains("p99 limit 600000 ms"));
-    let (_, body) = get(&format!("http://{}/api/v1/sessions", server.addr)).await;
+    let (_, body) = common::get_json(&format!("http://{}/api/v1/sessions", server.addr)).await;
     assert_eq!(body["sessions"].as_array().map(Vec::len), Some(0), "{body}");
     server.shutdown().await;
-}
-
-async fn get(url: &str) -> (u16, Value) {
-    let resp = reqwest::get(url).await.unwrap();
-    let status = resp.status().as_u16();
-    (status, resp.json().await.unwrap())
 }

@@ -1,5 +1,6 @@
 //! Set-up shared by the benches that run a real server (`ingest`, `transport`):
-//! an in-process navguard on a temporary SQLite store with one `echo` session.
+//! their runtime, and an in-process navguard on a temporary SQLite store with one
+//! `echo` session.
 
 use navguard::detect::PolicyConfig;
 use navguard::monitor::MonitorKind;
@@ -7,6 +8,16 @@ use navguard::service::wire::{CreateSession, MonitorSpecWire};
 use navguard::service::{self, ServiceConfig};
 use serde_json::Value;
 use tokio::runtime::Runtime;
+
+/// The runtime the benches' servers and clients share: two workers, as on the
+/// 2-core machine the figures are for.
+pub(crate) fn runtime() -> Runtime {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .expect("runtime")
+}
 
 /// A server started on `runtime` with one session `bench` whose single monitor
 /// (`name`, `kind`, `config`, `policy`) echoes every result. Keep the returned

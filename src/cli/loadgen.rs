@@ -65,6 +65,16 @@ pub(crate) enum Rate {
     Hz(f64),
 }
 
+impl Rate {
+    /// Frames per second per session; `None` for [`Rate::Max`].
+    pub(crate) fn hz(self) -> Option<f64> {
+        match self {
+            Rate::Max => None,
+            Rate::Hz(hz) => Some(hz),
+        }
+    }
+}
+
 impl FromStr for Rate {
     type Err = String;
 
@@ -601,10 +611,7 @@ fn report(
         url: args.url.clone(),
         monitor: format!("{:?}", args.monitor).to_lowercase(),
         sessions,
-        rate_hz: match args.rate {
-            Rate::Max => None,
-            Rate::Hz(hz) => Some(hz),
-        },
+        rate_hz: args.rate.hz(),
         batch: args.batch,
         wall_s,
         epochs_sent: t.epochs_sent,

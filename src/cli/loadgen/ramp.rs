@@ -12,10 +12,9 @@ use anyhow::Context;
 use navguard::sim::experiment::plot::{Chart, Series};
 use serde::Serialize;
 
-use super::report::{Report, ms};
+use super::report::{Report, ms, rate_label};
 use super::{
-    LoadgenArgs, Rate, Workload, create_sessions, delete_sessions, measure, server_sample,
-    session_ids,
+    LoadgenArgs, Workload, create_sessions, delete_sessions, measure, server_sample, session_ids,
 };
 use crate::cli::http::Endpoint;
 use crate::cli::thousands;
@@ -142,10 +141,7 @@ pub(super) async fn run(
     let report = RampReport {
         url: args.url.clone(),
         monitor: format!("{:?}", args.monitor).to_lowercase(),
-        rate_hz: match args.rate {
-            Rate::Max => None,
-            Rate::Hz(hz) => Some(hz),
-        },
+        rate_hz: args.rate.hz(),
         batch: args.batch,
         step_duration_s: args.duration,
         p99_limit_ms: args.ramp_p99_ms,
@@ -181,7 +177,7 @@ fn step_line(step: &Step) -> String {
 
 /// The ramp as a text table.
 fn render(r: &RampReport) -> String {
-    let rate = r.rate_hz.map_or("max".into(), |hz| format!("{hz} Hz"));
+    let rate = rate_label(r.rate_hz);
     let mut out = format!(
         "loadgen ramp → {}: {}, rate {rate}, batch {}, {} s a step, p99 limit {} ms\n",
         r.url, r.monitor, r.batch, r.step_duration_s, r.p99_limit_ms
@@ -238,7 +234,7 @@ fn curve(r: &RampReport) -> Chart {
             })
             .collect::<Vec<_>>()
     };
-    let rate = r.rate_hz.map_or("max".into(), |hz| format!("{hz} Hz"));
+    let rate = rate_label(r.rate_hz);
     Chart::new(
         format!(
             "loadgen ramp: {} sessions at {rate}, batch {}, {} s a step",

@@ -128,6 +128,11 @@ pub(super) fn ms(us: u32) -> String {
     format!("{:.3}", f64::from(us) / 1000.0)
 }
 
+/// `10 Hz`, or `max` for a run as fast as the server takes frames.
+pub(super) fn rate_label(rate_hz: Option<f64>) -> String {
+    rate_hz.map_or("max".into(), |hz| format!("{hz} Hz"))
+}
+
 pub(super) fn mib(bytes: Option<u64>) -> String {
     bytes.map_or("-".into(), |b| format!("{:.1} MiB", b as f64 / 1048576.0))
 }
@@ -136,7 +141,7 @@ pub(super) fn mib(bytes: Option<u64>) -> String {
 // Over 80 lines: one table, a straight run of rows in the order it prints them.
 pub(super) fn render(r: &Report) -> String {
     let mut out = String::new();
-    let rate = r.rate_hz.map_or("max".into(), |hz| format!("{hz} Hz"));
+    let rate = rate_label(r.rate_hz);
     let _ = writeln!(
         out,
         "loadgen → {}: {} × {} session(s), rate {rate}, batch {}",
