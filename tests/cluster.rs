@@ -118,8 +118,11 @@ fn repo() -> PathBuf {
 
 fn start_cluster() -> Cluster {
     let dir = tempfile::tempdir().unwrap();
-    // A port base of our own: 20000 + 100·(pid mod 300).
-    let base = 20_000 + 100 * (std::process::id() % 300);
+    // A port base of our own: 20000 + 100·(pid mod 120), so every port the script
+    // uses (base to base + 20s) stays below Linux's ephemeral range (32768 up):
+    // there, a node's own client socket to Postgres or NATS can take the load
+    // balancer's port before HAProxy binds it (seen in CI: 37300 in use).
+    let base = 20_000 + 100 * (std::process::id() % 120);
     let mut cluster = Cluster {
         dir,
         env: HashMap::new(),
