@@ -4,7 +4,10 @@
 //! - `wire/parse_frame/batch_N`: one ingest frame of N epochs (the JSON lines `loadgen`
 //!   sends) parsed and validated into `Epoch`s, as the socket task does per frame.
 //! - `wire/result_frame/batch_100`: the `result` frames of 100 federated-monitor reports
-//!   written, as the session actor does per epoch when the session echoes.
+//!   written, each into a `String` of its own.
+//! - `wire/result_frames_one_buffer/batch_100`: the same frames written one after another
+//!   into one buffer and split off it, as the session actor does for a frame's epochs
+//!   when the session echoes.
 //!
 //! Throughput is in epochs. Run: `cargo bench --bench wire`
 
@@ -17,7 +20,9 @@ use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use navguard::detect::{PolicyConfig, ThresholdSpec};
 use navguard::monitor::federated::{FederatedConfig, FederatedMonitor};
 use navguard::monitor::{Monitor, MonitorReport};
-use navguard::service::wire::{epoch_to_wire, parse_frame, result_frame};
+use navguard::service::wire::{
+    RESULT_FRAME_BYTES, epoch_to_wire, parse_frame, result_frame, write_result_frame,
+};
 use navguard::sim;
 
 /// The largest batch the server accepts by default is 1,000; the bench frames are smaller.
@@ -62,6 +67,18 @@ fn bench(c: &mut Criterion) {
         b.iter(|| {
             for (t, report) in &reports {
                 black_box(result_frame(*t, [("federated", report)]));
+            }
+        })
+    });
+    group.bench_function("result_frames_one_buffer/batch_100", |b| {
+        b.iter(|| {
+            let mut buffer = bytes::BytesMut::with_capacity(reports.len() * RESULT_FRAME_BYTES);
+            let mut scratch = Vec::with_capacity(RESULT_FRAME_BYTES);
+            for (t, report) in &reports {
+                scratch.clear();
+                write_result_frame(&mut scratch, *t, [("federated", report)]);
+                buffer.extend_from_slice(&scratch);
+                black_box(buffer.split().freeze());
             }
         })
     });

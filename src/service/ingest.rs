@@ -232,13 +232,13 @@ pub(crate) async fn close_if_too_big(socket: &mut WebSocket, e: axum::Error) -> 
 
 async fn write_queued(
     socket: &mut WebSocket,
-    first: String,
-    outgoing: &mut tokio::sync::mpsc::Receiver<String>,
+    first: Utf8Bytes,
+    outgoing: &mut tokio::sync::mpsc::Receiver<Utf8Bytes>,
 ) -> Result<(), axum::Error> {
-    socket.feed(Message::Text(first.into())).await?;
+    socket.feed(Message::Text(first)).await?;
     for _ in 1..FLUSH_EVERY {
         match outgoing.try_recv() {
-            Ok(text) => socket.feed(Message::Text(text.into())).await?,
+            Ok(text) => socket.feed(Message::Text(text)).await?,
             Err(_) => break,
         }
     }

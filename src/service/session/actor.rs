@@ -9,6 +9,8 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
+use axum::extract::ws::Utf8Bytes;
+use bytes::BytesMut;
 use tokio::sync::{mpsc, watch};
 
 use super::SessionError;
@@ -42,8 +44,13 @@ const FRAME_QUEUE: usize = 8;
 const CONTROL_QUEUE: usize = 64;
 /// Messages queued for the ingest socket before the actor waits for it.
 const INGEST_QUEUE: usize = 1024;
-/// Statistics are published at most this often (the events socket sends ≤ 20/s).
+/// Statistics are published at most this often while an events socket watches the
+/// session (it sends ≤ 20/s).
 const STATS_PERIOD: Duration = Duration::from_millis(50);
+/// … and at most this often while none does: the snapshot then only feeds the session
+/// list, `/metrics` and the cluster bus (which sends one per [`bus::STATS_PERIOD`]), and
+/// a copy of the statistics per 10 Hz frame was ~8 % of a busy server's CPU.
+const UNWATCHED_STATS_PERIOD: Duration = bus::STATS_PERIOD;
 
 /// What an actor needs from the service.
 #[derive(Debug, Clone)]
@@ -86,7 +93,15 @@ struct Actor {
     /// Statistics changed since the last publication (held back by the rate limit);
     /// a timer publishes them so a stream's last frame is never left unseen.
     stats_pending: bool,
-    ingest: Option<mpsc::Sender<String>>,
+    ingest: Option<mpsc::Sender<Utf8Bytes>>,
+    /// The `result` frames of the frame being processed, written one after another into
+    /// one buffer (each is sent as a slice of it); released when the frame is done.
+    results: BytesMut,
+    /// Length of the last `result` frame, to size the buffer for a frame's epochs.
+    result_len: usize,
+    /// Where one `result` frame is serialised before it joins [`Actor::results`]
+    /// (serde_json writes many small pieces, which a `Vec` takes fastest).
+    scratch: Vec<u8>,
     stream: u64,
     last_t: Option<f64>,
     rate_window: (Instant, u64),
@@ -224,6 +239,9 @@ fn spawn_inner(
         last_published: Instant::now(),
         stats_pending: false,
         ingest: None,
+        results: BytesMut::new(),
+        result_len: wire::RESULT_FRAME_BYTES,
+        scratch: Vec::new(),
         stream: 0,
         last_t: None,
         rate_window: (Instant::now(), 0),
@@ -368,7 +386,8 @@ impl Actor {
                 tracing::warn!(session = %self.id, "lease fenced: another node owns the session; stopping here");
                 break;
             }
-            let trailing = tokio::time::Instant::from_std(self.last_published + STATS_PERIOD);
+            let trailing =
+                tokio::time::Instant::from_std(self.last_published + self.stats_period());
             let due = self.owned.as_ref().and_then(|o| o.due);
             let checkpoint_at = tokio::time::Instant::from_std(due.unwrap_or_else(Instant::now));
             tokio::select! {
@@ -928,9 +947,9 @@ impl Actor {
         Ok(())
     }
 
-    async fn send_ingest(&mut self, text: String) {
+    async fn send_ingest(&mut self, text: impl Into<Utf8Bytes>) {
         if let Some(tx) = &self.ingest
-            && tx.send(text).await.is_err()
+            && tx.send(text.into()).await.is_err()
         {
             self.ingest = None;
         }
@@ -992,6 +1011,11 @@ impl Actor {
             text,
         } = frame;
         let total = epochs.len();
+        if self.echo {
+            // One buffer for the frame's results, with some room for longer ones.
+            self.results
+                .reserve(total * (self.result_len + self.result_len / 8));
+        }
         let first_epoch = self.stream_epochs;
         let recording_stream = self.recording_stream;
         self.frame_events.clear();
@@ -1168,6 +1192,8 @@ impl Actor {
     }
 
     fn finish_frame(&mut self, received: Instant, epochs: usize, changed: bool) {
+        // The frame's results are queued; what is left of their buffer goes with it.
+        self.results = BytesMut::new();
         self.changed();
         let now = Instant::now();
         self.rate_window.1 += epochs as u64;
@@ -1182,12 +1208,21 @@ impl Actor {
         self.publish(changed);
     }
 
-    fn result_frame(&self, t: f64, reports: &[Option<MonitorReport>]) -> String {
+    /// The epoch's `result` frame, written after the frame's earlier ones in
+    /// [`Actor::results`] and split off it (no allocation of its own).
+    fn result_frame(&mut self, t: f64, reports: &[Option<MonitorReport>]) -> Utf8Bytes {
         let monitors = self.monitors.iter().zip(reports);
-        wire::result_frame(
+        self.scratch.clear();
+        wire::write_result_frame(
+            &mut self.scratch,
             t,
             monitors.filter_map(|(m, r)| Some((m.name.as_str(), r.as_ref()?))),
-        )
+        );
+        self.results.extend_from_slice(&self.scratch);
+        let text = self.results.split().freeze();
+        self.result_len = text.len();
+        // serde_json writes UTF-8; the check is a formality that cannot fail.
+        Utf8Bytes::try_from(text).unwrap_or_default()
     }
 
     /// Updates statistics; announces state changes, alarms and availability changes.
@@ -1505,9 +1540,25 @@ impl Actor {
         }
     }
 
+    /// How often statistics are published: [`STATS_PERIOD`] while an events socket
+    /// subscribes, else [`UNWATCHED_STATS_PERIOD`].
+    fn stats_period(&self) -> Duration {
+        let mut subscribers = self
+            .shared
+            .subscribers
+            .lock()
+            .unwrap_or_else(|p| p.into_inner());
+        subscribers.retain(|tx| !tx.is_closed());
+        if subscribers.is_empty() {
+            UNWATCHED_STATS_PERIOD
+        } else {
+            STATS_PERIOD
+        }
+    }
+
     fn publish(&mut self, force: bool) {
         let now = Instant::now();
-        if force || now.duration_since(self.last_published) >= STATS_PERIOD {
+        if force || now.duration_since(self.last_published) >= self.stats_period() {
             self.last_published = now;
             self.stats_pending = false;
             self.refresh_consistency();

@@ -54,7 +54,7 @@ pub struct IngestLink {
     /// The session records its frames: send their text with them.
     pub record: bool,
     /// Messages (JSON text) for the ingest socket.
-    pub outgoing: mpsc::Receiver<String>,
+    pub outgoing: mpsc::Receiver<axum::extract::ws::Utf8Bytes>,
 }
 
 /// Commands other than frames; the actor serves them before pending frames.

@@ -2,11 +2,12 @@
 
 use std::collections::BTreeMap;
 
-use serde::{Deserialize, Serialize};
+use serde::ser::SerializeMap;
+use serde::{Deserialize, Serialize, Serializer};
 
 use super::ingest::{FrameError, FrameErrorCode};
 use crate::detect::{Health, Statistic};
-use crate::monitor::{Availability, Integrity, MonitorReport};
+use crate::monitor::{Availability, Integrity, MonitorReport, TestOutcome};
 
 /// How loud a state change is (docs/architecture.md §A2): an `alarm` is stored,
 /// announced as an `alarm` event and counted; a `warning` is stored and announced only
@@ -94,8 +95,8 @@ impl From<&Integrity> for IntegrityWire {
 /// One monitor's part of a `result` frame.
 #[derive(Debug, Clone, Serialize)]
 pub struct MonitorResultWire<'a> {
-    /// Tests that ran this epoch.
-    pub tests: BTreeMap<crate::monitor::TestName, TestResultWire>,
+    /// Tests that ran this epoch, by name.
+    pub tests: TestsWire<'a>,
     /// Integrity availability, for monitors with a protection level.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub integrity: Option<IntegrityWire>,
@@ -104,23 +105,44 @@ pub struct MonitorResultWire<'a> {
     pub outputs: &'a crate::monitor::Outputs,
 }
 
+/// The tests of one report as a JSON object keyed by test name in name order, as a
+/// `BTreeMap` of them writes it (a name given twice keeps its last outcome), but without
+/// building that map when the bank already lists its tests in name order, as it does
+/// for every built-in monitor.
+#[derive(Debug, Clone, Copy)]
+pub struct TestsWire<'a>(pub &'a [TestOutcome]);
+
+impl Serialize for TestsWire<'_> {
+    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        let result = |o: &TestOutcome| TestResultWire::new(&o.statistic, o.decision.health);
+        let tests = self.0;
+        let mut map = serializer.serialize_map(Some(tests.len()))?;
+        if tests.windows(2).all(|w| w[0].name < w[1].name) {
+            for o in tests {
+                map.serialize_entry(&*o.name, &result(o))?;
+            }
+        } else {
+            let sorted: BTreeMap<&str, &TestOutcome> =
+                tests.iter().map(|o| (&*o.name, o)).collect();
+            for (name, o) in sorted {
+                map.serialize_entry(name, &result(o))?;
+            }
+        }
+        map.end()
+    }
+}
+
 /// Builds the wire form of one monitor's report.
 pub fn monitor_result(report: &MonitorReport) -> MonitorResultWire<'_> {
     MonitorResultWire {
-        tests: report
-            .tests
-            .iter()
-            .map(|o| {
-                (
-                    o.name.clone(),
-                    TestResultWire::new(&o.statistic, o.decision.health),
-                )
-            })
-            .collect(),
+        tests: TestsWire(&report.tests),
         integrity: report.integrity.as_ref().map(IntegrityWire::from),
         outputs: &report.outputs,
     }
 }
+
+/// Room for one `result` frame: a federated monitor's is about 800 bytes.
+pub const RESULT_FRAME_BYTES: usize = 1024;
 
 /// The `result` frame of one epoch.
 #[derive(Serialize)]
@@ -131,23 +153,35 @@ struct ResultFrame<'a> {
     monitors: BTreeMap<&'a str, MonitorResultWire<'a>>,
 }
 
-/// The text of one epoch's `result` frame: its time and each reporting monitor's result
-/// by name (a monitor that failed on the epoch is left out by the caller).
-pub fn result_frame<'a>(
+/// Appends one epoch's `result` frame to `out`: its time and each reporting monitor's
+/// result by name (a monitor that failed on the epoch is left out by the caller). The
+/// session actor writes a frame's results into one buffer and sends each as a slice of it.
+pub fn write_result_frame<'a>(
+    out: impl std::io::Write,
     t: f64,
     monitors: impl IntoIterator<Item = (&'a str, &'a MonitorReport)>,
-) -> String {
+) {
     let monitors = monitors
         .into_iter()
         .map(|(name, report)| (name, monitor_result(report)))
         .collect();
-    // Serialising numbers, strings and maps of strings to a String cannot fail.
-    serde_json::to_string(&ResultFrame {
+    let frame = ResultFrame {
         kind: "result",
         t,
         monitors,
-    })
-    .unwrap_or_default()
+    };
+    // Numbers, strings and maps with string keys serialise into a Vec without error.
+    let _ = serde_json::to_writer(out, &frame);
+}
+
+/// The text of one epoch's `result` frame (see [`write_result_frame`]).
+pub fn result_frame<'a>(
+    t: f64,
+    monitors: impl IntoIterator<Item = (&'a str, &'a MonitorReport)>,
+) -> String {
+    let mut out = Vec::with_capacity(RESULT_FRAME_BYTES);
+    write_result_frame(&mut out, t, monitors);
+    String::from_utf8(out).unwrap_or_default()
 }
 
 /// An entry of the alarm log: a test's transition into suspect or isolated, as stored
