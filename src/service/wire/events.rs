@@ -107,8 +107,7 @@ pub struct MonitorResultWire<'a> {
 
 /// The tests of one report as a JSON object keyed by test name in name order, as a
 /// `BTreeMap` of them writes it (a name given twice keeps its last outcome), but without
-/// building that map when the bank already lists its tests in name order, as it does
-/// for every built-in monitor.
+/// building that map when the report already lists its tests in name order.
 #[derive(Debug, Clone, Copy)]
 pub struct TestsWire<'a>(pub &'a [TestOutcome]);
 
