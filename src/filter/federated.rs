@@ -156,6 +156,7 @@ pub fn equal_betas(n: usize) -> Vec<f64> {
 /// composed from `⌈dt / MAX_SUBSTEP_S⌉` equal sub-steps when `dt` is longer
 /// (`Φ = Φ_hⁿ`, `Q = Σ_k Φ_hᵏ Q_h Φ_hᵏᵀ`: exactly n successive predictions). `dt = 0` gives
 /// `Φ = I`, `Q = 0`.
+#[inline]
 pub fn ins_transition(
     nav: &NavSolution,
     imu: &ImuErrors,

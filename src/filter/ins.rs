@@ -197,6 +197,7 @@ pub fn discretize(
 /// blocks of F² are: `(φ,φ) A²`, `(φ,ε) −AC`, `(δv,φ) BA + VB`, `(δv,δv) V²`, `(δv,ε) −BC`,
 /// `(δv,∇) VC`, `(δp,φ) B`, `(δp,δv) V`, `(δp,∇) C`; and `Q_d` has the blocks
 /// `C diag(q_g) Cᵀ Δt` on φ and `C diag(q_a) Cᵀ Δt` on δv.
+#[inline]
 pub fn transition(nav: &NavSolution, imu: &ImuErrors, dt: f64) -> (ErrorMatrix, ErrorMatrix) {
     let w_ie = geo::earth_rate_enu(nav.lla.lat);
     let w_en = geo::transport_rate_enu(nav.lla.lat, nav.lla.h, &nav.vel);
