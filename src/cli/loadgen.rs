@@ -44,7 +44,7 @@ mod ramp;
 mod report;
 mod stream;
 
-use report::{CpuShare, Report, percentiles, render};
+use report::{CommitShare, CpuShare, Report, percentiles, render};
 use stream::{Tally, run_session};
 
 /// Most epochs generated for one pass (a pass is replayed on a fresh socket).
@@ -358,12 +358,15 @@ fn diagonal(d: &[f64]) -> Vec<Vec<f64>> {
 
 /// The server's resident memory and CPU time at one moment, from `/metrics`
 /// (`None` where the server does not export them, as off Linux).
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Default)]
 struct ServerSample {
     /// `process_resident_memory_bytes`.
     rss: Option<u64>,
     /// `process_cpu_seconds_total`.
     cpu_s: Option<f64>,
+    /// `navguard_alarm_commit_seconds` as cumulative `(upper bound s, count)` buckets,
+    /// `+Inf` last (empty when the server does not export it).
+    alarm_commit: Vec<(f64, u64)>,
 }
 
 /// Reads the server's `/metrics`.
@@ -375,8 +378,21 @@ async fn server_sample(endpoint: &Endpoint) -> anyhow::Result<ServerSample> {
     Ok(sample_of_metrics(&body))
 }
 
-/// The two process metrics of a Prometheus text page.
+/// The process metrics and the alarm-commit histogram of a Prometheus text page.
 fn sample_of_metrics(body: &str) -> ServerSample {
+    let alarm_commit = body
+        .lines()
+        .filter_map(|line| {
+            let rest = line.strip_prefix("navguard_alarm_commit_seconds_bucket{le=\"")?;
+            let (bound, count) = rest.split_once("\"} ")?;
+            let bound = if bound == "+Inf" {
+                f64::INFINITY
+            } else {
+                bound.parse().ok()?
+            };
+            Some((bound, count.trim().parse().ok()?))
+        })
+        .collect();
     let value = |name: &str| {
         body.lines().find_map(|line| {
             let v = line.strip_prefix(name)?.strip_prefix(' ')?;
@@ -386,6 +402,7 @@ fn sample_of_metrics(body: &str) -> ServerSample {
     ServerSample {
         rss: value("process_resident_memory_bytes").map(|v| v as u64),
         cpu_s: value("process_cpu_seconds_total"),
+        alarm_commit,
     }
 }
 
@@ -543,6 +560,7 @@ async fn measure(
         cores(idle.cpu_s, loaded.cpu_s),
         cores(own_before, own_after),
     );
+    let alarm_commit = CommitShare::between(&idle.alarm_commit, &loaded.alarm_commit);
     Ok(report(
         args,
         ids.len() as u64,
@@ -550,6 +568,7 @@ async fn measure(
         wall_s,
         [baseline, idle, loaded],
         cpu,
+        alarm_commit,
     ))
 }
 
@@ -600,6 +619,7 @@ fn report(
     wall_s: f64,
     samples: [ServerSample; 3],
     cpu: CpuShare,
+    alarm_commit: Option<CommitShare>,
 ) -> Report {
     let per_s = |n: u64| if wall_s > 0.0 { n as f64 / wall_s } else { 0.0 };
     let [baseline, idle, loaded] = samples.map(|s| s.rss);
@@ -624,6 +644,7 @@ fn report(
         frames_per_s: per_s(t.frames_answered),
         frame_latency: percentiles(&mut t.frame_latency_us),
         alarm_latency: percentiles(&mut t.alarm_latency_us),
+        alarm_commit,
         alarms: t.alarms,
         state_changes: t.states,
         errors: t.errors,
@@ -681,6 +702,45 @@ mod tests {
         assert_eq!((s.rss, s.cpu_s), (Some(1_048_576), Some(12.5)));
         let none = sample_of_metrics("navguard_sessions 3\n");
         assert_eq!((none.rss, none.cpu_s), (None, None));
+    }
+
+    #[test]
+    fn the_server_commit_share_is_the_histogram_difference_over_the_stream() {
+        let page = |counts: [u64; 4]| {
+            format!(
+                "navguard_frame_latency_seconds_bucket{{le=\"0.001\"}} 99\n\
+                 navguard_alarm_commit_seconds_bucket{{le=\"0.001\"}} {}\n\
+                 navguard_alarm_commit_seconds_bucket{{le=\"0.01\"}} {}\n\
+                 navguard_alarm_commit_seconds_bucket{{le=\"0.05\"}} {}\n\
+                 navguard_alarm_commit_seconds_bucket{{le=\"+Inf\"}} {}\n\
+                 navguard_alarm_commit_seconds_count {}\n",
+                counts[0], counts[1], counts[2], counts[3], counts[3]
+            )
+        };
+        let before = sample_of_metrics(&page([5, 5, 5, 5]));
+        assert_eq!(
+            before.alarm_commit,
+            vec![(0.001, 5), (0.01, 5), (0.05, 5), (f64::INFINITY, 5)]
+        );
+        // 100 entries during the stream: 10 under 1 ms, 50 more under 10 ms, 39 more
+        // under 50 ms, one over: the median falls in (1, 10] ms, the 99th in (10, 50].
+        let after = sample_of_metrics(&page([15, 65, 104, 105]));
+        let share = CommitShare::between(&before.alarm_commit, &after.alarm_commit).unwrap();
+        assert_eq!(share.count, 100);
+        assert_eq!(share.p50_le_ms, Some(10.0));
+        assert_eq!(share.p99_le_ms, Some(50.0));
+        // Two entries over the last finite bound are "beyond the buckets", not a number.
+        let after = sample_of_metrics(&page([5, 5, 103, 105]));
+        let share = CommitShare::between(&before.alarm_commit, &after.alarm_commit).unwrap();
+        assert_eq!((share.p50_le_ms, share.p99_le_ms), (Some(50.0), None));
+        // Nothing committed, an older server without the histogram, or other buckets.
+        let idle = CommitShare::between(&before.alarm_commit, &before.alarm_commit).unwrap();
+        assert_eq!((idle.count, idle.p50_le_ms), (0, None));
+        assert_eq!(CommitShare::between(&[], &[]), None);
+        assert_eq!(
+            CommitShare::between(&[(0.002, 1), (f64::INFINITY, 1)], &after.alarm_commit),
+            None
+        );
     }
 
     #[test]

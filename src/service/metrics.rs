@@ -4,10 +4,47 @@ use std::fmt::Write;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
-/// Upper bounds of the frame-latency histogram buckets, seconds.
-const LATENCY_BUCKETS_S: [f64; 12] = [
-    1e-5, 2.5e-5, 5e-5, 1e-4, 2.5e-4, 5e-4, 1e-3, 2.5e-3, 5e-3, 1e-2, 5e-2, 0.25,
+/// Upper bounds of the latency histograms' buckets, seconds.
+const LATENCY_BUCKETS_S: [f64; 13] = [
+    1e-5, 2.5e-5, 5e-5, 1e-4, 2.5e-4, 5e-4, 1e-3, 2.5e-3, 5e-3, 1e-2, 2.5e-2, 5e-2, 0.25,
 ];
+
+/// A latency histogram over [`LATENCY_BUCKETS_S`] (relaxed atomics: observed from any
+/// task without a lock).
+#[derive(Debug, Default)]
+struct Histogram {
+    buckets: [AtomicU64; LATENCY_BUCKETS_S.len()],
+    count: AtomicU64,
+    sum_ns: AtomicU64,
+}
+
+impl Histogram {
+    fn observe(&self, elapsed: Duration) {
+        let s = elapsed.as_secs_f64();
+        if let Some(i) = LATENCY_BUCKETS_S.iter().position(|&b| s <= b) {
+            self.buckets[i].fetch_add(1, Ordering::Relaxed);
+        }
+        self.count.fetch_add(1, Ordering::Relaxed);
+        self.sum_ns
+            .fetch_add(elapsed.as_nanos() as u64, Ordering::Relaxed);
+    }
+
+    /// The Prometheus exposition of the histogram `name` (cumulative buckets, `+Inf`,
+    /// sum in seconds, count).
+    fn render(&self, out: &mut String, name: &str, help: &str) {
+        let get = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        let _ = writeln!(out, "# HELP {name} {help}\n# TYPE {name} histogram");
+        let mut cumulative = 0;
+        for (bound, bucket) in LATENCY_BUCKETS_S.iter().zip(&self.buckets) {
+            cumulative += get(bucket);
+            let _ = writeln!(out, "{name}_bucket{{le=\"{bound}\"}} {cumulative}");
+        }
+        let count = get(&self.count);
+        let _ = writeln!(out, "{name}_bucket{{le=\"+Inf\"}} {count}");
+        let _ = writeln!(out, "{name}_sum {}", get(&self.sum_ns) as f64 * 1e-9);
+        let _ = writeln!(out, "{name}_count {count}");
+    }
+}
 
 /// What the sessions' latest statistics show, counted over every session for
 /// `/metrics` (docs/methods.md §M22, §M24): tests by consistency flag and by state,
@@ -76,21 +113,22 @@ pub struct Metrics {
     pub ingest_sockets: AtomicU64,
     /// Open event sockets.
     pub event_sockets: AtomicU64,
-    latency_buckets: [AtomicU64; LATENCY_BUCKETS_S.len()],
-    latency_count: AtomicU64,
-    latency_sum_ns: AtomicU64,
+    frame_latency: Histogram,
+    alarm_commit: Histogram,
 }
 
 impl Metrics {
     /// Records the time from a frame's arrival to the end of its processing.
     pub fn observe_frame_latency(&self, elapsed: Duration) {
-        let s = elapsed.as_secs_f64();
-        if let Some(i) = LATENCY_BUCKETS_S.iter().position(|&b| s <= b) {
-            self.latency_buckets[i].fetch_add(1, Ordering::Relaxed);
-        }
-        self.latency_count.fetch_add(1, Ordering::Relaxed);
-        self.latency_sum_ns
-            .fetch_add(elapsed.as_nanos() as u64, Ordering::Relaxed);
+        self.frame_latency.observe(elapsed);
+    }
+
+    /// Records the time one log entry (alarm or warning) took from its session handing it
+    /// to the store to its commit: the wait in the alarm writer's queue and the shared
+    /// transaction ([`crate::service::store`]'s group commit). An entry is announced
+    /// only after it, so this is the store's share of alarm-to-event latency.
+    pub fn observe_alarm_commit(&self, elapsed: Duration) {
+        self.alarm_commit.observe(elapsed);
     }
 
     /// Renders the Prometheus text exposition.
@@ -186,24 +224,16 @@ impl Metrics {
             "Open event sockets.",
             get(&self.event_sockets) as f64,
         );
-        let name = "navguard_frame_latency_seconds";
-        let _ = writeln!(
-            out,
-            "# HELP {name} Frame arrival to end of processing.\n# TYPE {name} histogram"
+        self.frame_latency.render(
+            &mut out,
+            "navguard_frame_latency_seconds",
+            "Frame arrival to end of processing.",
         );
-        let mut cumulative = 0;
-        for (bound, bucket) in LATENCY_BUCKETS_S.iter().zip(&self.latency_buckets) {
-            cumulative += get(bucket);
-            let _ = writeln!(out, "{name}_bucket{{le=\"{bound}\"}} {cumulative}");
-        }
-        let count = get(&self.latency_count);
-        let _ = writeln!(out, "{name}_bucket{{le=\"+Inf\"}} {count}");
-        let _ = writeln!(
-            out,
-            "{name}_sum {}",
-            get(&self.latency_sum_ns) as f64 * 1e-9
+        self.alarm_commit.render(
+            &mut out,
+            "navguard_alarm_commit_seconds",
+            "Log entry handed to the store to its commit (queue and shared transaction).",
         );
-        let _ = writeln!(out, "{name}_count {count}");
         if let Some(rss) = resident_memory_bytes() {
             gauge(
                 &mut out,
@@ -298,6 +328,28 @@ mod tests {
             "{text}"
         );
         assert!(text.contains("navguard_sessions 3"));
+        // No entry committed yet: an empty histogram, every bucket 0.
+        assert!(text.contains("navguard_alarm_commit_seconds_bucket{le=\"+Inf\"} 0"));
+        m.observe_alarm_commit(Duration::from_millis(12));
+        m.observe_alarm_commit(Duration::from_millis(30));
+        let text = m.render(3, &gauges);
+        for (bound, n) in [("0.01", 0), ("0.025", 1), ("0.05", 2), ("+Inf", 2)] {
+            let line = format!("navguard_alarm_commit_seconds_bucket{{le=\"{bound}\"}} {n}\n");
+            assert!(text.contains(&line), "{line} in {text}");
+        }
+        assert!(
+            text.contains("navguard_alarm_commit_seconds_sum 0.042\n"),
+            "{text}"
+        );
+        assert!(
+            text.contains("navguard_alarm_commit_seconds_count 2\n"),
+            "{text}"
+        );
+        // The frame histogram is untouched by alarm commits.
+        assert!(
+            text.contains("navguard_frame_latency_seconds_count 3\n"),
+            "{text}"
+        );
     }
 
     #[test]

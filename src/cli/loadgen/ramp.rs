@@ -113,7 +113,7 @@ pub(super) async fn run(
         if let Err(e) = created {
             break Err(e.context(format!("creating sessions for the step of {target}")));
         }
-        let report = match measure(args, endpoint, work, &ids, baseline).await {
+        let report = match measure(args, endpoint, work, &ids, baseline.clone()).await {
             Ok(report) => report,
             Err(e) => break Err(e),
         };
@@ -278,6 +278,7 @@ mod tests {
                 max_us: p99_us,
             },
             alarm_latency: Percentiles::default(),
+            alarm_commit: None,
             alarms: 0,
             state_changes: 0,
             errors: Default::default(),

@@ -67,6 +67,48 @@ impl CpuShare {
     }
 }
 
+/// The server's own time to commit the log entries raised during the stream, from the
+/// difference of its `navguard_alarm_commit_seconds` histogram before and after: the wait
+/// in the alarm writer's queue and the shared transaction, which every alarm pays before
+/// it is announced. Percentiles are the upper bounds of the buckets they fall in.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub(super) struct CommitShare {
+    /// Entries committed over the stream.
+    pub count: u64,
+    /// The median is at most this, ms (`None` past the last finite bucket).
+    pub p50_le_ms: Option<f64>,
+    /// The 99th percentile is at most this, ms (`None` past the last finite bucket).
+    pub p99_le_ms: Option<f64>,
+}
+
+impl CommitShare {
+    /// From the cumulative buckets `(upper bound s, count)` read before and after the
+    /// stream (the same bounds, `+Inf` last); `None` when the server has no such histogram
+    /// or the two readings do not line up.
+    pub(super) fn between(before: &[(f64, u64)], after: &[(f64, u64)]) -> Option<Self> {
+        if after.is_empty() || before.len() != after.len() {
+            return None;
+        }
+        let diff: Vec<(f64, u64)> = before
+            .iter()
+            .zip(after)
+            .map(|(&(b, n0), &(a, n1))| (b == a).then(|| (a, n1.saturating_sub(n0))))
+            .collect::<Option<_>>()?;
+        let count = diff.last().map_or(0, |&(_, n)| n);
+        let bound = |q: f64| {
+            let rank = (q * count as f64).ceil().max(1.0) as u64;
+            diff.iter()
+                .find(|&&(_, n)| n >= rank)
+                .and_then(|&(b, _)| b.is_finite().then_some(b * 1e3))
+        };
+        Some(CommitShare {
+            count,
+            p50_le_ms: if count > 0 { bound(0.50) } else { None },
+            p99_le_ms: if count > 0 { bound(0.99) } else { None },
+        })
+    }
+}
+
 /// The report (`--json` prints it as is).
 #[derive(Debug, Clone, Serialize)]
 pub(super) struct Report {
@@ -102,6 +144,9 @@ pub(super) struct Report {
     pub frame_latency: Percentiles,
     /// Frame holding the alarm's epoch sent → alarm received.
     pub alarm_latency: Percentiles,
+    /// The server's commit of the log entries before announcing them (its part of the
+    /// alarm latency); `None` for a server without the histogram.
+    pub alarm_commit: Option<CommitShare>,
     /// Alarms received.
     pub alarms: u64,
     /// State changes received.
@@ -183,6 +228,19 @@ pub(super) fn render(r: &Report) -> String {
     };
     row(&mut out, "frame → result latency", pct(&r.frame_latency));
     row(&mut out, "alarm → event latency", pct(&r.alarm_latency));
+    if let Some(c) = r.alarm_commit.filter(|c| c.count > 0) {
+        let le = |v: Option<f64>| v.map_or("> 250".into(), |v| format!("≤ {v}"));
+        row(
+            &mut out,
+            "  of which server commit",
+            format!(
+                "p50 {}  p99 {} ms  (n = {})",
+                le(c.p50_le_ms),
+                le(c.p99_le_ms),
+                thousands(c.count)
+            ),
+        );
+    }
     row(
         &mut out,
         "alarms / state changes",

@@ -1333,12 +1333,14 @@ impl Actor {
             epoch_index: self.stream_epochs.saturating_sub(1),
         };
         let fence = self.fence();
-        match self
+        let handed = Instant::now();
+        let stored = self
             .deps
             .store
             .insert_alarm_keyed(entry.clone(), key, fence.as_ref())
-            .await
-        {
+            .await;
+        self.deps.metrics.observe_alarm_commit(handed.elapsed());
+        match stored {
             Ok(stored) => Some(stored),
             Err(e @ StoreError::Fenced(_)) => {
                 let _ = self.store_error(e);
