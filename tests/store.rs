@@ -4,6 +4,7 @@
 
 mod common;
 
+use std::collections::{HashMap, HashSet};
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -700,6 +701,96 @@ async fn a_replayed_alarm_is_one_log_entry() {
         distinct.dedup();
         assert_eq!(distinct.len(), 6, "{backend}: {ids:?}");
         assert_eq!(store.alarms(&all(100)).await.unwrap().len(), 6, "{backend}");
+        store.close().await;
+    }
+}
+
+/// A burst goes in as multi-row inserts whose `RETURNING` rows are matched back to their
+/// callers: each caller gets the id of its own entry (checked against what is stored
+/// under that id), identical unkeyed entries distinct ids, and a keyed entry raised
+/// again — in a later burst, or twice in the same one — the first one's id.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn each_entry_of_a_burst_gets_its_own_id() {
+    // Entry `k` of a burst. k % 3 == 0: keyed (stream 7, epoch k / 6, so k and k + 3 share
+    // a key; t and statistic follow the key). k % 3 == 1: unkeyed and all identical.
+    // k % 3 == 2: unkeyed, each its own (t = −0 once, which SQLite gives back as +0).
+    let entry = |k: usize| match k % 3 {
+        0 => {
+            let e = k / 6;
+            let key = AlarmKey {
+                stream: 7,
+                epoch_index: e as u64,
+            };
+            (
+                alarm(&format!("s{}", e % 10), e as f64, 30.0 + e as f64),
+                key,
+            )
+        }
+        1 => (alarm("same", 5.0, 50.0), AlarmKey::default()),
+        _ => {
+            let t = if k == 5 { -0.0 } else { k as f64 };
+            let a = alarm(&format!("s{}", k % 10), t, 30.0 + k as f64);
+            (a, AlarmKey::default())
+        }
+    };
+    let dir = tempfile::tempdir().unwrap();
+    for (backend, db) in backends(&dir, "burst").await {
+        let store = Store::open(&db).await.unwrap();
+        let burst = |range: std::ops::Range<usize>| {
+            let tasks: Vec<_> = range
+                .map(|k| {
+                    let store = store.clone();
+                    let (a, key) = entry(k);
+                    tokio::spawn(async move {
+                        (k, store.insert_alarm_keyed(a, key, None).await.unwrap())
+                    })
+                })
+                .collect();
+            async move {
+                let mut out = Vec::new();
+                for t in tasks {
+                    out.push(t.await.unwrap());
+                }
+                out
+            }
+        };
+        let first = burst(0..600).await;
+        // The same keyed entries again with new ones: a replay after a failover.
+        let second = burst(300..900).await;
+        let stored: HashMap<i64, AlarmRecord> = store
+            .alarms(&all(2000))
+            .await
+            .unwrap()
+            .into_iter()
+            .map(|a| (a.id, a))
+            .collect();
+        let mut by_key: HashMap<(String, u64), i64> = HashMap::new();
+        let mut unkeyed = HashSet::new();
+        for (k, got) in first.iter().chain(&second) {
+            let (a, key) = entry(*k);
+            let row = &stored[&got.id];
+            assert_eq!(
+                (&row.session, row.t, row.statistic),
+                (&a.session, a.t, a.statistic),
+                "{backend}: entry {k} got id {} of another entry",
+                got.id
+            );
+            if key.stream > 0 {
+                let first_id = *by_key
+                    .entry((a.session.clone(), key.epoch_index))
+                    .or_insert(got.id);
+                assert_eq!(got.id, first_id, "{backend}: entry {k}: a key is one entry");
+            } else {
+                assert!(
+                    unkeyed.insert(got.id),
+                    "{backend}: entry {k}: id given twice"
+                );
+            }
+        }
+        // 1,200 calls: 400 keyed ones naming 150 keys (0..100, then 50..150), 800 unkeyed.
+        assert_eq!(by_key.len(), 150, "{backend}");
+        assert_eq!(unkeyed.len(), 800, "{backend}");
+        assert_eq!(stored.len(), 150 + 800, "{backend}");
         store.close().await;
     }
 }

@@ -153,14 +153,114 @@ async fn run(pool: Pool, mut rx: mpsc::Receiver<Pending>) {
     }
 }
 
+/// Rows of one multi-row `INSERT` at most: 13 values a row stays under SQLite's 32,766
+/// bound parameters and Postgres' 65,535.
+const INSERT_ROWS: usize = 512;
+
+/// The columns an entry is matched back by from the `RETURNING` rows of a multi-row
+/// insert: everything that names it, and `t` (as bits) for the unkeyed ones.
+type RowKey = (String, String, String, String, String, i64, i64, u64);
+
+fn row_key(alarm: &AlarmRecord, key: &AlarmKey) -> RowKey {
+    (
+        alarm.session.clone(),
+        alarm.monitor.clone(),
+        alarm.test.clone(),
+        alarm.state.as_str().to_owned(),
+        alarm.severity.as_str().to_owned(),
+        key.stream as i64,
+        key.epoch_index as i64,
+        t_bits(alarm.t),
+    )
+}
+
+/// `t`'s bits with −0 as +0 (a store may give back either).
+fn t_bits(t: f64) -> u64 {
+    (t + 0.0).to_bits()
+}
+
+/// Inserts the queued entries `rows` (`(index in the batch, entry, key)`) with one
+/// multi-row `INSERT … ON CONFLICT DO NOTHING RETURNING` per [`INSERT_ROWS`], inside the
+/// writer's transaction `$tx`, and sets each one's [`Done::Id`] in `$done`. Returned rows
+/// are matched back by what names them (the order of `RETURNING` rows is not
+/// guaranteed); an entry with no returned row was already stored under its key (replayed
+/// after a failover) and takes the stored entry's id. One statement per chunk instead of
+/// one per entry: on SQLite every statement is a round trip to its worker thread, which
+/// was most of a burst's commit time (docs/performance.md).
+macro_rules! insert_rows {
+    ($tx:ident, $rows:expr, $done:ident) => {
+        for chunk in $rows.chunks(INSERT_ROWS) {
+            let mut q = sqlx::QueryBuilder::new(
+                "INSERT INTO alarms (session, monitor, test, state, t, statistic, threshold, dof, delay_s, raised_at_ms, severity, stream, epoch_index) ",
+            );
+            q.push_values(chunk, |mut b, (_, alarm, key)| {
+                b.push_bind(alarm.session.as_str())
+                    .push_bind(alarm.monitor.as_str())
+                    .push_bind(alarm.test.as_str())
+                    .push_bind(alarm.state.as_str())
+                    .push_bind(alarm.t)
+                    .push_bind(alarm.statistic)
+                    .push_bind(alarm.threshold)
+                    .push_bind(i64::from(alarm.dof))
+                    .push_bind(alarm.delay_s)
+                    .push_bind(alarm.raised_at_ms)
+                    .push_bind(alarm.severity.as_str())
+                    .push_bind(key.stream as i64)
+                    .push_bind(key.epoch_index as i64);
+            });
+            q.push(
+                " ON CONFLICT (session, stream, epoch_index, monitor, test, state, severity) WHERE stream > 0 DO NOTHING \
+                 RETURNING id, session, monitor, test, state, severity, stream, epoch_index, t",
+            );
+            let returned: Vec<(i64, String, String, String, String, String, i64, i64, f64)> =
+                q.build_query_as().fetch_all(&mut *$tx).await?;
+            let mut ids: std::collections::HashMap<RowKey, Vec<i64>> =
+                std::collections::HashMap::with_capacity(returned.len());
+            for (id, session, monitor, test, state, severity, stream, epoch_index, t) in returned {
+                ids.entry((session, monitor, test, state, severity, stream, epoch_index, t_bits(t)))
+                    .or_default()
+                    .push(id);
+            }
+            // Identical unkeyed entries take their ids in insertion order.
+            for list in ids.values_mut() {
+                list.sort_unstable_by(|a, b| b.cmp(a));
+            }
+            for (index, alarm, key) in chunk {
+                let id = match ids.get_mut(&row_key(alarm, key)).and_then(Vec::pop) {
+                    Some(id) => id,
+                    // An unkeyed entry is always inserted: no row for it is a fault, and
+                    // the whole group is refused (rolled back) rather than misnumbered.
+                    None if key.stream == 0 => return Err(sqlx::Error::RowNotFound),
+                    // Raised before (replayed after a failover): the stored entry's id.
+                    None => sqlx::query_scalar(
+                        "SELECT id FROM alarms WHERE session = $1 AND stream = $2 AND epoch_index = $3 AND monitor = $4 AND test = $5 AND state = $6 AND severity = $7",
+                    )
+                    .bind(&alarm.session)
+                    .bind(key.stream as i64)
+                    .bind(key.epoch_index as i64)
+                    .bind(&alarm.monitor)
+                    .bind(&alarm.test)
+                    .bind(alarm.state.as_str())
+                    .bind(alarm.severity.as_str())
+                    .fetch_one(&mut *$tx)
+                    .await?,
+                };
+                $done[*index] = Some(Done::Id(id));
+            }
+        }
+    };
+}
+
 /// Runs every write of `batch` in one transaction, in order; what became of each, in
 /// order ([`Done::Fenced`] for a write whose fence no longer holds: not written, the
-/// others are).
+/// others are). Consecutive inserts go in as multi-row inserts ([`insert_rows!`]); a clear
+/// first inserts the entries queued before it, so each session's order holds.
 async fn commit(pool: &Pool, batch: &[Pending]) -> Result<Vec<Done>, sqlx::Error> {
     with_pool!(pool, p => {
         let mut tx = p.begin().await?;
-        let mut done = Vec::with_capacity(batch.len());
-        for Pending { op, fence, .. } in batch {
+        let mut done: Vec<Option<Done>> = batch.iter().map(|_| None).collect();
+        let mut rows: Vec<(usize, &AlarmRecord, &AlarmKey)> = Vec::with_capacity(batch.len());
+        for (index, Pending { op, fence, .. }) in batch.iter().enumerate() {
             if let Some(f) = fence {
                 let held = sqlx::query(FENCE_SQL)
                     .bind(&f.session)
@@ -170,72 +270,35 @@ async fn commit(pool: &Pool, batch: &[Pending]) -> Result<Vec<Done>, sqlx::Error
                     .await?
                     .rows_affected();
                 if held == 0 {
-                    done.push(Done::Fenced);
+                    done[index] = Some(Done::Fenced);
                     continue;
                 }
             }
-            let (alarm, key) = match op {
-                Op::Insert { alarm, key } => (alarm, key),
-                Op::Clear { session, test: Some((monitor, test)), t } => {
-                    sqlx::query("UPDATE alarms SET cleared_t = COALESCE($1, t) WHERE session = $2 AND monitor = $3 AND test = $4 AND cleared_t IS NULL")
-                        .bind(t)
-                        .bind(session)
-                        .bind(monitor)
-                        .bind(test)
-                        .execute(&mut *tx)
-                        .await?;
-                    done.push(Done::Cleared);
-                    continue;
+            match op {
+                Op::Insert { alarm, key } => rows.push((index, alarm, key)),
+                Op::Clear { session, test, t } => {
+                    insert_rows!(tx, rows, done);
+                    rows.clear();
+                    match test {
+                        Some((monitor, test)) => sqlx::query("UPDATE alarms SET cleared_t = COALESCE($1, t) WHERE session = $2 AND monitor = $3 AND test = $4 AND cleared_t IS NULL")
+                            .bind(t)
+                            .bind(session)
+                            .bind(monitor)
+                            .bind(test)
+                            .execute(&mut *tx)
+                            .await?,
+                        None => sqlx::query("UPDATE alarms SET cleared_t = t WHERE session = $1 AND cleared_t IS NULL")
+                            .bind(session)
+                            .execute(&mut *tx)
+                            .await?,
+                    };
+                    done[index] = Some(Done::Cleared);
                 }
-                Op::Clear { session, test: None, .. } => {
-                    sqlx::query("UPDATE alarms SET cleared_t = t WHERE session = $1 AND cleared_t IS NULL")
-                        .bind(session)
-                        .execute(&mut *tx)
-                        .await?;
-                    done.push(Done::Cleared);
-                    continue;
-                }
-            };
-            let inserted: Option<i64> = sqlx::query_scalar(
-                "INSERT INTO alarms (session, monitor, test, state, t, statistic, threshold, dof, delay_s, raised_at_ms, cleared_t, severity, stream, epoch_index)
-                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, NULL, $11, $12, $13)
-                 ON CONFLICT (session, stream, epoch_index, monitor, test, state, severity) WHERE stream > 0 DO NOTHING
-                 RETURNING id",
-            )
-            .bind(&alarm.session)
-            .bind(&alarm.monitor)
-            .bind(&alarm.test)
-            .bind(alarm.state.as_str())
-            .bind(alarm.t)
-            .bind(alarm.statistic)
-            .bind(alarm.threshold)
-            .bind(i64::from(alarm.dof))
-            .bind(alarm.delay_s)
-            .bind(alarm.raised_at_ms)
-            .bind(alarm.severity.as_str())
-            .bind(key.stream as i64)
-            .bind(key.epoch_index as i64)
-            .fetch_optional(&mut *tx)
-            .await?;
-            let id = match inserted {
-                Some(id) => id,
-                // Raised before (replayed after a failover): the stored entry's id.
-                None => sqlx::query_scalar(
-                    "SELECT id FROM alarms WHERE session = $1 AND stream = $2 AND epoch_index = $3 AND monitor = $4 AND test = $5 AND state = $6 AND severity = $7",
-                )
-                .bind(&alarm.session)
-                .bind(key.stream as i64)
-                .bind(key.epoch_index as i64)
-                .bind(&alarm.monitor)
-                .bind(&alarm.test)
-                .bind(alarm.state.as_str())
-                .bind(alarm.severity.as_str())
-                .fetch_one(&mut *tx)
-                .await?,
-            };
-            done.push(Done::Id(id));
+            }
         }
+        insert_rows!(tx, rows, done);
         tx.commit().await?;
-        Ok(done)
+        // Every write was answered above (fenced, inserted or cleared).
+        Ok(done.into_iter().map(|d| d.unwrap_or(Done::Fenced)).collect())
     })
 }
