@@ -95,16 +95,17 @@ impl CommitShare {
             .map(|(&(b, n0), &(a, n1))| (b == a).then(|| (a, n1.saturating_sub(n0))))
             .collect::<Option<_>>()?;
         let count = diff.last().map_or(0, |&(_, n)| n);
+        // None with nothing counted, or when the rank lies past the last finite bound.
         let bound = |q: f64| {
-            let rank = (q * count as f64).ceil().max(1.0) as u64;
+            let rank = (q * count as f64).ceil() as u64;
             diff.iter()
-                .find(|&&(_, n)| n >= rank)
+                .find(|&&(_, n)| count > 0 && n >= rank)
                 .and_then(|&(b, _)| b.is_finite().then_some(b * 1e3))
         };
         Some(CommitShare {
             count,
-            p50_le_ms: if count > 0 { bound(0.50) } else { None },
-            p99_le_ms: if count > 0 { bound(0.99) } else { None },
+            p50_le_ms: bound(0.50),
+            p99_le_ms: bound(0.99),
         })
     }
 }
@@ -229,7 +230,7 @@ pub(super) fn render(r: &Report) -> String {
     row(&mut out, "frame → result latency", pct(&r.frame_latency));
     row(&mut out, "alarm → event latency", pct(&r.alarm_latency));
     if let Some(c) = r.alarm_commit.filter(|c| c.count > 0) {
-        let le = |v: Option<f64>| v.map_or("> 250".into(), |v| format!("≤ {v}"));
+        let le = |v: Option<f64>| v.map_or("over the last bucket".into(), |v| format!("≤ {v}"));
         row(
             &mut out,
             "  of which server commit",

@@ -297,8 +297,13 @@ async fn commit(pool: &Pool, batch: &[Pending]) -> Result<Vec<Done>, sqlx::Error
             }
         }
         insert_rows!(tx, rows, done);
+        // Every write was answered above (fenced, inserted or cleared); one that was not
+        // rolls the group back rather than be answered with a guess.
+        let done = done
+            .into_iter()
+            .collect::<Option<Vec<Done>>>()
+            .ok_or_else(|| sqlx::Error::Protocol("an alarm write went unanswered".into()))?;
         tx.commit().await?;
-        // Every write was answered above (fenced, inserted or cleared).
-        Ok(done.into_iter().map(|d| d.unwrap_or(Done::Fenced)).collect())
+        Ok(done)
     })
 }
