@@ -377,71 +377,118 @@ impl TryFrom<WireEpoch> for Epoch {
 /// stops the parse at the first epoch past it: memory stays proportional to the
 /// limit, not to however many tiny epochs fit in a frame (a 1 MiB frame holds
 /// 131,072 `{"t":0}`, about 48 MB once parsed).
+///
+/// Each element is checked and converted into an [`Epoch`] as soon as it is read (one
+/// pass, no vector of wire epochs in between). The first epoch refused after parsing
+/// (a range, a non-finite number, time going back) is kept in `refused` and the parse
+/// goes on over the rest, so that a JSON error or the batch limit later in the frame
+/// still takes precedence, as it does when the frame is parsed whole first.
 struct Batch<'a> {
     max: usize,
+    /// Epochs to reserve room for before the first is read.
+    capacity: usize,
     /// Elements the parser has read, the one past the limit included.
     visited: &'a Cell<usize>,
     /// Set when the array holds more than `max` elements.
     over: &'a Cell<bool>,
+    /// The first element refused after parsing, with its index.
+    refused: &'a Cell<Option<FrameError>>,
+}
+
+/// How many epochs to reserve room for before the first is read: an epoch with an INS
+/// block is over 100 bytes of JSON, so a frame of them is not grown (and copied) while it
+/// is read, and the reservation is never more than the limit.
+fn batch_capacity(text_len: usize, max: usize) -> usize {
+    (text_len / 100 + 1).min(max)
 }
 
 impl<'de> DeserializeSeed<'de> for Batch<'_> {
-    type Value = Vec<WireEpoch>;
+    type Value = Vec<Epoch>;
 
     fn deserialize<D: Deserializer<'de>>(self, deserializer: D) -> Result<Self::Value, D::Error> {
         deserializer.deserialize_seq(self)
     }
 }
 
+/// Element `i`, parsed, as the batch's next epoch: converted and in time order after
+/// `epochs`, or the reason it is refused (with its index).
+fn checked(epochs: &[Epoch], i: usize, wire: WireEpoch) -> Result<Epoch, FrameError> {
+    let epoch = Epoch::try_from(wire).map_err(|e| e.at(i))?;
+    match epochs.last() {
+        Some(prev) if epoch.t < prev.t => Err(FrameError::new(
+            FrameErrorCode::TimeBackwards,
+            format!("t = {} goes back from {} within the batch", epoch.t, prev.t),
+        )
+        .at(i)),
+        _ => Ok(epoch),
+    }
+}
+
 impl<'de> Visitor<'de> for Batch<'_> {
-    type Value = Vec<WireEpoch>;
+    type Value = Vec<Epoch>;
 
     fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str("an array of epochs")
     }
 
     fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Self::Value, A::Error> {
-        let mut epochs = Vec::new();
-        while epochs.len() < self.max {
+        let mut epochs = Vec::with_capacity(self.capacity);
+        let mut refused = None;
+        let mut read = 0;
+        while read < self.max {
             match seq.next_element::<WireEpoch>()? {
-                Some(epoch) => {
-                    self.visited.set(self.visited.get() + 1);
-                    epochs.push(epoch);
+                Some(wire) => {
+                    // Past a refused epoch the rest are only parsed (for JSON errors).
+                    if refused.is_none() {
+                        match checked(&epochs, read, wire) {
+                            Ok(epoch) => epochs.push(epoch),
+                            Err(e) => refused = Some(e),
+                        }
+                    }
+                    read += 1;
+                    self.visited.set(read);
                 }
-                None => return Ok(epochs),
+                None => {
+                    self.refused.set(refused);
+                    return Ok(epochs);
+                }
             }
         }
         // One element more is enough to refuse: skip it without keeping it and stop.
         if seq.next_element::<IgnoredAny>()?.is_some() {
-            self.visited.set(self.visited.get() + 1);
+            self.visited.set(read + 1);
             self.over.set(true);
             return Err(de::Error::custom("batch over the epoch limit"));
         }
+        self.refused.set(refused);
         Ok(epochs)
     }
 }
 
-/// Parses a batch frame's array; also says how many elements were read.
-fn parse_batch(text: &str, max_batch: usize) -> (Result<Vec<WireEpoch>, FrameError>, usize) {
-    let (visited, over) = (Cell::new(0), Cell::new(false));
+/// Parses a batch frame's array into checked epochs; also says how many elements were
+/// read. Errors in the order a whole-frame parse would give them: the JSON (or the
+/// limit) first, then the first refused epoch.
+fn parse_batch(text: &str, max_batch: usize) -> (Result<Vec<Epoch>, FrameError>, usize) {
+    let (visited, over, refused) = (Cell::new(0), Cell::new(false), Cell::new(None));
     let mut deserializer = serde_json::Deserializer::from_str(text);
-    let parsed = Batch {
+    let result = Batch {
         max: max_batch,
+        capacity: batch_capacity(text.len(), max_batch),
         visited: &visited,
         over: &over,
+        refused: &refused,
     }
     .deserialize(&mut deserializer)
     .and_then(|epochs| deserializer.end().map(|()| epochs));
-    let result = parsed.map_err(|e| {
-        if over.get() {
-            FrameError::new(
-                FrameErrorCode::BatchTooLarge,
-                format!("batch holds more than {max_batch} epochs, the limit"),
-            )
-        } else {
-            classify(e, text)
-        }
-    });
+    let result = match (result, refused.take()) {
+        (Err(_), _) if over.get() => Err(FrameError::new(
+            FrameErrorCode::BatchTooLarge,
+            format!("batch holds more than {max_batch} epochs, the limit"),
+        )),
+        (Err(e), _) => Err(classify(e, text)),
+        (Ok(_), Some(refusal)) => Err(refusal),
+        (Ok(epochs), None) => Ok(epochs),
+    };
     (result, visited.get())
 }
 
@@ -449,30 +496,16 @@ fn parse_batch(text: &str, max_batch: usize) -> (Result<Vec<WireEpoch>, FrameErr
 /// `max_batch` epochs. Times must not decrease within the frame.
 pub fn parse_frame(text: &str, max_batch: usize) -> Result<Vec<Epoch>, FrameError> {
     let trimmed = text.trim_start();
-    let wire: Vec<WireEpoch> = if trimmed.starts_with('[') {
-        parse_batch(text, max_batch).0?
-    } else {
-        vec![serde_json::from_str(text).map_err(|e| classify(e, text))?]
-    };
-    if wire.is_empty() {
+    if !trimmed.starts_with('[') {
+        let wire: WireEpoch = serde_json::from_str(text).map_err(|e| classify(e, text))?;
+        return Ok(vec![Epoch::try_from(wire).map_err(|e| e.at(0))?]);
+    }
+    let epochs = parse_batch(text, max_batch).0?;
+    if epochs.is_empty() {
         return Err(FrameError::new(
             FrameErrorCode::EmptyBatch,
             "a batch must hold at least one epoch",
         ));
-    }
-    let mut epochs = Vec::with_capacity(wire.len());
-    for (i, w) in wire.into_iter().enumerate() {
-        let epoch = Epoch::try_from(w).map_err(|e| e.at(i))?;
-        if let Some(prev) = epochs.last().map(|e: &Epoch| e.t)
-            && epoch.t < prev
-        {
-            return Err(FrameError::new(
-                FrameErrorCode::TimeBackwards,
-                format!("t = {} goes back from {} within the batch", epoch.t, prev),
-            )
-            .at(i));
-        }
-        epochs.push(epoch);
     }
     Ok(epochs)
 }
@@ -682,6 +715,59 @@ mod batch_tests {
             code(r#"[{"t":0},{"t":0},{"t":0},{"t":"#),
             FrameErrorCode::MalformedJson
         );
+    }
+
+    #[test]
+    fn a_refused_epoch_yields_to_later_json_errors_and_the_limit() {
+        // Epochs are converted as they are read; the first refusal is reported with its
+        // index only if the whole frame is JSON within the limit.
+        let bad_lat = r#"{"t":1,"cns":{"lat":91,"lon":0}}"#;
+        let refused = parse_frame(&format!(r#"[{{"t":0}},{bad_lat},{{"t":2}}]"#), 3).unwrap_err();
+        assert_eq!(
+            (refused.code, refused.index),
+            (FrameErrorCode::InvalidEpoch, Some(1))
+        );
+        let json = parse_frame(&format!(r#"[{{"t":0}},{bad_lat},{{"t":"#), 3).unwrap_err();
+        assert_eq!(
+            (json.code, json.index),
+            (FrameErrorCode::MalformedJson, None)
+        );
+        let unknown = parse_frame(&format!(r#"[{bad_lat},{{"t":2,"lidar":1}}]"#), 3).unwrap_err();
+        assert_eq!(unknown.code, FrameErrorCode::UnknownInput);
+        let over =
+            parse_frame(&format!(r#"[{bad_lat},{{"t":2}},{{"t":3}},{{"t":4}}]"#), 3).unwrap_err();
+        assert_eq!(over.code, FrameErrorCode::BatchTooLarge);
+        // Only the first refusal counts: time going back at 2, a bad latitude at 3.
+        let back =
+            parse_frame(&format!(r#"[{{"t":5}},{{"t":6}},{{"t":4}},{bad_lat}]"#), 4).unwrap_err();
+        assert_eq!(
+            (back.code, back.index),
+            (FrameErrorCode::TimeBackwards, Some(2))
+        );
+        assert!(
+            back.message.contains("t = 4 goes back from 6"),
+            "{}",
+            back.message
+        );
+    }
+
+    #[test]
+    fn epochs_convert_as_they_are_read() {
+        let epochs = parse_frame(
+            r#"[{"t":0.5,"cns":{"lat":30,"lon":-120}},{"t":0.5,"tacan":{"range_m":12.5}}]"#,
+            2,
+        )
+        .unwrap();
+        assert_eq!(epochs.len(), 2);
+        let cns = epochs[0].cns.as_ref().unwrap();
+        assert_eq!(
+            (cns.lat, cns.lon),
+            (30f64.to_radians(), (-120f64).to_radians())
+        );
+        assert_eq!(epochs[1].tacan_range_m, Some(12.5));
+        assert_eq!(batch_capacity(0, 10), 1);
+        assert_eq!(batch_capacity(1 << 20, 10), 10);
+        assert_eq!(batch_capacity(1_000, 100), 11);
     }
 }
 
