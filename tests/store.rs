@@ -794,3 +794,47 @@ async fn each_entry_of_a_burst_gets_its_own_id() {
         store.close().await;
     }
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sqlite_copies_its_wal_into_the_file_from_a_task_of_its_own() {
+    // A few entries are a few WAL pages, far below SQLite's automatic checkpoint (1,000
+    // pages, run inside a commit, which the store turns off): only the store's own
+    // checkpoint task moves them into the database file, within about half a second.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("wal.db");
+    let store = Store::open(&path).await.unwrap();
+    let file_len = || std::fs::metadata(&path).map(|m| m.len()).unwrap();
+    let before = file_len();
+    for k in 0..200 {
+        let stored = store
+            .insert_alarm(alarm(&format!("s{}", k % 50), k as f64, 30.0))
+            .await
+            .unwrap();
+        assert!(stored.id > 0);
+    }
+    let wal = dir.path().join("wal.db-wal");
+    assert!(
+        std::fs::metadata(&wal).unwrap().len() > 0,
+        "the commits are in the WAL"
+    );
+    let mut grown = file_len() > before;
+    for _ in 0..100 {
+        if grown {
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+        grown = file_len() > before;
+    }
+    assert!(grown, "the database file is still {before} bytes after 5 s");
+    // Everything committed is there after a reopen.
+    store.close().await;
+    let reopened = Store::open(&path).await.unwrap();
+    let page = reopened
+        .alarms(&AlarmQuery {
+            limit: 500,
+            ..AlarmQuery::default()
+        })
+        .await
+        .unwrap();
+    assert_eq!(page.len(), 200);
+}

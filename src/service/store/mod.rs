@@ -23,6 +23,8 @@ pub mod recordings;
 
 use std::path::Path;
 use std::str::FromStr;
+use std::sync::{Arc, Weak};
+use std::time::Duration;
 
 use sqlx::postgres::{PgConnectOptions, PgPool, PgPoolOptions};
 use sqlx::sqlite::{
@@ -178,6 +180,41 @@ pub struct Store {
     recordings: recordings::RecordingWriter,
     /// Checkpoints through a third (group commit, awaited).
     checkpoints: cluster::CheckpointWriter,
+    /// Held while any clone of the store lives; SQLite's WAL checkpointer stops when it
+    /// is gone ([`spawn_wal_checkpointer`]).
+    _alive: Arc<()>,
+}
+
+/// How often SQLite's WAL is copied into the database file, by a task of its own.
+const WAL_CHECKPOINT_PERIOD: Duration = Duration::from_millis(500);
+
+/// Copies SQLite's WAL into the database file every [`WAL_CHECKPOINT_PERIOD`] (a
+/// `PASSIVE` checkpoint: it waits for no reader or writer), until the store is dropped
+/// or closed. The connections themselves never checkpoint (`wal_autocheckpoint = 0`,
+/// [`open_sqlite`]): SQLite's automatic checkpoint runs inside the commit that takes the
+/// WAL past 1,000 pages, and that commit is usually the alarm writer's, holding every
+/// alarm of a burst back from being announced while the WAL is copied and synced.
+fn spawn_wal_checkpointer(pool: SqlitePool, alive: Weak<()>) {
+    tokio::spawn(async move {
+        let mut tick = tokio::time::interval(WAL_CHECKPOINT_PERIOD);
+        tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        tick.tick().await;
+        loop {
+            tick.tick().await;
+            if alive.strong_count() == 0 || pool.is_closed() {
+                return;
+            }
+            if let Err(e) = sqlx::query("PRAGMA wal_checkpoint(PASSIVE)")
+                .execute(&pool)
+                .await
+            {
+                if pool.is_closed() {
+                    return;
+                }
+                tracing::warn!(error = %e, "WAL checkpoint failed; retrying");
+            }
+        }
+    });
 }
 
 /// Columns added to SQLite's first schema before migrations were versioned, with their
@@ -208,11 +245,16 @@ impl Store {
         let alarms = alarm_writer::AlarmWriter::spawn(pool.clone());
         let recordings = recordings::RecordingWriter::spawn(pool.clone(), retention);
         let checkpoints = cluster::CheckpointWriter::spawn(pool.clone());
+        let alive = Arc::new(());
+        if let Pool::Sqlite(sqlite) = &pool {
+            spawn_wal_checkpointer(sqlite.clone(), Arc::downgrade(&alive));
+        }
         Ok(Store {
             pool,
             alarms,
             recordings,
             checkpoints,
+            _alive: alive,
         })
     }
 
@@ -530,6 +572,10 @@ async fn open_sqlite(path: &Path) -> Result<SqlitePool, StoreError> {
         // WAL + NORMAL: a committed transaction survives a process crash;
         // only an OS crash or power loss can lose the last commits.
         .synchronous(SqliteSynchronous::Normal)
+        // The WAL is checkpointed by a task of its own, not inside a commit.
+        .pragma("wal_autocheckpoint", "0")
+        // After a checkpoint has emptied it, the WAL file is cut back to 64 MiB at most.
+        .pragma("journal_size_limit", "67108864")
         .busy_timeout(std::time::Duration::from_secs(5));
     Ok(SqlitePoolOptions::new()
         .max_connections(4)
