@@ -92,6 +92,48 @@ pub(super) fn bias_columns_zero<const M: usize>(h: &SMatrix<f64, M, N>) -> bool 
     h.as_slice()[9 * M..].iter().all(|&v| v == 0.0)
 }
 
+/// `H A` for an `H` whose bias columns are zero (every aid's: [`bias_columns_zero`]),
+/// skipping `H`'s zeros: an aid's row selects one error state, or three for the DVL's
+/// attitude coupling. The sum runs over `H`'s columns in ascending order, as the dense
+/// product's does, so the result is the dense one (to the sign of a zero).
+fn sparse_h_times<const M: usize, const C: usize>(
+    h: &SMatrix<f64, M, N>,
+    a: &SMatrix<f64, N, C>,
+) -> SMatrix<f64, M, C> {
+    let mut out = SMatrix::<f64, M, C>::zeros();
+    for k in 0..9 {
+        for i in 0..M {
+            let v = h[(i, k)];
+            if v != 0.0 {
+                for j in 0..C {
+                    out[(i, j)] += v * a[(k, j)];
+                }
+            }
+        }
+    }
+    out
+}
+
+/// `A Hᵀ` for an `H` whose bias columns are zero, skipping `H`'s zeros (as
+/// [`sparse_h_times`]).
+fn sparse_times_h_transpose<const R: usize, const M: usize>(
+    a: &SMatrix<f64, R, N>,
+    h: &SMatrix<f64, M, N>,
+) -> SMatrix<f64, R, M> {
+    let mut out = SMatrix::<f64, R, M>::zeros();
+    for k in 0..9 {
+        for l in 0..M {
+            let v = h[(l, k)];
+            if v != 0.0 {
+                for i in 0..R {
+                    out[(i, l)] += a[(i, k)] * v;
+                }
+            }
+        }
+    }
+    out
+}
+
 /// The local test of `m` against the prior `(x, P/β)` without forming `P/β`:
 /// `r = z − H x`, `S = H P Hᵀ / β + R`, `λ = |L⁻¹ r|²` with `S = L Lᵀ` — what
 /// [`kalman::innovation`] computes for that prior. Returns `λ`, the diagonal of `S⁻¹`
@@ -104,12 +146,14 @@ pub(super) fn share_test<const M: usize>(
     m: &AidMeasurement<M>,
 ) -> Result<ShareTest, FilterError> {
     let h = &m.obs.h;
-    let r = m.z - h * prior.x;
-    let hph = if bias_columns_zero(h) {
-        let h9 = h.fixed_columns::<9>(0);
-        (h9 * prior.p.fixed_view::<9, 9>(0, 0)) * h9.transpose()
+    let (r, hph) = if bias_columns_zero(h) {
+        let hp = sparse_h_times(h, &prior.p);
+        (
+            m.z - sparse_h_times(h, &prior.x),
+            sparse_times_h_transpose(&hp, h),
+        )
     } else {
-        (h * prior.p) * h.transpose()
+        (m.z - h * prior.x, (h * prior.p) * h.transpose())
     };
     let s = symmetrise(&(hph / beta + m.obs.r));
     finite("innovation", &r)?;
@@ -196,17 +240,15 @@ pub(super) fn joseph_update<const M: usize>(
     m: &AidMeasurement<M>,
 ) -> Result<(), FilterError> {
     let h = &m.obs.h;
-    let (hp, hph) = if bias_columns_zero(h) {
-        let h9 = h.fixed_columns::<9>(0);
-        let hp = h9 * est.p.fixed_rows::<9>(0);
-        let hph = hp.fixed_columns::<9>(0) * h9.transpose();
-        (hp, hph)
+    let (hp, hph, r) = if bias_columns_zero(h) {
+        let hp = sparse_h_times(h, &est.p);
+        let hph = sparse_times_h_transpose(&hp, h);
+        (hp, hph, m.z - sparse_h_times(h, &est.x))
     } else {
         let hp = h * est.p;
-        (hp, hp * h.transpose())
+        (hp, hp * h.transpose(), m.z - h * est.x)
     };
     let s = symmetrise(&(hph + m.obs.r));
-    let r = m.z - h * est.x;
     finite("innovation", &r)?;
     finite("innovation covariance", &s)?;
     // Kᵀ = S⁻¹ (H P): S is M × M and well conditioned (R bounds it below), so its inverse
@@ -271,7 +313,12 @@ pub(super) fn fused_slope<const M: usize>(
     s_inv: &SVector<f64, 6>,
 ) -> Result<f64, hpl::HplError> {
     let ph: SMatrix<f64, N, 2> = p_g.fixed_columns::<2>(POS).into_owned();
-    let hph = m.obs.h * ph; // M × 2 = (P_g[h, :] Hᵀ)ᵀ
+    // M × 2 = (P_g[h, :] Hᵀ)ᵀ
+    let hph = if bias_columns_zero(&m.obs.h) {
+        sparse_h_times(&m.obs.h, &ph)
+    } else {
+        m.obs.h * ph
+    };
     let r = &m.obs.r;
     let diagonal = (0..M).all(|i| (0..M).all(|j| i == j || r[(i, j)] == 0.0));
     // K_h = P_g[h, :] Hᵀ R⁻¹  ⇔  R K_hᵀ = H P_g[:, h]  (R symmetric).
