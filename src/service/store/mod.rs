@@ -188,9 +188,13 @@ pub struct Store {
 /// How often SQLite's WAL is copied into the database file, by a task of its own.
 const WAL_CHECKPOINT_PERIOD: Duration = Duration::from_millis(500);
 
+/// WAL frames (4 KiB pages) past which the checkpoint makes the WAL start over (64 MiB).
+const WAL_RESTART_FRAMES: i64 = 16_384;
+
 /// Copies SQLite's WAL into the database file every [`WAL_CHECKPOINT_PERIOD`] (a
-/// `PASSIVE` checkpoint: it waits for no reader or writer), until the store is dropped
-/// or closed. The connections themselves never checkpoint (`wal_autocheckpoint = 0`,
+/// `PASSIVE` checkpoint: it waits for no reader or writer; a `RESTART` one, which waits
+/// for readers, once the WAL holds more than [`WAL_RESTART_FRAMES`]), until the store is
+/// dropped or closed. The connections themselves never checkpoint (`wal_autocheckpoint = 0`,
 /// [`open_sqlite`]): SQLite's automatic checkpoint runs inside the commit that takes the
 /// WAL past 1,000 pages, and that commit is usually the alarm writer's, holding every
 /// alarm of a burst back from being announced while the WAL is copied and synced.
@@ -204,10 +208,22 @@ fn spawn_wal_checkpointer(pool: SqlitePool, alive: Weak<()>) {
             if alive.strong_count() == 0 || pool.is_closed() {
                 return;
             }
-            if let Err(e) = sqlx::query("PRAGMA wal_checkpoint(PASSIVE)")
-                .execute(&pool)
-                .await
-            {
+            // (busy, frames in the WAL, frames copied)
+            let passive = sqlx::query_as::<_, (i64, i64, i64)>("PRAGMA wal_checkpoint(PASSIVE)")
+                .fetch_one(&pool)
+                .await;
+            let outcome = match passive {
+                // A WAL that keeps growing (readers never let it start over) is made to
+                // start over, waiting for those readers.
+                Ok((_, frames, _)) if frames > WAL_RESTART_FRAMES => {
+                    sqlx::query("PRAGMA wal_checkpoint(RESTART)")
+                        .execute(&pool)
+                        .await
+                        .map(drop)
+                }
+                other => other.map(drop),
+            };
+            if let Err(e) = outcome {
                 if pool.is_closed() {
                     return;
                 }
