@@ -229,6 +229,43 @@ pub(super) fn inverse_cholesky_factor<const M: usize>(
     Some(inv)
 }
 
+/// `L A` for a lower-triangular `L`, skipping its upper zeros; each sum runs over `k`
+/// ascending, as the dense product's, so the result is the dense one (to the sign of a
+/// zero).
+fn lower_times<const M: usize, const C: usize>(
+    l: &SMatrix<f64, M, M>,
+    a: &SMatrix<f64, M, C>,
+) -> SMatrix<f64, M, C> {
+    let mut out = SMatrix::<f64, M, C>::zeros();
+    for j in 0..C {
+        for k in 0..M {
+            let akj = a[(k, j)];
+            for i in k..M {
+                out[(i, j)] += l[(i, k)] * akj;
+            }
+        }
+    }
+    out
+}
+
+/// `Lᵀ A` for a lower-triangular `L`, skipping `Lᵀ`'s lower zeros (as [`lower_times`]).
+fn lower_transpose_times<const M: usize, const C: usize>(
+    l: &SMatrix<f64, M, M>,
+    a: &SMatrix<f64, M, C>,
+) -> SMatrix<f64, M, C> {
+    let mut out = SMatrix::<f64, M, C>::zeros();
+    for j in 0..C {
+        for i in 0..M {
+            let mut sum = 0.0;
+            for k in i..M {
+                sum += l[(k, i)] * a[(k, j)];
+            }
+            out[(i, j)] = sum;
+        }
+    }
+    out
+}
+
 /// The Kalman update of `est` by `m`, in place, with the Joseph form written out. With
 /// `S = HPHᵀ + R`, `Kᵀ = S⁻¹ H P` and `U = HP − ½ S Kᵀ`:
 /// `(I − KH) P (I − KH)ᵀ + K R Kᵀ = P − KHP − (KHP)ᵀ + K S Kᵀ = P − (K U + Uᵀ Kᵀ)` — the
@@ -254,7 +291,7 @@ pub(super) fn joseph_update<const M: usize>(
     // Kᵀ = S⁻¹ (H P): S is M × M and well conditioned (R bounds it below), so its inverse
     // S⁻¹ = L⁻ᵀ L⁻¹ costs less than 15 triangular solves and loses nothing.
     let l_inv = inverse_cholesky_factor(&s).ok_or(FilterError::NotPositiveDefinite)?;
-    let kt = l_inv.transpose() * (l_inv * hp);
+    let kt = lower_transpose_times(&l_inv, &lower_times(&l_inv, &hp));
     finite("gain", &kt)?;
     let u = hp - (s * kt) * 0.5;
     let ktu = kt.transpose() * u;
