@@ -3,7 +3,7 @@
 //! `O(15²·M)`, independent-estimate fusion and the HPL slope. [`super::FederatedFilter`]
 //! sequences them each epoch; this file only computes.
 
-use nalgebra::{SMatrix, SVector, U15};
+use nalgebra::{Const, Matrix, RawStorage, SMatrix, SVector, U15};
 
 use super::ErrorEstimate;
 use crate::detect::hpl;
@@ -96,9 +96,9 @@ pub(super) fn bias_columns_zero<const M: usize>(h: &SMatrix<f64, M, N>) -> bool 
 /// skipping `H`'s zeros: an aid's row selects one error state, or three for the DVL's
 /// attitude coupling. The sum runs over `H`'s columns in ascending order, as the dense
 /// product's does, so the result is the dense one (to the sign of a zero).
-fn sparse_h_times<const M: usize, const C: usize>(
+fn sparse_h_times<const M: usize, const C: usize, S: RawStorage<f64, Const<N>, Const<C>>>(
     h: &SMatrix<f64, M, N>,
-    a: &SMatrix<f64, N, C>,
+    a: &Matrix<f64, Const<N>, Const<C>, S>,
 ) -> SMatrix<f64, M, C> {
     let mut out = SMatrix::<f64, M, C>::zeros();
     for k in 0..9 {
@@ -115,11 +115,12 @@ fn sparse_h_times<const M: usize, const C: usize>(
 }
 
 /// `A Hᵀ` for an `H` whose bias columns are zero, skipping `H`'s zeros (as
-/// [`sparse_h_times`]).
-fn sparse_times_h_transpose<const R: usize, const M: usize>(
-    a: &SMatrix<f64, R, N>,
+/// [`sparse_h_times`]); only `A`'s first 9 columns are read, so `A` may have just those.
+fn sparse_times_h_transpose<const R: usize, const C: usize, const M: usize>(
+    a: &SMatrix<f64, R, C>,
     h: &SMatrix<f64, M, N>,
 ) -> SMatrix<f64, R, M> {
+    const { assert!(C >= 9, "A must hold H's nine non-bias columns") };
     let mut out = SMatrix::<f64, R, M>::zeros();
     for k in 0..9 {
         for l in 0..M {
@@ -147,7 +148,8 @@ pub(super) fn share_test<const M: usize>(
 ) -> Result<ShareTest, FilterError> {
     let h = &m.obs.h;
     let (r, hph) = if bias_columns_zero(h) {
-        let hp = sparse_h_times(h, &prior.p);
+        // H P Hᵀ reads only H P's first 9 columns (H's bias columns are zero).
+        let hp = sparse_h_times(h, &prior.p.fixed_columns::<9>(0));
         (
             m.z - sparse_h_times(h, &prior.x),
             sparse_times_h_transpose(&hp, h),
