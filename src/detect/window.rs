@@ -306,21 +306,17 @@ impl Scale {
     }
 
     /// `(tail, raw, blocks)` of this scale for the window mean `mean`, if it can judge.
-    fn judge(
-        &self,
-        mean: &DVector<f64>,
-        known_inv: Option<&DMatrix<f64>>,
-    ) -> Option<(f64, f64, usize)> {
-        let d = mean.nrows();
+    fn judge(&self, mean: &[f64], known_inv: Option<&DMatrix<f64>>) -> Option<(f64, f64, usize)> {
+        let d = mean.len();
         if let Some((sigma_inv, _)) = &self.estimate {
             let b = self.blocks.len() as f64;
-            let raw = mean.dot(&(sigma_inv * mean)).max(0.0);
+            let raw = quadratic_form(sigma_inv, mean).max(0.0);
             let d2 = b - d as f64 + 1.0;
             let f = raw * d2 / (b * d as f64);
             return Some((f_upper_tail(f, d as f64, d2), raw, self.blocks.len()));
         }
         let inv = known_inv?;
-        let raw = (self.n as f64 * mean.dot(&(inv * mean))).max(0.0);
+        let raw = (self.n as f64 * quadratic_form(inv, mean)).max(0.0);
         let tail = if raw > 0.0 {
             chi2::false_alarm_probability(d as u32, raw).unwrap_or(0.0)
         } else {
@@ -328,6 +324,21 @@ impl Scale {
         };
         Some((tail, raw, 0))
     }
+}
+
+/// `mᵀ A m` for a square `A` of `m`'s dimension, summed in the order of nalgebra's
+/// `m.dot(&(A * m))` (each `(A m)_i` over `j` ascending, then the dot over `i` ascending),
+/// so the value is that expression's to the bit, without its allocation.
+fn quadratic_form(a: &DMatrix<f64>, m: &[f64]) -> f64 {
+    let mut q = 0.0;
+    for (i, &mi) in m.iter().enumerate() {
+        let mut y = 0.0;
+        for (j, &mj) in m.iter().enumerate() {
+            y += a[(i, j)] * mj;
+        }
+        q += mi * y;
+    }
+    q
 }
 
 /// The running windowed-mean test of one signal (serde: a monitor checkpoint saves it
@@ -485,7 +496,7 @@ impl WindowTest {
         }
     }
 
-    fn check(&self, r: &[f64]) -> Result<DVector<f64>, WindowError> {
+    fn check(&self, r: &[f64]) -> Result<(), WindowError> {
         if r.len() != self.params.dim {
             return Err(WindowError::Dimension {
                 got: r.len(),
@@ -495,25 +506,43 @@ impl WindowTest {
         if r.iter().any(|v| !v.is_finite()) {
             return Err(WindowError::NonFinite);
         }
-        Ok(DVector::from_column_slice(r))
+        Ok(())
     }
 
     /// The test over the windows with `r` appended as the newest input, changing nothing.
-    /// `Ok(None)` until some scale has a full window and a variance.
+    /// `Ok(None)` until some scale has a full window and a variance. Window means of up to
+    /// eight components are formed on the stack (every Kalman innovation's), so an
+    /// evaluation allocates nothing.
     pub fn evaluate(&self, r: &[f64]) -> Result<Option<WindowValue>, WindowError> {
-        let r = self.check(r)?;
+        self.check(r)?;
+        let d = r.len();
+        let mut on_stack = [0.0; 8];
+        let mut on_heap = Vec::new();
+        let mean: &mut [f64] = if d <= on_stack.len() {
+            &mut on_stack[..d]
+        } else {
+            on_heap.resize(d, 0.0);
+            &mut on_heap
+        };
         let held = self.window.len();
         let mut best: Option<(f64, f64, usize, usize)> = None;
         for scale in &self.scales {
             if held + 1 < scale.n {
                 continue;
             }
-            let mut sum = r.clone();
+            // The sum from the newest input, then the window's oldest to newest, as the
+            // vector sum `r + Σ x` does.
+            mean.copy_from_slice(r);
             for x in self.window.iter().skip(held + 1 - scale.n) {
-                sum += x;
+                for (m, v) in mean.iter_mut().zip(x.iter()) {
+                    *m += v;
+                }
             }
-            let mean = sum / scale.n as f64;
-            if let Some((tail, raw, blocks)) = scale.judge(&mean, self.known_inv.as_ref())
+            let n = scale.n as f64;
+            for m in mean.iter_mut() {
+                *m /= n;
+            }
+            if let Some((tail, raw, blocks)) = scale.judge(mean, self.known_inv.as_ref())
                 && best.is_none_or(|b| tail < b.0)
             {
                 best = Some((tail, raw, scale.n, blocks));
@@ -536,7 +565,8 @@ impl WindowTest {
     /// in progress (completing a block renews that scale's Σ̂); an unhealthy epoch
     /// discards the blocks in progress, so Σ̂ stays frozen.
     pub fn commit(&mut self, r: &[f64], healthy: bool) -> Result<(), WindowError> {
-        let r = self.check(r)?;
+        self.check(r)?;
+        let r = DVector::from_column_slice(r);
         if self.window.len() >= self.params.longest() {
             self.window.pop_front();
         }
