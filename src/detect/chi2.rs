@@ -32,6 +32,7 @@
 //!   logarithm of the small tail, so tiny probabilities keep full relative
 //!   accuracy.
 
+use libm::erfc;
 use statrs::function::erf::erfc_inv;
 use statrs::function::gamma::ln_gamma;
 
@@ -104,12 +105,26 @@ pub fn threshold(dof: u32, p_fa: f64) -> Result<f64, Chi2Error> {
         _ => {}
     }
     let a = f64::from(dof) / 2.0;
+    // Small dof (every drift test's χ²(3) equivalent, one per epoch): the tails from the
+    // finite sums of `finite_tails`, several times cheaper than `inc_gamma`'s series and
+    // continued fraction.
+    let finite = dof <= FINITE_SUM_MAX_DOF;
     let y = if p_fa < 0.5 {
-        upper_quantile(a, p_fa)
+        upper_quantile_with(a, p_fa, |y| match finite_tails(dof, y) {
+            Some((q, density)) if finite => (q.ln(), density / q),
+            _ => upper_tail_slope(a, y),
+        })
     } else {
         // 1 − p_fa is exact here (Sterbenz), so the lower tail is the
-        // well-conditioned one to invert.
-        lower_quantile(a, 1.0 - p_fa)
+        // well-conditioned one to invert. `1 − Q` is used only where `P ≥ 0.1`, so it
+        // loses at most a few bits; below, the series.
+        lower_quantile_with(a, 1.0 - p_fa, |y| match finite_tails(dof, y) {
+            Some((q, density)) if finite && q <= 0.9 => {
+                let p = 1.0 - q;
+                (p.ln(), density * y / p)
+            }
+            _ => lower_tail_slope(a, y),
+        })
     };
     Ok(2.0 * y)
 }
@@ -449,10 +464,72 @@ fn inc_gamma(b: f64, y: f64) -> IncGamma {
     }
 }
 
+/// [`upper_quantile_with`] on [`inc_gamma`] alone (the reference the closed forms are
+/// tested against).
+#[cfg(test)]
+fn upper_quantile(a: f64, p: f64) -> f64 {
+    upper_quantile_with(a, p, |y| upper_tail_slope(a, y))
+}
+
+/// Largest dof whose thresholds use [`finite_tails`].
+const FINITE_SUM_MAX_DOF: u32 = 12;
+
+/// `(Q(dof/2, y), ρ(y))`, the χ²(dof) survival function at `2y` and the Gamma(dof/2, 1)
+/// density at `y`, for `dof ≥ 1` and `0 < y ≤ 700` (`None` beyond, where `e^{−y}` nears
+/// underflow), from the finite sums — of positive terms, so to a few ulp:
+/// - even `dof = 2m`: `Q = e^{−y} Σ_{k<m} y^k/k!`, `ρ = e^{−y} y^{m−1}/(m−1)!`;
+/// - odd `dof = 2m+1`: `Q = erfc(√y) + e^{−y} Σ_{k=1}^{m} y^{k−½}/Γ(k+½)`,
+///   `ρ = e^{−y} y^{m−½}/Γ(m+½)` (for `m = 0`, `ρ = e^{−y}/√(π y)`).
+///
+/// The sums have `dof/2` terms, so they are for small dof ([`FINITE_SUM_MAX_DOF`]).
+fn finite_tails(dof: u32, y: f64) -> Option<(f64, f64)> {
+    if !(y > 0.0 && y <= 700.0) {
+        return None;
+    }
+    let m = dof / 2;
+    let e = (-y).exp();
+    if dof % 2 == 0 {
+        let (mut term, mut sum) = (1.0, 1.0);
+        for k in 1..m {
+            term *= y / f64::from(k);
+            sum += term;
+        }
+        Some((e * sum, e * term))
+    } else {
+        let root = y.sqrt();
+        if m == 0 {
+            return Some((erfc(root), e / (root * std::f64::consts::PI.sqrt())));
+        }
+        // y^{½}/Γ(3/2), then y^{k+½}/Γ(k+3/2) = previous · y/(k+½).
+        let mut term = root * std::f64::consts::FRAC_2_SQRT_PI;
+        let mut sum = term;
+        for k in 1..m {
+            term *= y / (f64::from(k) + 0.5);
+            sum += term;
+        }
+        Some((erfc(root) + e * sum, e * term))
+    }
+}
+
+/// `(ln Q(a, y), ρ(y)/Q(a, y))` from [`inc_gamma`]: what [`upper_quantile_with`] steps on.
+fn upper_tail_slope(a: f64, y: f64) -> (f64, f64) {
+    let g = inc_gamma(a, y);
+    // ρ/Q = a d_a(y) / (y Q)
+    (g.ln_q, (g.ln_d - g.ln_q).exp() * a / y)
+}
+
+/// `(ln P(a, y), y ρ(y)/P(a, y))` from [`inc_gamma`]: what [`lower_quantile_with`] steps on.
+fn lower_tail_slope(a: f64, y: f64) -> (f64, f64) {
+    let g = inc_gamma(a, y);
+    // y ρ/P = a d_a(y) / P
+    (g.ln_p, (g.ln_d - g.ln_p).exp() * a)
+}
+
 /// `y` with `Q(a, y) = p` for `p < 0.5`: Newton on `ln p − ln Q(a, y)`, which
 /// is close to linear in `y` in the tail, from the Wilson–Hilferty start,
-/// falling back to bisection / doubling whenever a step leaves the bracket.
-fn upper_quantile(a: f64, p: f64) -> f64 {
+/// falling back to bisection / doubling whenever a step leaves the bracket;
+/// `tail(y)` gives `ln Q` and the slope `d/dy (−ln Q) = ρ/Q` (ρ the Gamma(a, 1) density).
+fn upper_quantile_with(a: f64, p: f64, tail: impl Fn(f64) -> (f64, f64)) -> f64 {
     let ln_p = p.ln();
     let dof = 2.0 * a;
     let z = std::f64::consts::SQRT_2 * erfc_inv(2.0 * p);
@@ -461,8 +538,8 @@ fn upper_quantile(a: f64, p: f64) -> f64 {
     let mut y = if wh.is_finite() && wh > 0.0 { wh } else { a };
     let (mut lo, mut hi) = (0.0_f64, f64::INFINITY);
     for _ in 0..200 {
-        let g = inc_gamma(a, y);
-        let f = ln_p - g.ln_q; // increasing in y
+        let (ln_q, slope) = tail(y);
+        let f = ln_p - ln_q; // increasing in y, with slope d/dy (−ln Q) = ρ/Q
         if f == 0.0 {
             break;
         }
@@ -471,8 +548,6 @@ fn upper_quantile(a: f64, p: f64) -> f64 {
         } else {
             hi = y;
         }
-        // d/dy (−ln Q) = density / Q = a d_a(y) / (y Q)
-        let slope = (g.ln_d - g.ln_q).exp() * a / y;
         let mut next = y - f / slope;
         if !(next > lo && next < hi) {
             next = if hi.is_finite() {
@@ -490,18 +565,25 @@ fn upper_quantile(a: f64, p: f64) -> f64 {
     y
 }
 
+/// [`lower_quantile_with`] on [`inc_gamma`] alone.
+#[cfg(test)]
+fn lower_quantile(a: f64, q: f64) -> f64 {
+    lower_quantile_with(a, q, |y| lower_tail_slope(a, y))
+}
+
 /// `y` with `P(a, y) = q` for `q <= 0.5`: Newton in `u = ln y`, where
 /// `ln P ≈ a u − ln Γ(a+1)` is close to linear, inside the bracket
-/// `P(a, y) <= y^a/Γ(a+1)` (left) and median < a (right).
-fn lower_quantile(a: f64, q: f64) -> f64 {
+/// `P(a, y) <= y^a/Γ(a+1)` (left) and median < a (right); `tail(y)` gives `ln P` and
+/// the slope `d ln P / d ln y = y ρ/P`.
+fn lower_quantile_with(a: f64, q: f64, tail: impl Fn(f64) -> (f64, f64)) -> f64 {
     let ln_q = q.ln();
     let mut lo = (ln_q + ln_gamma(a + 1.0)) / a - 1.0;
     let mut hi = (a + 1.0).ln();
     let mut u = (lo + 1.0).min(0.5 * (lo + hi));
     for _ in 0..200 {
         let y = u.exp();
-        let g = inc_gamma(a, y);
-        let f = g.ln_p - ln_q; // increasing in u
+        let (ln_p, slope) = tail(y);
+        let f = ln_p - ln_q; // increasing in u, with slope d ln P / du = y ρ/P
         if f == 0.0 {
             break;
         }
@@ -510,8 +592,6 @@ fn lower_quantile(a: f64, q: f64) -> f64 {
         } else {
             hi = u;
         }
-        // d ln P / du = y · density / P = a d_a(y) / P
-        let slope = (g.ln_d - g.ln_p).exp() * a;
         let mut next = u - f / slope;
         if !(next > lo && next < hi) {
             next = 0.5 * (lo + hi);
@@ -821,11 +901,12 @@ mod tests {
     }
 
     #[test]
-    fn the_one_and_two_dof_closed_forms_equal_the_general_inversion() {
+    fn the_closed_forms_equal_the_general_inversion() {
+        // dof 1 and 2 invert in closed form, 3..=12 by Newton on the finite sums.
         for p_fa in [
-            0.999_999, 0.9, 0.5, 0.3, 0.1, 1e-3, 1e-7, 1e-12, 1e-50, 1e-300,
+            0.999_999, 0.95, 0.9, 0.7, 0.5, 0.3, 0.1, 1e-3, 1e-7, 1e-12, 1e-50, 1e-200, 1e-300,
         ] {
-            for dof in [1u32, 2] {
+            for dof in 1..=FINITE_SUM_MAX_DOF + 1 {
                 let a = f64::from(dof) / 2.0;
                 let general = 2.0
                     * if p_fa < 0.5 {
@@ -840,6 +921,35 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn the_finite_sums_equal_the_series_and_continued_fraction() {
+        for dof in 1..=FINITE_SUM_MAX_DOF {
+            let a = f64::from(dof) / 2.0;
+            for y in [
+                1e-6, 1e-3, 0.1, 0.5, 1.0, 2.4, 3.0, 7.5, 20.0, 80.0, 300.0, 700.0,
+            ] {
+                let (q, density) = finite_tails(dof, y).unwrap();
+                let g = inc_gamma(a, y);
+                // ρ = a d_a(y) / y
+                let want_density = g.ln_d.exp() * a / y;
+                // The reference comes through `exp(ln Q)`, whose relative error is the
+                // absolute error of `ln Q` (≈ ε |ln Q|, 1.6e-13 at y = 700).
+                let tol = 1e-14 + 2.0 * f64::EPSILON * g.ln_q.abs();
+                assert!(
+                    rel_err(q, g.ln_q.exp()) <= tol,
+                    "dof {dof} y {y}: Q {q} vs {}",
+                    g.ln_q.exp()
+                );
+                assert!(
+                    rel_err(density, want_density) <= 1e-13 + tol,
+                    "dof {dof} y {y}: ρ {density} vs {want_density}"
+                );
+            }
+        }
+        assert_eq!(finite_tails(3, 700.5), None);
+        assert_eq!(finite_tails(3, 0.0), None);
     }
 
     #[test]
