@@ -207,42 +207,50 @@ impl Scale {
     }
 
     fn discard_partial(&mut self) {
-        let d = self.partial.0.nrows();
-        self.partial = (DVector::zeros(d), DMatrix::zeros(d, d), 0);
+        self.partial.0.fill(0.0);
+        self.partial.1.fill(0.0);
+        self.partial.2 = 0;
     }
 
+    /// Adds `r` to the block in progress; a completed block joins the kept ones and renews
+    /// the estimate. Outer products are accumulated in place (each entry the same
+    /// `r_i r_j` nalgebra's `r rᵀ` forms), and a block that leaves lends its storage to
+    /// the next block in progress, so a full scale allocates only in [`Scale::renew`].
     fn add(&mut self, r: &DVector<f64>, params: &WindowParams) {
-        self.partial.1 += r * r.transpose();
+        add_outer(&mut self.partial.1, r, 1.0);
         self.partial.0 += r;
         self.partial.2 += 1;
         if self.partial.2 < self.n {
             return;
         }
         let d = params.dim;
-        let (sum, sum_sq, count) = std::mem::replace(
+        let (mut mean, sum_sq, count) = std::mem::replace(
             &mut self.partial,
-            (DVector::zeros(d), DMatrix::zeros(d, d), 0),
+            (DVector::zeros(0), DMatrix::zeros(0, 0), 0),
         );
-        let block = Block {
-            mean: sum / count as f64,
-            sum_sq,
-        };
-        self.sums.0 += &block.mean * block.mean.transpose();
+        mean /= count as f64;
+        let block = Block { mean, sum_sq };
+        add_outer(&mut self.sums.0, &block.mean, 1.0);
         self.sums.1 += &block.sum_sq;
         self.blocks.push_back(block);
-        if self.blocks.len() > self.max_blocks
-            && let Some(old) = self.blocks.pop_front()
+        self.partial = if self.blocks.len() > self.max_blocks
+            && let Some(mut old) = self.blocks.pop_front()
         {
-            self.sums.0 -= &old.mean * old.mean.transpose();
+            add_outer(&mut self.sums.0, &old.mean, -1.0);
             self.sums.1 -= &old.sum_sq;
-        }
+            old.mean.fill(0.0);
+            old.sum_sq.fill(0.0);
+            (old.mean, old.sum_sq, 0)
+        } else {
+            (DVector::zeros(d), DMatrix::zeros(d, d), 0)
+        };
         self.since_recompute += 1;
         if self.since_recompute >= self.max_blocks {
             self.since_recompute = 0;
             self.sums.0.fill(0.0);
             self.sums.1.fill(0.0);
             for b in &self.blocks {
-                self.sums.0 += &b.mean * b.mean.transpose();
+                add_outer(&mut self.sums.0, &b.mean, 1.0);
                 self.sums.1 += &b.sum_sq;
             }
         }
@@ -257,8 +265,15 @@ impl Scale {
             return;
         }
         let mut second = self.sums.0.clone();
-        let mut per_input = self.sums.1.clone();
         second /= b as f64;
+        // The per-input covariance reuses the previous estimate's storage.
+        let mut per_input = match self.estimate.take() {
+            Some((_, mut old)) => {
+                old.copy_from(&self.sums.1);
+                old
+            }
+            None => self.sums.1.clone(),
+        };
         per_input /= (b * self.n) as f64;
         // A singular Σ̂ (no spread in some direction) leaves the scale without a variance:
         // it stays idle rather than divide by zero.
@@ -326,10 +341,32 @@ impl Scale {
     }
 }
 
-/// `mᵀ A m` for a square `A` of `m`'s dimension, summed in the order of nalgebra's
-/// `m.dot(&(A * m))` (each `(A m)_i` over `j` ascending, then the dot over `i` ascending),
-/// so the value is that expression's to the bit, without its allocation.
+/// `a += sign · m mᵀ` in place, entry by entry: `a_ij ± m_i m_j`, what `a += &m * m.transpose()`
+/// (or `-=`) computes, to the bit, without the product's allocation.
+fn add_outer(a: &mut DMatrix<f64>, m: &DVector<f64>, sign: f64) {
+    let d = m.len();
+    for j in 0..d {
+        for i in 0..d {
+            let p = m[i] * m[j];
+            if sign > 0.0 {
+                a[(i, j)] += p;
+            } else {
+                a[(i, j)] -= p;
+            }
+        }
+    }
+}
+
+/// `mᵀ A m` for a square `A` of `m`'s dimension: nalgebra's `m.dot(&(A * m))` to the bit.
+/// Below 8 components (every Kalman innovation) it is summed in that expression's order
+/// (each `(A m)_i` over `j` ascending, then the dot over `i` ascending) without its
+/// allocations; from 8 on nalgebra's dot splits the sum over eight accumulators, so the
+/// expression itself is used.
 fn quadratic_form(a: &DMatrix<f64>, m: &[f64]) -> f64 {
+    if m.len() >= 8 {
+        let m = DVector::from_column_slice(m);
+        return m.dot(&(a * &m));
+    }
     let mut q = 0.0;
     for (i, &mi) in m.iter().enumerate() {
         let mut y = 0.0;
@@ -510,13 +547,13 @@ impl WindowTest {
     }
 
     /// The test over the windows with `r` appended as the newest input, changing nothing.
-    /// `Ok(None)` until some scale has a full window and a variance. Window means of up to
-    /// eight components are formed on the stack (every Kalman innovation's), so an
+    /// `Ok(None)` until some scale has a full window and a variance. Below eight components
+    /// (every Kalman innovation) the window means are formed on the stack and an
     /// evaluation allocates nothing.
     pub fn evaluate(&self, r: &[f64]) -> Result<Option<WindowValue>, WindowError> {
         self.check(r)?;
         let d = r.len();
-        let mut on_stack = [0.0; 8];
+        let mut on_stack = [0.0; 7];
         let mut on_heap = Vec::new();
         let mean: &mut [f64] = if d <= on_stack.len() {
             &mut on_stack[..d]
@@ -566,10 +603,15 @@ impl WindowTest {
     /// discards the blocks in progress, so Σ̂ stays frozen.
     pub fn commit(&mut self, r: &[f64], healthy: bool) -> Result<(), WindowError> {
         self.check(r)?;
-        let r = DVector::from_column_slice(r);
-        if self.window.len() >= self.params.longest() {
-            self.window.pop_front();
-        }
+        // The input that leaves the longest window lends its storage to the new one.
+        let r = if self.window.len() >= self.params.longest()
+            && let Some(mut old) = self.window.pop_front()
+        {
+            old.copy_from_slice(r);
+            old
+        } else {
+            DVector::from_column_slice(r)
+        };
         for scale in &mut self.scales {
             if healthy {
                 scale.add(&r, &self.params);
@@ -611,6 +653,32 @@ mod tests {
             test.commit(&x, true).unwrap();
         }
         over as f64 / tested as f64
+    }
+
+    #[test]
+    fn the_in_place_products_equal_nalgebras_to_the_bit() {
+        let mut rng = StdRng::seed_from_u64(15);
+        for d in 1..=9 {
+            for _ in 0..50 {
+                let m = DVector::<f64>::from_fn(d, |_, _| StandardNormal.sample(&mut rng));
+                let a = DMatrix::<f64>::from_fn(d, d, |_, _| StandardNormal.sample(&mut rng));
+                let want = m.dot(&(&a * &m));
+                assert_eq!(quadratic_form(&a, m.as_slice()).to_bits(), want.to_bits());
+
+                let mut plus = a.clone();
+                add_outer(&mut plus, &m, 1.0);
+                let mut minus = a.clone();
+                add_outer(&mut minus, &m, -1.0);
+                let (want_plus, want_minus) = (&a + &m * m.transpose(), &a - &m * m.transpose());
+                for (got, want) in [(plus, want_plus), (minus, want_minus)] {
+                    assert!(
+                        got.iter()
+                            .zip(want.iter())
+                            .all(|(g, w)| g.to_bits() == w.to_bits())
+                    );
+                }
+            }
+        }
     }
 
     #[test]
