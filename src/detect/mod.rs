@@ -4,6 +4,7 @@
 
 pub mod chi2;
 pub mod consistency;
+pub mod f_law;
 pub mod hpl;
 pub mod parity;
 pub mod policy;

@@ -22,7 +22,8 @@ use std::collections::VecDeque;
 
 use serde::{Deserialize, Serialize};
 
-use super::window::{chi2_equivalent, f_lower_tail};
+use super::f_law::FLaw;
+use super::window::chi2_equivalent;
 
 /// Default differences in the window (a freeze is flagged after about this many
 /// repeated samples).
@@ -116,6 +117,10 @@ pub struct StuckTest {
     /// `‖d‖²` of the last healthy differences, and their sum.
     reference: VecDeque<f64>,
     reference_sum: f64,
+    /// The F law of the window against the reference, renewed on commit (not saved: a
+    /// restored test forms it again).
+    #[serde(skip)]
+    law: Option<FLaw>,
 }
 
 impl StuckTest {
@@ -127,6 +132,7 @@ impl StuckTest {
             window: VecDeque::new(),
             reference: VecDeque::new(),
             reference_sum: 0.0,
+            law: None,
             params,
         }
     }
@@ -206,11 +212,8 @@ impl StuckTest {
             return Ok(None);
         }
         let ratio = (window / (p.k as f64 * dim)) / rho;
-        let tail = f_lower_tail(
-            ratio,
-            effective_dof(p.k) * dim,
-            effective_dof(self.reference.len()) * dim,
-        );
+        let (d1, d2) = self.dofs();
+        let tail = FLaw::reuse(self.law, d1, d2).lower_tail(ratio);
         Ok(Some(StuckValue {
             value: chi2_equivalent(1, tail),
             ratio,
@@ -242,8 +245,27 @@ impl StuckTest {
                 }
             }
         }
-        self.last = Some((x.to_vec(), healthy));
+        match &mut self.last {
+            Some((last, h)) => {
+                last.copy_from_slice(x);
+                *h = healthy;
+            }
+            None => self.last = Some((x.to_vec(), healthy)),
+        }
+        if self.reference.len() >= self.params.min_reference {
+            let (d1, d2) = self.dofs();
+            self.law = Some(FLaw::reuse(self.law, d1, d2));
+        }
         Ok(())
+    }
+
+    /// The dofs of the window's law against the reference's.
+    fn dofs(&self) -> (f64, f64) {
+        let dim = self.params.dim as f64;
+        (
+            effective_dof(self.params.k) * dim,
+            effective_dof(self.reference.len()) * dim,
+        )
     }
 }
 
@@ -324,7 +346,7 @@ mod tests {
         let v = test.evaluate(&[0.5]).unwrap().unwrap();
         let ratio = (0.25 / 2.0) / (9.0 / 4.0);
         assert!((v.ratio - ratio).abs() < 1e-15);
-        let tail = f_lower_tail(ratio, effective_dof(2), effective_dof(4));
+        let tail = crate::detect::window::f_lower_tail(ratio, effective_dof(2), effective_dof(4));
         assert!((v.tail - tail).abs() < 1e-15);
         assert!((v.value - chi2::threshold(1, tail).unwrap()).abs() < 1e-12);
     }

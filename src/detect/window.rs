@@ -34,6 +34,7 @@ use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 use super::chi2;
+use super::f_law::FLaw;
 
 /// Default number of block means kept per scale (its variance's memory is
 /// `max_blocks · n` epochs).
@@ -136,32 +137,14 @@ pub fn chi2_equivalent(dof: u32, tail: f64) -> f64 {
     chi2::threshold(dof.max(1), tail.max(MIN_TAIL)).unwrap_or(0.0)
 }
 
-/// Upper-tail probability of `F(d1, d2)` at `x`, computed as `I_{d2/(d1 x + d2)}(d2/2,
-/// d1/2)` directly (no `1 − cdf` cancellation in the far tail).
+/// Upper-tail probability of `F(d1, d2)` at `x` ([`FLaw::upper_tail`]).
 pub fn f_upper_tail(x: f64, d1: f64, d2: f64) -> f64 {
-    if x <= 0.0 {
-        return 1.0;
-    }
-    if !x.is_finite() {
-        return 0.0;
-    }
-    if d1 == 2.0 {
-        // I_w(a, 1) = wᵃ: with w = d2/(2x + d2), the tail is (1 + 2x/d2)^(−d2/2) (the
-        // drift tests of two-component aids take one every epoch).
-        return (-0.5 * d2 * (2.0 * x / d2).ln_1p()).exp();
-    }
-    statrs::function::beta::beta_reg(d2 / 2.0, d1 / 2.0, d2 / (d1 * x + d2))
+    FLaw::new(d1, d2).upper_tail(x)
 }
 
-/// Lower-tail probability of `F(d1, d2)` at `x`: `I_{d1 x/(d1 x + d2)}(d1/2, d2/2)`.
+/// Lower-tail probability of `F(d1, d2)` at `x` ([`FLaw::lower_tail`]).
 pub fn f_lower_tail(x: f64, d1: f64, d2: f64) -> f64 {
-    if x <= 0.0 {
-        return 0.0;
-    }
-    if !x.is_finite() {
-        return 1.0;
-    }
-    statrs::function::beta::beta_reg(d1 / 2.0, d2 / 2.0, d1 * x / (d1 * x + d2))
+    FLaw::new(d1, d2).lower_tail(x)
 }
 
 /// A completed healthy block: its mean and the sum of `r rᵀ` over its inputs.
@@ -190,6 +173,10 @@ struct Scale {
     /// `(Σ̂⁻¹, per-input covariance)` from the kept blocks, once there are enough and Σ̂
     /// is positive definite.
     estimate: Option<(DMatrix<f64>, DMatrix<f64>)>,
+    /// The Hotelling F law of the kept blocks, renewed with the estimate (not saved: a
+    /// restored scale forms it again).
+    #[serde(skip)]
+    law: Option<FLaw>,
 }
 
 impl Scale {
@@ -203,6 +190,7 @@ impl Scale {
             sums: (DMatrix::zeros(d, d), DMatrix::zeros(d, d)),
             since_recompute: 0,
             estimate: None,
+            law: None,
         }
     }
 
@@ -275,6 +263,8 @@ impl Scale {
             None => self.sums.1.clone(),
         };
         per_input /= (b * self.n) as f64;
+        let d = self.sums.0.nrows() as f64;
+        self.law = Some(FLaw::reuse(self.law, d, b as f64 - d + 1.0));
         // A singular Σ̂ (no spread in some direction) leaves the scale without a variance:
         // it stays idle rather than divide by zero.
         self.estimate = second.cholesky().map(|c| (c.inverse(), per_input));
@@ -328,7 +318,8 @@ impl Scale {
             let raw = quadratic_form(sigma_inv, mean).max(0.0);
             let d2 = b - d as f64 + 1.0;
             let f = raw * d2 / (b * d as f64);
-            return Some((f_upper_tail(f, d as f64, d2), raw, self.blocks.len()));
+            let law = FLaw::reuse(self.law, d as f64, d2);
+            return Some((law.upper_tail(f), raw, self.blocks.len()));
         }
         let inv = known_inv?;
         let raw = (self.n as f64 * quadratic_form(inv, mean)).max(0.0);
