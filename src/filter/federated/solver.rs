@@ -69,18 +69,27 @@ pub(super) fn predict_into(
     let top_left = m1 * a.transpose() + m2 * b.transpose();
     let p22 = p.fixed_view::<6, 6>(9, 9);
     out.x = phi * est.x;
-    // Each block symmetrised so that Φ P Φᵀ + Q is exactly symmetric.
-    out.p
-        .fixed_view_mut::<9, 9>(0, 0)
-        .copy_from(&((top_left + top_left.transpose()) * 0.5));
-    out.p.fixed_view_mut::<9, 6>(0, 9).copy_from(&m2);
-    out.p
-        .fixed_view_mut::<6, 9>(9, 0)
-        .copy_from(&m2.transpose());
-    out.p
-        .fixed_view_mut::<6, 6>(9, 9)
-        .copy_from(&((p22 + p22.transpose()) * 0.5));
-    out.p += (trans.q + trans.q.transpose()) * 0.5;
+    // Each block symmetrised so that Φ P Φᵀ + Q is exactly symmetric, then `(Q + Qᵀ)/2`
+    // added: entry by entry, the same operations as the block copies and the matrix sum
+    // without their temporaries.
+    let q = &trans.q;
+    let half_q = |i: usize, j: usize| (q[(i, j)] + q[(j, i)]) * 0.5;
+    for j in 0..9 {
+        for i in 0..9 {
+            out.p[(i, j)] = (top_left[(i, j)] + top_left[(j, i)]) * 0.5 + half_q(i, j);
+        }
+        for i in 9..N {
+            out.p[(i, j)] = m2[(j, i - 9)] + half_q(i, j);
+        }
+    }
+    for j in 9..N {
+        for i in 0..9 {
+            out.p[(i, j)] = m2[(i, j - 9)] + half_q(i, j);
+        }
+        for i in 9..N {
+            out.p[(i, j)] = (p22[(i - 9, j - 9)] + p22[(j - 9, i - 9)]) * 0.5 + half_q(i, j);
+        }
+    }
     finite("predicted state", &out.x)?;
     finite("predicted covariance", &out.p)?;
     Ok(())
@@ -298,7 +307,12 @@ pub(super) fn joseph_update<const M: usize>(
     let u = hp - (s * kt) * 0.5;
     let ktu = kt.transpose() * u;
     est.x += kt.transpose() * r;
-    est.p -= ktu + ktu.transpose();
+    // P − (K U + (K U)ᵀ), entry by entry: the same sums without the transpose's copy.
+    for j in 0..N {
+        for i in 0..N {
+            est.p[(i, j)] -= ktu[(i, j)] + ktu[(j, i)];
+        }
+    }
     finite("updated state", &est.x)?;
     finite("updated covariance", &est.p)
 }
