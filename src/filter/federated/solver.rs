@@ -304,7 +304,13 @@ pub(super) fn joseph_update<const M: usize>(
     let l_inv = inverse_cholesky_factor(&s).ok_or(FilterError::NotPositiveDefinite)?;
     let kt = lower_transpose_times(&l_inv, &lower_times(&l_inv, &hp));
     finite("gain", &kt)?;
-    let u = hp - (s * kt) * 0.5;
+    let skt = s * kt;
+    let mut u = hp;
+    for j in 0..N {
+        for i in 0..M {
+            u[(i, j)] -= skt[(i, j)] * 0.5;
+        }
+    }
     let ktu = kt.transpose() * u;
     est.x += kt.transpose() * r;
     // P − (K U + (K U)ᵀ), entry by entry: the same sums without the transpose's copy.
