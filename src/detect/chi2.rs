@@ -108,10 +108,9 @@ pub fn threshold(dof: u32, p_fa: f64) -> Result<f64, Chi2Error> {
     // Small dof (every drift test's χ²(3) equivalent, one per epoch): the tails from the
     // finite sums of `finite_tails`, several times cheaper than `inc_gamma`'s series and
     // continued fraction.
-    let finite = dof <= FINITE_SUM_MAX_DOF;
     let y = if p_fa < 0.5 {
         upper_quantile_with(a, p_fa, |y| match finite_tails(dof, y) {
-            Some((q, density)) if finite => (q.ln(), density / q),
+            Some((q, density)) => (q.ln(), density / q),
             _ => upper_tail_slope(a, y),
         })
     } else {
@@ -119,7 +118,7 @@ pub fn threshold(dof: u32, p_fa: f64) -> Result<f64, Chi2Error> {
         // well-conditioned one to invert. `1 − Q` is used only where `P ≥ 0.1`, so it
         // loses at most a few bits; below, the series.
         lower_quantile_with(a, 1.0 - p_fa, |y| match finite_tails(dof, y) {
-            Some((q, density)) if finite && q <= 0.9 => {
+            Some((q, density)) if q <= 0.9 => {
                 let p = 1.0 - q;
                 (p.ln(), density * y / p)
             }
@@ -475,15 +474,16 @@ fn upper_quantile(a: f64, p: f64) -> f64 {
 const FINITE_SUM_MAX_DOF: u32 = 12;
 
 /// `(Q(dof/2, y), ρ(y))`, the χ²(dof) survival function at `2y` and the Gamma(dof/2, 1)
-/// density at `y`, for `dof ≥ 1` and `0 < y ≤ 700` (`None` beyond, where `e^{−y}` nears
-/// underflow), from the finite sums — of positive terms, so to a few ulp:
+/// density at `y`, for `1 ≤ dof ≤` [`FINITE_SUM_MAX_DOF`] and `0 < y ≤ 700` (`None`
+/// otherwise: past 700 `e^{−y}` nears underflow), from the finite sums — of positive
+/// terms, so to a few ulp:
 /// - even `dof = 2m`: `Q = e^{−y} Σ_{k<m} y^k/k!`, `ρ = e^{−y} y^{m−1}/(m−1)!`;
 /// - odd `dof = 2m+1`: `Q = erfc(√y) + e^{−y} Σ_{k=1}^{m} y^{k−½}/Γ(k+½)`,
 ///   `ρ = e^{−y} y^{m−½}/Γ(m+½)` (for `m = 0`, `ρ = e^{−y}/√(π y)`).
 ///
-/// The sums have `dof/2` terms, so they are for small dof ([`FINITE_SUM_MAX_DOF`]).
+/// The sums have `dof/2` terms, so they are for small dof only.
 fn finite_tails(dof: u32, y: f64) -> Option<(f64, f64)> {
-    if !(y > 0.0 && y <= 700.0) {
+    if dof > FINITE_SUM_MAX_DOF || !(y > 0.0 && y <= 700.0) {
         return None;
     }
     let m = dof / 2;
