@@ -13,6 +13,21 @@ use crate::filter::kalman::{
     self, FilterError, LinearObservation, LinearTransition, StateEstimate,
 };
 
+/// True when the kernels below may run their AVX2 builds: the CPU has AVX2 and
+/// `NAVGUARD_NO_AVX2` is not set (the switch lets the baseline build be measured on the same
+/// machine). The AVX2 builds perform the same IEEE operations in the same order (no FMA is
+/// enabled and Rust never contracts or reassociates floating point), four lanes at a time
+/// instead of two, so their results are the baseline's to the bit (tested); only the
+/// instruction count changes.
+#[cfg(target_arch = "x86_64")]
+pub(super) fn avx2() -> bool {
+    static AVX2: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *AVX2.get_or_init(|| {
+        std::arch::is_x86_feature_detected!("avx2")
+            && std::env::var_os("NAVGUARD_NO_AVX2").is_none()
+    })
+}
+
 /// `(x, P/β)`.
 pub(super) fn scaled(est: &ErrorEstimate, beta: f64) -> ErrorEstimate {
     StateEstimate {
@@ -26,16 +41,80 @@ pub(super) fn symmetrise<const R: usize>(p: &SMatrix<f64, R, R>) -> SMatrix<f64,
     (p + p.transpose()) * 0.5
 }
 
-/// `Err(NonFinite(what))` unless every entry is finite.
+/// `Err(NonFinite(what))` unless every entry is finite. The entries are all read (no early
+/// exit), which lets the check vectorise: it runs on every covariance the step writes.
+#[inline(always)]
 pub(super) fn finite<const R: usize, const C: usize>(
     what: &'static str,
     m: &SMatrix<f64, R, C>,
 ) -> Result<(), FilterError> {
-    if m.as_slice().iter().all(|v| v.is_finite()) {
+    if m.as_slice().iter().fold(true, |ok, v| ok & v.is_finite()) {
         Ok(())
     } else {
         Err(FilterError::NonFinite(what))
     }
+}
+
+/// `A B` in nalgebra's order of operations (column by column; each entry the `k = 0`
+/// product, then `+= a_ik b_kj` for `k` ascending), so the result is nalgebra's `a * b` to
+/// the bit. Inlined into its caller, so that the caller's AVX2 build vectorises it too
+/// (nalgebra's product is a separate function there, compiled for the baseline).
+#[inline(always)]
+pub(super) fn product<const R: usize, const K: usize, const C: usize, SA, SB>(
+    a: &Matrix<f64, Const<R>, Const<K>, SA>,
+    b: &Matrix<f64, Const<K>, Const<C>, SB>,
+) -> SMatrix<f64, R, C>
+where
+    SA: RawStorage<f64, Const<R>, Const<K>>,
+    SB: RawStorage<f64, Const<K>, Const<C>>,
+{
+    const { assert!(K >= 1, "an empty product") };
+    let mut out = SMatrix::<f64, R, C>::zeros();
+    for j in 0..C {
+        let b0 = b[(0, j)];
+        for i in 0..R {
+            out[(i, j)] = a[(i, 0)] * b0;
+        }
+        for k in 1..K {
+            let bkj = b[(k, j)];
+            for i in 0..R {
+                out[(i, j)] += a[(i, k)] * bkj;
+            }
+        }
+    }
+    out
+}
+
+/// `A₁ B₁ + A₂ B₂` as nalgebra's `a1 * b1 + a2 * b2` computes it (two products, then
+/// their sum), to the bit.
+#[inline(always)]
+pub(super) fn sum_of_products<
+    const R: usize,
+    const K1: usize,
+    const K2: usize,
+    const C: usize,
+    S1,
+    T1,
+    S2,
+    T2,
+>(
+    a1: &Matrix<f64, Const<R>, Const<K1>, S1>,
+    b1: &Matrix<f64, Const<K1>, Const<C>, T1>,
+    a2: &Matrix<f64, Const<R>, Const<K2>, S2>,
+    b2: &Matrix<f64, Const<K2>, Const<C>, T2>,
+) -> SMatrix<f64, R, C>
+where
+    S1: RawStorage<f64, Const<R>, Const<K1>>,
+    T1: RawStorage<f64, Const<K1>, Const<C>>,
+    S2: RawStorage<f64, Const<R>, Const<K2>>,
+    T2: RawStorage<f64, Const<K2>, Const<C>>,
+{
+    let mut out = product(a1, b1);
+    let second = product(a2, b2);
+    for (o, s) in out.as_mut_slice().iter_mut().zip(second.as_slice()) {
+        *o += s;
+    }
+    out
 }
 
 /// [`kalman::predict`] into `out`, with the INS transition's structure used when `Φ` has
@@ -43,8 +122,34 @@ pub(super) fn finite<const R: usize, const C: usize>(
 /// `Φ = [[A, B], [0, I]]` (A 9 × 9, B 9 × 6) `Φ P Φᵀ` needs only
 /// `M₁ = A P₁₁ + B P₂₁`, `M₂ = A P₁₂ + B P₂₂`, top-left `M₁ Aᵀ + M₂ Bᵀ`, top-right `M₂`,
 /// bottom-right `P₂₂` — half the multiplications. Any other `Φ` takes the generic path.
-/// On `Err`, `out` may hold a partial result.
+/// On `Err`, `out` may hold a partial result. Runs the AVX2 build when the CPU has it
+/// ([`avx2`]).
 pub(super) fn predict_into(
+    est: &ErrorEstimate,
+    trans: &LinearTransition<U15>,
+    out: &mut ErrorEstimate,
+) -> Result<(), FilterError> {
+    #[cfg(target_arch = "x86_64")]
+    if avx2() {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        return unsafe { predict_into_avx2(est, trans, out) };
+    }
+    predict_into_body(est, trans, out)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn predict_into_avx2(
+    est: &ErrorEstimate,
+    trans: &LinearTransition<U15>,
+    out: &mut ErrorEstimate,
+) -> Result<(), FilterError> {
+    predict_into_body(est, trans, out)
+}
+
+/// [`predict_into`] in whichever build its caller has.
+#[inline(always)]
+pub(super) fn predict_into_body(
     est: &ErrorEstimate,
     trans: &LinearTransition<U15>,
     out: &mut ErrorEstimate,
@@ -64,11 +169,21 @@ pub(super) fn predict_into(
     let a = phi.fixed_view::<9, 9>(0, 0);
     let b = phi.fixed_view::<9, 6>(0, 9);
     let p = &est.p;
-    let m1 = a * p.fixed_view::<9, 9>(0, 0) + b * p.fixed_view::<6, 9>(9, 0);
-    let m2 = a * p.fixed_view::<9, 6>(0, 9) + b * p.fixed_view::<6, 6>(9, 9);
-    let top_left = m1 * a.transpose() + m2 * b.transpose();
+    let m1 = sum_of_products(
+        &a,
+        &p.fixed_view::<9, 9>(0, 0),
+        &b,
+        &p.fixed_view::<6, 9>(9, 0),
+    );
+    let m2 = sum_of_products(
+        &a,
+        &p.fixed_view::<9, 6>(0, 9),
+        &b,
+        &p.fixed_view::<6, 6>(9, 9),
+    );
+    let top_left = sum_of_products(&m1, &a.transpose(), &m2, &b.transpose());
     let p22 = p.fixed_view::<6, 6>(9, 9);
-    out.x = phi * est.x;
+    out.x = product(phi, &est.x);
     // Each block symmetrised so that Φ P Φᵀ + Q is exactly symmetric, then `(Q + Qᵀ)/2`
     // added: entry by entry, the same operations as the block copies and the matrix sum
     // without their temporaries.
@@ -97,6 +212,7 @@ pub(super) fn predict_into(
 
 /// True when `H`'s bias columns 9..15 are zero (every aid's H): column-major, they are the
 /// last `6·M` entries.
+#[inline(always)]
 pub(super) fn bias_columns_zero<const M: usize>(h: &SMatrix<f64, M, N>) -> bool {
     h.as_slice()[9 * M..].iter().all(|&v| v == 0.0)
 }
@@ -105,6 +221,7 @@ pub(super) fn bias_columns_zero<const M: usize>(h: &SMatrix<f64, M, N>) -> bool 
 /// skipping `H`'s zeros: an aid's row selects one error state, or three for the DVL's
 /// attitude coupling. The sum runs over `H`'s columns in ascending order, as the dense
 /// product's does, so the result is the dense one (to the sign of a zero).
+#[inline(always)]
 fn sparse_h_times<const M: usize, const C: usize, S: RawStorage<f64, Const<N>, Const<C>>>(
     h: &SMatrix<f64, M, N>,
     a: &Matrix<f64, Const<N>, Const<C>, S>,
@@ -125,6 +242,7 @@ fn sparse_h_times<const M: usize, const C: usize, S: RawStorage<f64, Const<N>, C
 
 /// `A Hᵀ` for an `H` whose bias columns are zero, skipping `H`'s zeros (as
 /// [`sparse_h_times`]); only `A`'s first 9 columns are read, so `A` may have just those.
+#[inline(always)]
 fn sparse_times_h_transpose<const R: usize, const C: usize, const M: usize>(
     a: &SMatrix<f64, R, C>,
     h: &SMatrix<f64, M, N>,
@@ -149,8 +267,34 @@ fn sparse_times_h_transpose<const R: usize, const C: usize, const M: usize>(
 /// [`kalman::innovation`] computes for that prior. Returns `λ`, the diagonal of `S⁻¹`
 /// (first M entries), which the HPL slope needs, and the normalised innovation
 /// `ν = L⁻¹ r` (first M entries; `‖ν‖² = λ`), which the consistency diagnostics and the
-/// drift and stuck tests take (docs/methods.md §M22, §M23).
+/// drift and stuck tests take (docs/methods.md §M22, §M23). Runs the AVX2 build when the
+/// CPU has it ([`avx2`]).
 pub(super) fn share_test<const M: usize>(
+    prior: &ErrorEstimate,
+    beta: f64,
+    m: &AidMeasurement<M>,
+) -> Result<ShareTest, FilterError> {
+    #[cfg(target_arch = "x86_64")]
+    if avx2() {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        return unsafe { share_test_avx2(prior, beta, m) };
+    }
+    share_test_body(prior, beta, m)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn share_test_avx2<const M: usize>(
+    prior: &ErrorEstimate,
+    beta: f64,
+    m: &AidMeasurement<M>,
+) -> Result<ShareTest, FilterError> {
+    share_test_body(prior, beta, m)
+}
+
+/// [`share_test`] in whichever build its caller has.
+#[inline(always)]
+pub(super) fn share_test_body<const M: usize>(
     prior: &ErrorEstimate,
     beta: f64,
     m: &AidMeasurement<M>,
@@ -171,7 +315,7 @@ pub(super) fn share_test<const M: usize>(
     finite("innovation covariance", &s)?;
     let l_inv = inverse_cholesky_factor(&s).ok_or(FilterError::NotPositiveDefinite)?;
     // λ = rᵀ (L Lᵀ)⁻¹ r = |L⁻¹ r|², and (S⁻¹)_ii = Σ_k (L⁻¹)_ki² (column norms of L⁻¹).
-    let nu_m = l_inv * r;
+    let nu_m = product(&l_inv, &r);
     let statistic = nu_m.norm_squared();
     if !statistic.is_finite() {
         return Err(FilterError::NonFinite("chi-square statistic"));
@@ -203,6 +347,7 @@ pub(super) struct ShareTest {
 /// `L⁻¹` for the Cholesky factor `S = L Lᵀ` of a small SPD matrix, by plain loops (for
 /// `M ≤ 6` these beat the general factor-and-solve routines several times over); `None`
 /// unless `S` is positive definite.
+#[inline(always)]
 pub(super) fn inverse_cholesky_factor<const M: usize>(
     s: &SMatrix<f64, M, M>,
 ) -> Option<SMatrix<f64, M, M>> {
@@ -243,6 +388,7 @@ pub(super) fn inverse_cholesky_factor<const M: usize>(
 /// `L A` for a lower-triangular `L`, skipping its upper zeros; each sum runs over `k`
 /// ascending, as the dense product's, so the result is the dense one (to the sign of a
 /// zero).
+#[inline(always)]
 fn lower_times<const M: usize, const C: usize>(
     l: &SMatrix<f64, M, M>,
     a: &SMatrix<f64, M, C>,
@@ -260,6 +406,7 @@ fn lower_times<const M: usize, const C: usize>(
 }
 
 /// `Lᵀ A` for a lower-triangular `L`, skipping `Lᵀ`'s lower zeros (as [`lower_times`]).
+#[inline(always)]
 fn lower_transpose_times<const M: usize, const C: usize>(
     l: &SMatrix<f64, M, M>,
     a: &SMatrix<f64, M, C>,
@@ -282,8 +429,32 @@ fn lower_transpose_times<const M: usize, const C: usize>(
 /// `(I − KH) P (I − KH)ᵀ + K R Kᵀ = P − KHP − (KHP)ᵀ + K S Kᵀ = P − (K U + Uᵀ Kᵀ)` — the
 /// same expression as [`kalman::update`]'s (first-order insensitive to errors in K, exactly
 /// symmetric) for about `15²·M` multiplications instead of `2·15³`. On `Err`, `est` may be
-/// partly updated (the caller discards it).
+/// partly updated (the caller discards it). Runs the AVX2 build when the CPU has it
+/// ([`avx2`]).
 pub(super) fn joseph_update<const M: usize>(
+    est: &mut ErrorEstimate,
+    m: &AidMeasurement<M>,
+) -> Result<(), FilterError> {
+    #[cfg(target_arch = "x86_64")]
+    if avx2() {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        return unsafe { joseph_update_avx2(est, m) };
+    }
+    joseph_update_body(est, m)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn joseph_update_avx2<const M: usize>(
+    est: &mut ErrorEstimate,
+    m: &AidMeasurement<M>,
+) -> Result<(), FilterError> {
+    joseph_update_body(est, m)
+}
+
+/// [`joseph_update`] in whichever build its caller has.
+#[inline(always)]
+pub(super) fn joseph_update_body<const M: usize>(
     est: &mut ErrorEstimate,
     m: &AidMeasurement<M>,
 ) -> Result<(), FilterError> {
@@ -304,15 +475,16 @@ pub(super) fn joseph_update<const M: usize>(
     let l_inv = inverse_cholesky_factor(&s).ok_or(FilterError::NotPositiveDefinite)?;
     let kt = lower_transpose_times(&l_inv, &lower_times(&l_inv, &hp));
     finite("gain", &kt)?;
-    let skt = s * kt;
+    let skt = product(&s, &kt);
     let mut u = hp;
     for j in 0..N {
         for i in 0..M {
             u[(i, j)] -= skt[(i, j)] * 0.5;
         }
     }
-    let ktu = kt.transpose() * u;
-    est.x += kt.transpose() * r;
+    let k = kt.transpose();
+    let ktu = product(&k, &u);
+    est.x += product(&k, &r);
     // P − (K U + (K U)ᵀ), entry by entry: the same sums without the transpose's copy.
     for j in 0..N {
         for i in 0..N {
@@ -366,7 +538,33 @@ pub(super) fn fuse_estimates(
 
 /// HPL slope of one aid: `K_h = (P_g H_iᵀ R_i⁻¹)` rows east and north, and the diagonal of the
 /// local test's `S⁻¹`. `R` is diagonal for every aid model (then `R⁻¹` is a division).
+/// Runs the AVX2 build when the CPU has it ([`avx2`]).
 pub(super) fn fused_slope<const M: usize>(
+    p_g: &ErrorMatrix,
+    m: &AidMeasurement<M>,
+    s_inv: &SVector<f64, 6>,
+) -> Result<f64, hpl::HplError> {
+    #[cfg(target_arch = "x86_64")]
+    if avx2() {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        return unsafe { fused_slope_avx2(p_g, m, s_inv) };
+    }
+    fused_slope_body(p_g, m, s_inv)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn fused_slope_avx2<const M: usize>(
+    p_g: &ErrorMatrix,
+    m: &AidMeasurement<M>,
+    s_inv: &SVector<f64, 6>,
+) -> Result<f64, hpl::HplError> {
+    fused_slope_body(p_g, m, s_inv)
+}
+
+/// [`fused_slope`] in whichever build its caller has.
+#[inline(always)]
+pub(super) fn fused_slope_body<const M: usize>(
     p_g: &ErrorMatrix,
     m: &AidMeasurement<M>,
     s_inv: &SVector<f64, 6>,

@@ -1,7 +1,10 @@
 //! Tests of the federated filter: the fast kernels against the generic Kalman filter,
 //! fusion against the information form, and the filter's behaviour under faults.
 
-use super::solver::{bias_columns_zero, inverse_cholesky_factor, kalman_update};
+use super::solver::{
+    bias_columns_zero, fused_slope_body, inverse_cholesky_factor, joseph_update_body,
+    kalman_update, predict_into_body, product, share_test_body, sum_of_products,
+};
 use super::*;
 use crate::detect::{Health, PolicyConfig, PolicyState};
 use crate::epoch::InsBlock;
@@ -260,6 +263,103 @@ fn fast_kernels_equal_the_generic_kalman_filter() {
             assert_state_close(&fast.x, &reference.x, &reference.p, 1e-10);
             est = reference;
         });
+    }
+}
+
+#[test]
+fn the_inlined_products_equal_nalgebras_to_the_bit() {
+    // Same operations in the same order as nalgebra's `*` (and `a1 * b1 + a2 * b2`), so
+    // every bit agrees, signed zeros included.
+    fn same<const R: usize, const C: usize>(a: &SMatrix<f64, R, C>, b: &SMatrix<f64, R, C>) {
+        let bits = |m: &SMatrix<f64, R, C>| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(a), bits(b));
+    }
+    let mut rng = StdRng::seed_from_u64(22);
+    let mut u = || {
+        let v: f64 = rng.sample(StandardNormal);
+        // Some exact zeros and negative zeros, as Φ and H have.
+        match (v.abs() * 10.0) as u32 % 7 {
+            0 => 0.0,
+            1 => -0.0,
+            _ => v * 10f64.powi((v * 3.0) as i32),
+        }
+    };
+    for _ in 0..50 {
+        let p = ErrorMatrix::from_fn(|_, _| u());
+        let phi = ErrorMatrix::from_fn(|_, _| u());
+        let (a, b) = (phi.fixed_view::<9, 9>(0, 0), phi.fixed_view::<9, 6>(0, 9));
+        let m1 = sum_of_products(
+            &a,
+            &p.fixed_view::<9, 9>(0, 0),
+            &b,
+            &p.fixed_view::<6, 9>(9, 0),
+        );
+        same(
+            &m1,
+            &(a * p.fixed_view::<9, 9>(0, 0) + b * p.fixed_view::<6, 9>(9, 0)),
+        );
+        let m2 = SMatrix::<f64, 9, 6>::from_fn(|_, _| u());
+        same(
+            &sum_of_products(&m1, &a.transpose(), &m2, &b.transpose()),
+            &(m1 * a.transpose() + m2 * b.transpose()),
+        );
+        let x = ErrorVector::from_fn(|_, _| u());
+        same(&product(&phi, &x), &(phi * x));
+        let kt = SMatrix::<f64, 6, 15>::from_fn(|_, _| u());
+        let s = SMatrix::<f64, 6, 6>::from_fn(|_, _| u());
+        same(&product(&s, &kt), &(s * kt));
+        same(&product(&kt.transpose(), &kt), &(kt.transpose() * kt));
+    }
+}
+
+#[test]
+fn the_dispatched_kernels_equal_the_baseline_build_to_the_bit() {
+    // `predict_into`, `share_test`, `joseph_update` and `fused_slope` run their AVX2 builds
+    // on a CPU with AVX2; the `_body` functions called from here are the baseline build
+    // (this test function has no target features). Same operations in the same order, so
+    // the results must be identical, not merely close. On a CPU without AVX2 both sides
+    // are the baseline and the test holds trivially.
+    let mut rng = StdRng::seed_from_u64(21);
+    let nav = ship();
+    for k in 0..30 {
+        // Dense Φ and H take the generic paths; the INS Φ and the aids' H the structured ones.
+        let (dense, dense_obs) = synthetic(&mut rng);
+        let dt = [0.1, 1.0, 2.5][k % 3];
+        let ins = ins_transition(&nav, &ImuErrors::default(), dt).unwrap();
+        let a = ErrorMatrix::from_fn(|_, _| rng.random::<f64>() - 0.5);
+        let scales = ErrorVector::from_fn(|i, _| [30.0, 0.3, 1e-3, 1e-4, 1e-6][i / 3]);
+        let est = StateEstimate {
+            x: ErrorVector::from_fn(|i, _| scales[i] * (rng.random::<f64>() - 0.5)),
+            p: ErrorMatrix::from_fn(|i, j| scales[i] * scales[j])
+                .component_mul(&(a * a.transpose() + ErrorMatrix::identity())),
+        };
+        for trans in [&dense, &ins] {
+            let (mut fast, mut base) = (est.clone(), est.clone());
+            predict_into(&est, trans, &mut fast).unwrap();
+            predict_into_body(&est, trans, &mut base).unwrap();
+            assert_eq!(fast, base, "prediction, step {k}");
+        }
+        let mut prior = est.clone();
+        predict_into_body(&est, &ins, &mut prior).unwrap();
+        let truth = ErrorVector::from_fn(|i, _| scales[i] * (rng.random::<f64>() - 0.5));
+        let aids = aid_observations(&nav, &truth, Some(&mut rng));
+        for o in aids.iter().chain(dense_obs.iter()).flatten() {
+            with_measurement!(o, m => {
+                let fast = share_test(&prior, 0.3, m).unwrap();
+                let base = share_test_body(&prior, 0.3, m).unwrap();
+                assert_eq!(fast.statistic.to_bits(), base.statistic.to_bits());
+                assert_eq!((fast.s_inv, fast.nu), (base.s_inv, base.nu));
+                let s_inv = SVector::<f64, 6>::from_fn(|i, _| 1.0 + i as f64);
+                let fast = fused_slope(&prior.p, m, &s_inv).unwrap();
+                let base = fused_slope_body(&prior.p, m, &s_inv).unwrap();
+                assert_eq!(fast.to_bits(), base.to_bits());
+                let (mut fast, mut base) = (prior.clone(), prior.clone());
+                joseph_update(&mut fast, m).unwrap();
+                joseph_update_body(&mut base, m).unwrap();
+                assert_eq!(fast, base, "Joseph update, step {k}");
+                prior = base;
+            });
+        }
     }
 }
 
