@@ -562,7 +562,7 @@ impl WindowTest {
             // vector sum `r + Σ x` does.
             mean.copy_from_slice(r);
             for x in self.window.iter().skip(held + 1 - scale.n) {
-                for (m, v) in mean.iter_mut().zip(x.iter()) {
+                for (m, v) in mean.iter_mut().zip(x.as_slice()) {
                     *m += v;
                 }
             }

@@ -569,7 +569,9 @@ pub(super) fn fused_slope_body<const M: usize>(
     m: &AidMeasurement<M>,
     s_inv: &SVector<f64, 6>,
 ) -> Result<f64, hpl::HplError> {
-    let ph: SMatrix<f64, N, 2> = p_g.fixed_columns::<2>(POS).into_owned();
+    // Entry by entry: a view's `into_owned` goes through nalgebra's iterator, several times
+    // slower than the copy.
+    let ph = SMatrix::<f64, N, 2>::from_fn(|i, j| p_g[(i, POS + j)]);
     // M × 2 = (P_g[h, :] Hᵀ)ᵀ
     let hph = if bias_columns_zero(&m.obs.h) {
         sparse_h_times(&m.obs.h, &ph)
@@ -585,6 +587,6 @@ pub(super) fn fused_slope_body<const M: usize>(
         let chol = r.cholesky().ok_or(hpl::HplError::NotPositiveDefinite)?;
         chol.solve(&hph)
     };
-    let d: SVector<f64, M> = s_inv.fixed_rows::<M>(0).into_owned();
+    let d = SVector::<f64, M>::from_fn(|i, _| s_inv[i]);
     hpl::slope_max_with::<M>(&k_h_t.transpose(), &d)
 }
