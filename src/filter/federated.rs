@@ -47,7 +47,10 @@
 //! [`kalman::update`] in kernels that exploit the INS structure (tested equal to them to
 //! rounding): the prediction uses `Φ`'s constant bias rows, every aid's `H` has zero bias
 //! columns, the Joseph form is written out as a rank-`M` correction, and the two state
-//! buffers are flipped on commit rather than copied. Nothing is allocated per epoch.
+//! buffers are flipped on commit rather than copied. Nothing is allocated per epoch. The
+//! kernels run a second, AVX2 build of themselves when the CPU has it (a runtime check;
+//! the same IEEE operations in the same order, so the same results to the bit, tested).
+//! `NAVGUARD_NO_AVX2` set in the environment keeps them on the baseline build.
 
 use nalgebra::{SVector, U15};
 use serde::{Deserialize, Serialize};
