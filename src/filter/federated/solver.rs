@@ -28,6 +28,33 @@ pub(super) fn avx2() -> bool {
     })
 }
 
+/// Defines `$name`, which runs `$body` compiled a second time for AVX2 (`$avx2`) when
+/// [`avx2`] allows it and the baseline build of `$body` otherwise. `$body` is
+/// `#[inline(always)]`, so each wrapper holds its own build of it.
+macro_rules! avx2_dispatch {
+    (
+        $(#[$doc:meta])*
+        fn $name:ident $(<const $c:ident: usize>)? ($($arg:ident: $ty:ty),* $(,)?) -> $ret:ty
+        => $avx2:ident, $body:ident
+    ) => {
+        $(#[$doc])*
+        pub(super) fn $name $(<const $c: usize>)? ($($arg: $ty),*) -> $ret {
+            #[cfg(target_arch = "x86_64")]
+            if avx2() {
+                // SAFETY: the CPU supports AVX2 (checked just above).
+                return unsafe { $avx2($($arg),*) };
+            }
+            $body($($arg),*)
+        }
+
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2")]
+        fn $avx2 $(<const $c: usize>)? ($($arg: $ty),*) -> $ret {
+            $body($($arg),*)
+        }
+    };
+}
+
 /// `(x, P/β)`.
 pub(super) fn scaled(est: &ErrorEstimate, beta: f64) -> ErrorEstimate {
     StateEstimate {
@@ -117,34 +144,20 @@ where
     out
 }
 
-/// [`kalman::predict`] into `out`, with the INS transition's structure used when `Φ` has
-/// it: the bias rows of an INS `Φ` are `[0 I]` (biases are random constants), so with
-/// `Φ = [[A, B], [0, I]]` (A 9 × 9, B 9 × 6) `Φ P Φᵀ` needs only
-/// `M₁ = A P₁₁ + B P₂₁`, `M₂ = A P₁₂ + B P₂₂`, top-left `M₁ Aᵀ + M₂ Bᵀ`, top-right `M₂`,
-/// bottom-right `P₂₂` — half the multiplications. Any other `Φ` takes the generic path.
-/// On `Err`, `out` may hold a partial result. Runs the AVX2 build when the CPU has it
-/// ([`avx2`]).
-pub(super) fn predict_into(
-    est: &ErrorEstimate,
-    trans: &LinearTransition<U15>,
-    out: &mut ErrorEstimate,
-) -> Result<(), FilterError> {
-    #[cfg(target_arch = "x86_64")]
-    if avx2() {
-        // SAFETY: the CPU supports AVX2 (checked just above).
-        return unsafe { predict_into_avx2(est, trans, out) };
-    }
-    predict_into_body(est, trans, out)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn predict_into_avx2(
-    est: &ErrorEstimate,
-    trans: &LinearTransition<U15>,
-    out: &mut ErrorEstimate,
-) -> Result<(), FilterError> {
-    predict_into_body(est, trans, out)
+avx2_dispatch! {
+    /// [`kalman::predict`] into `out`, with the INS transition's structure used when `Φ` has
+    /// it: the bias rows of an INS `Φ` are `[0 I]` (biases are random constants), so with
+    /// `Φ = [[A, B], [0, I]]` (A 9 × 9, B 9 × 6) `Φ P Φᵀ` needs only
+    /// `M₁ = A P₁₁ + B P₂₁`, `M₂ = A P₁₂ + B P₂₂`, top-left `M₁ Aᵀ + M₂ Bᵀ`, top-right `M₂`,
+    /// bottom-right `P₂₂` — half the multiplications. Any other `Φ` takes the generic path.
+    /// On `Err`, `out` may hold a partial result. Runs the AVX2 build when the CPU has it
+    /// ([`avx2`]).
+    fn predict_into(
+        est: &ErrorEstimate,
+        trans: &LinearTransition<U15>,
+        out: &mut ErrorEstimate,
+    ) -> Result<(), FilterError>
+    => predict_into_avx2, predict_into_body
 }
 
 /// [`predict_into`] in whichever build its caller has.
@@ -262,34 +275,20 @@ fn sparse_times_h_transpose<const R: usize, const C: usize, const M: usize>(
     out
 }
 
-/// The local test of `m` against the prior `(x, P/β)` without forming `P/β`:
-/// `r = z − H x`, `S = H P Hᵀ / β + R`, `λ = |L⁻¹ r|²` with `S = L Lᵀ` — what
-/// [`kalman::innovation`] computes for that prior. Returns `λ`, the diagonal of `S⁻¹`
-/// (first M entries), which the HPL slope needs, and the normalised innovation
-/// `ν = L⁻¹ r` (first M entries; `‖ν‖² = λ`), which the consistency diagnostics and the
-/// drift and stuck tests take (docs/methods.md §M22, §M23). Runs the AVX2 build when the
-/// CPU has it ([`avx2`]).
-pub(super) fn share_test<const M: usize>(
-    prior: &ErrorEstimate,
-    beta: f64,
-    m: &AidMeasurement<M>,
-) -> Result<ShareTest, FilterError> {
-    #[cfg(target_arch = "x86_64")]
-    if avx2() {
-        // SAFETY: the CPU supports AVX2 (checked just above).
-        return unsafe { share_test_avx2(prior, beta, m) };
-    }
-    share_test_body(prior, beta, m)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn share_test_avx2<const M: usize>(
-    prior: &ErrorEstimate,
-    beta: f64,
-    m: &AidMeasurement<M>,
-) -> Result<ShareTest, FilterError> {
-    share_test_body(prior, beta, m)
+avx2_dispatch! {
+    /// The local test of `m` against the prior `(x, P/β)` without forming `P/β`:
+    /// `r = z − H x`, `S = H P Hᵀ / β + R`, `λ = |L⁻¹ r|²` with `S = L Lᵀ` — what
+    /// [`kalman::innovation`] computes for that prior. Returns `λ`, the diagonal of `S⁻¹`
+    /// (first M entries), which the HPL slope needs, and the normalised innovation
+    /// `ν = L⁻¹ r` (first M entries; `‖ν‖² = λ`), which the consistency diagnostics and the
+    /// drift and stuck tests take (docs/methods.md §M22, §M23). Runs the AVX2 build when the
+    /// CPU has it ([`avx2`]).
+    fn share_test<const M: usize>(
+        prior: &ErrorEstimate,
+        beta: f64,
+        m: &AidMeasurement<M>,
+    ) -> Result<ShareTest, FilterError>
+    => share_test_avx2, share_test_body
 }
 
 /// [`share_test`] in whichever build its caller has.
@@ -424,32 +423,19 @@ fn lower_transpose_times<const M: usize, const C: usize>(
     out
 }
 
-/// The Kalman update of `est` by `m`, in place, with the Joseph form written out. With
-/// `S = HPHᵀ + R`, `Kᵀ = S⁻¹ H P` and `U = HP − ½ S Kᵀ`:
-/// `(I − KH) P (I − KH)ᵀ + K R Kᵀ = P − KHP − (KHP)ᵀ + K S Kᵀ = P − (K U + Uᵀ Kᵀ)` — the
-/// same expression as [`kalman::update`]'s (first-order insensitive to errors in K, exactly
-/// symmetric) for about `15²·M` multiplications instead of `2·15³`. On `Err`, `est` may be
-/// partly updated (the caller discards it). Runs the AVX2 build when the CPU has it
-/// ([`avx2`]).
-pub(super) fn joseph_update<const M: usize>(
-    est: &mut ErrorEstimate,
-    m: &AidMeasurement<M>,
-) -> Result<(), FilterError> {
-    #[cfg(target_arch = "x86_64")]
-    if avx2() {
-        // SAFETY: the CPU supports AVX2 (checked just above).
-        return unsafe { joseph_update_avx2(est, m) };
-    }
-    joseph_update_body(est, m)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn joseph_update_avx2<const M: usize>(
-    est: &mut ErrorEstimate,
-    m: &AidMeasurement<M>,
-) -> Result<(), FilterError> {
-    joseph_update_body(est, m)
+avx2_dispatch! {
+    /// The Kalman update of `est` by `m`, in place, with the Joseph form written out. With
+    /// `S = HPHᵀ + R`, `Kᵀ = S⁻¹ H P` and `U = HP − ½ S Kᵀ`:
+    /// `(I − KH) P (I − KH)ᵀ + K R Kᵀ = P − KHP − (KHP)ᵀ + K S Kᵀ = P − (K U + Uᵀ Kᵀ)` — the
+    /// same expression as [`kalman::update`]'s (first-order insensitive to errors in K, exactly
+    /// symmetric) for about `15²·M` multiplications instead of `2·15³`. On `Err`, `est` may be
+    /// partly updated (the caller discards it). Runs the AVX2 build when the CPU has it
+    /// ([`avx2`]).
+    fn joseph_update<const M: usize>(
+        est: &mut ErrorEstimate,
+        m: &AidMeasurement<M>,
+    ) -> Result<(), FilterError>
+    => joseph_update_avx2, joseph_update_body
 }
 
 /// [`joseph_update`] in whichever build its caller has.
@@ -536,30 +522,17 @@ pub(super) fn fuse_estimates(
     })
 }
 
-/// HPL slope of one aid: `K_h = (P_g H_iᵀ R_i⁻¹)` rows east and north, and the diagonal of the
-/// local test's `S⁻¹`. `R` is diagonal for every aid model (then `R⁻¹` is a division).
-/// Runs the AVX2 build when the CPU has it ([`avx2`]).
-pub(super) fn fused_slope<const M: usize>(
-    p_g: &ErrorMatrix,
-    m: &AidMeasurement<M>,
-    s_inv: &SVector<f64, 6>,
-) -> Result<f64, hpl::HplError> {
-    #[cfg(target_arch = "x86_64")]
-    if avx2() {
-        // SAFETY: the CPU supports AVX2 (checked just above).
-        return unsafe { fused_slope_avx2(p_g, m, s_inv) };
-    }
-    fused_slope_body(p_g, m, s_inv)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn fused_slope_avx2<const M: usize>(
-    p_g: &ErrorMatrix,
-    m: &AidMeasurement<M>,
-    s_inv: &SVector<f64, 6>,
-) -> Result<f64, hpl::HplError> {
-    fused_slope_body(p_g, m, s_inv)
+avx2_dispatch! {
+    /// HPL slope of one aid: `K_h = (P_g H_iᵀ R_i⁻¹)` rows east and north, and the diagonal of the
+    /// local test's `S⁻¹`. `R` is diagonal for every aid model (then `R⁻¹` is a division).
+    /// Runs the AVX2 build when the CPU has it ([`avx2`]).
+    fn fused_slope<const M: usize>(
+        p_g: &ErrorMatrix,
+        m: &AidMeasurement<M>,
+        s_inv: &SVector<f64,
+        6>,
+    ) -> Result<f64, hpl::HplError>
+    => fused_slope_avx2, fused_slope_body
 }
 
 /// [`fused_slope`] in whichever build its caller has.
