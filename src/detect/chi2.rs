@@ -549,9 +549,10 @@ fn upper_quantile_with(a: f64, p: f64, tail: impl Fn(f64) -> (f64, f64)) -> f64 
             hi = y;
         }
         // Halley: f'' / f' = (a − 1)/y − 1 + ρ/Q (ρ' = ρ ((a − 1)/y − 1), Q' = −ρ).
-        let mut next = y - halley_step(f / slope, (a - 1.0) / y - 1.0 + slope);
-        let halley = next > lo && next < hi;
-        if !halley {
+        let (correction, halley) = halley_step(f / slope, (a - 1.0) / y - 1.0 + slope);
+        let mut next = y - correction;
+        let inside = next > lo && next < hi;
+        if !inside {
             next = if hi.is_finite() {
                 0.5 * (lo + hi)
             } else {
@@ -562,7 +563,7 @@ fn upper_quantile_with(a: f64, p: f64, tail: impl Fn(f64) -> (f64, f64)) -> f64 
         // A Halley step that moves ln Q by δ leaves an error in ln Q of order δ³: below
         // `CONVERGED_STEP` that is under the last bit, so no further evaluation is needed.
         let done = step <= 4.0 * f64::EPSILON * y
-            || (halley && step * slope <= CONVERGED_STEP)
+            || (halley && inside && step * slope <= CONVERGED_STEP)
             || next == lo
             || next == hi;
         y = next;
@@ -579,14 +580,14 @@ fn upper_quantile_with(a: f64, p: f64, tail: impl Fn(f64) -> (f64, f64)) -> f64 
 const CONVERGED_STEP: f64 = 1e-7;
 
 /// Halley's correction from the Newton correction `t = f/f'` and `c = f''/f'`:
-/// `t / (1 − t c / 2)`, or `t` itself when the denominator is not comfortably positive
-/// (far from the root, where Newton and the bracket are safer).
-fn halley_step(t: f64, c: f64) -> f64 {
+/// `(t / (1 − t c / 2), true)`, or `(t, false)` (Newton's) when the denominator is not
+/// comfortably positive (far from the root, where Newton and the bracket are safer).
+fn halley_step(t: f64, c: f64) -> (f64, bool) {
     let denominator = 1.0 - 0.5 * t * c;
     if denominator > 0.5 && denominator < 2.0 {
-        t / denominator
+        (t / denominator, true)
     } else {
-        t
+        (t, false)
     }
 }
 
@@ -618,14 +619,15 @@ fn lower_quantile_with(a: f64, q: f64, tail: impl Fn(f64) -> (f64, f64)) -> f64 
             hi = u;
         }
         // Halley in u: with w = y ρ/P, d²(ln P)/du² = w (a − y − w).
-        let mut next = u - halley_step(f / slope, a - y - slope);
-        let halley = next > lo && next < hi;
-        if !halley {
+        let (correction, halley) = halley_step(f / slope, a - y - slope);
+        let mut next = u - correction;
+        let inside = next > lo && next < hi;
+        if !inside {
             next = 0.5 * (lo + hi);
         }
         let step = (next - u).abs();
         let done = step <= 2.0 * f64::EPSILON
-            || (halley && step * slope <= CONVERGED_STEP)
+            || (halley && inside && step * slope <= CONVERGED_STEP)
             || next == lo
             || next == hi;
         u = next;
