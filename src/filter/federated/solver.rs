@@ -112,38 +112,6 @@ where
     out
 }
 
-/// `A₁ B₁ + A₂ B₂` as nalgebra's `a1 * b1 + a2 * b2` computes it (two products, then
-/// their sum), to the bit.
-#[inline(always)]
-pub(super) fn sum_of_products<
-    const R: usize,
-    const K1: usize,
-    const K2: usize,
-    const C: usize,
-    S1,
-    T1,
-    S2,
-    T2,
->(
-    a1: &Matrix<f64, Const<R>, Const<K1>, S1>,
-    b1: &Matrix<f64, Const<K1>, Const<C>, T1>,
-    a2: &Matrix<f64, Const<R>, Const<K2>, S2>,
-    b2: &Matrix<f64, Const<K2>, Const<C>, T2>,
-) -> SMatrix<f64, R, C>
-where
-    S1: RawStorage<f64, Const<R>, Const<K1>>,
-    T1: RawStorage<f64, Const<K1>, Const<C>>,
-    S2: RawStorage<f64, Const<R>, Const<K2>>,
-    T2: RawStorage<f64, Const<K2>, Const<C>>,
-{
-    let mut out = product(a1, b1);
-    let second = product(a2, b2);
-    for (o, s) in out.as_mut_slice().iter_mut().zip(second.as_slice()) {
-        *o += s;
-    }
-    out
-}
-
 avx2_dispatch! {
     /// [`kalman::predict`] into `out`, with the INS transition's structure used when `Φ` has
     /// it: the bias rows of an INS `Φ` are `[0 I]` (biases are random constants), so with
@@ -182,19 +150,9 @@ pub(super) fn predict_into_body(
     let a = phi.fixed_view::<9, 9>(0, 0);
     let b = phi.fixed_view::<9, 6>(0, 9);
     let p = &est.p;
-    let m1 = sum_of_products(
-        &a,
-        &p.fixed_view::<9, 9>(0, 0),
-        &b,
-        &p.fixed_view::<6, 9>(9, 0),
-    );
-    let m2 = sum_of_products(
-        &a,
-        &p.fixed_view::<9, 6>(0, 9),
-        &b,
-        &p.fixed_view::<6, 6>(9, 9),
-    );
-    let top_left = sum_of_products(&m1, &a.transpose(), &m2, &b.transpose());
+    let m1 = product(&a, &p.fixed_view::<9, 9>(0, 0)) + product(&b, &p.fixed_view::<6, 9>(9, 0));
+    let m2 = product(&a, &p.fixed_view::<9, 6>(0, 9)) + product(&b, &p.fixed_view::<6, 6>(9, 9));
+    let top_left = product(&m1, &a.transpose()) + product(&m2, &b.transpose());
     let p22 = p.fixed_view::<6, 6>(9, 9);
     out.x = product(phi, &est.x);
     // Each block symmetrised so that Φ P Φᵀ + Q is exactly symmetric, then `(Q + Qᵀ)/2`

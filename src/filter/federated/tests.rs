@@ -3,7 +3,7 @@
 
 use super::solver::{
     bias_columns_zero, fused_slope_body, inverse_cholesky_factor, joseph_update_body,
-    kalman_update, predict_into_body, product, share_test_body, sum_of_products,
+    kalman_update, predict_into_body, product, share_test_body,
 };
 use super::*;
 use crate::detect::{Health, PolicyConfig, PolicyState};
@@ -268,7 +268,7 @@ fn fast_kernels_equal_the_generic_kalman_filter() {
 
 #[test]
 fn the_inlined_products_equal_nalgebras_to_the_bit() {
-    // Same operations in the same order as nalgebra's `*` (and `a1 * b1 + a2 * b2`), so
+    // Same operations in the same order as nalgebra's `*` (also inside `a1 * b1 + a2 * b2`), so
     // every bit agrees, signed zeros included.
     fn same<const R: usize, const C: usize>(a: &SMatrix<f64, R, C>, b: &SMatrix<f64, R, C>) {
         let bits = |m: &SMatrix<f64, R, C>| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
@@ -288,19 +288,15 @@ fn the_inlined_products_equal_nalgebras_to_the_bit() {
         let p = ErrorMatrix::from_fn(|_, _| u());
         let phi = ErrorMatrix::from_fn(|_, _| u());
         let (a, b) = (phi.fixed_view::<9, 9>(0, 0), phi.fixed_view::<9, 6>(0, 9));
-        let m1 = sum_of_products(
-            &a,
-            &p.fixed_view::<9, 9>(0, 0),
-            &b,
-            &p.fixed_view::<6, 9>(9, 0),
-        );
+        let m1 =
+            product(&a, &p.fixed_view::<9, 9>(0, 0)) + product(&b, &p.fixed_view::<6, 9>(9, 0));
         same(
             &m1,
             &(a * p.fixed_view::<9, 9>(0, 0) + b * p.fixed_view::<6, 9>(9, 0)),
         );
         let m2 = SMatrix::<f64, 9, 6>::from_fn(|_, _| u());
         same(
-            &sum_of_products(&m1, &a.transpose(), &m2, &b.transpose()),
+            &(product(&m1, &a.transpose()) + product(&m2, &b.transpose())),
             &(m1 * a.transpose() + m2 * b.transpose()),
         );
         let x = ErrorVector::from_fn(|_, _| u());
