@@ -199,6 +199,21 @@ pub fn discretize(
 /// `C diag(q_g) Cᵀ Δt` on φ and `C diag(q_a) Cᵀ Δt` on δv.
 #[inline]
 pub fn transition(nav: &NavSolution, imu: &ImuErrors, dt: f64) -> (ErrorMatrix, ErrorMatrix) {
+    let (mut phi, mut q) = (ErrorMatrix::zeros(), ErrorMatrix::zeros());
+    transition_into(nav, imu, dt, &mut phi, &mut q);
+    (phi, q)
+}
+
+/// [`transition`] written into `phi` and `q` (whatever they held): a 15 × 15 pair returned
+/// by value is copied on its way out, which the federated step's 10 Hz path avoids.
+#[inline]
+pub fn transition_into(
+    nav: &NavSolution,
+    imu: &ImuErrors,
+    dt: f64,
+    phi: &mut ErrorMatrix,
+    q: &mut ErrorMatrix,
+) {
     let w_ie = geo::earth_rate_enu(nav.lla.lat);
     let w_en = geo::transport_rate_enu(nav.lla.lat, nav.lla.h, &nav.vel);
     let a = -geo::skew(&(w_ie + w_en));
@@ -206,7 +221,12 @@ pub fn transition(nav: &NavSolution, imu: &ImuErrors, dt: f64) -> (ErrorMatrix, 
     let b = geo::skew(&nav.f_n);
     let c = nav.c_bn;
     let (h1, h2) = (dt, 0.5 * dt * dt);
-    let mut phi = ErrorMatrix::identity();
+    // Through the slice: nalgebra's `fill` walks its strided iterator, ~10 instructions
+    // an entry.
+    phi.as_mut_slice().fill(0.0);
+    for i in 0..N {
+        phi[(i, i)] = 1.0;
+    }
     let mut put = |row: usize, col: usize, m: Matrix3<f64>| {
         let mut blk = phi.fixed_view_mut::<3, 3>(row, col);
         blk += m;
@@ -220,7 +240,7 @@ pub fn transition(nav: &NavSolution, imu: &ImuErrors, dt: f64) -> (ErrorMatrix, 
     put(POS, ATT, b * h2);
     put(POS, VEL, Matrix3::identity() * h1 + v * h2);
     put(POS, ACC, c * h2);
-    let mut q = ErrorMatrix::zeros();
+    q.as_mut_slice().fill(0.0);
     let block = |psd: f64| {
         let m = c * Matrix3::from_diagonal_element(psd * dt) * c.transpose();
         (m + m.transpose()) * 0.5
@@ -229,7 +249,6 @@ pub fn transition(nav: &NavSolution, imu: &ImuErrors, dt: f64) -> (ErrorMatrix, 
         .copy_from(&block(imu.gyro_noise_psd()));
     q.fixed_view_mut::<3, 3>(VEL, VEL)
         .copy_from(&block(imu.accel_noise_psd()));
-    (phi, q)
 }
 
 #[cfg(test)]

@@ -127,6 +127,11 @@ pub struct FederatedMonitor {
     /// Time of the last INS epoch.
     last_t: Option<f64>,
     outputs: Outputs,
+    /// Working buffers of a step, written in place rather than moved (3.6 kB and 1 kB per
+    /// epoch): the transition, and each aid's previewed tests until the commit. Neither is
+    /// state; a checkpoint does not save them.
+    trans: LinearTransition<nalgebra::U15>,
+    pending: Previews,
 }
 
 impl FederatedMonitor {
@@ -180,6 +185,11 @@ impl FederatedMonitor {
                 hpl: None,
                 isolated: Vec::new(),
             },
+            trans: LinearTransition {
+                f: ErrorMatrix::identity(),
+                q: ErrorMatrix::zeros(),
+            },
+            pending: [None, None, None],
         })
     }
 
@@ -243,39 +253,39 @@ impl FederatedMonitor {
             .collect()
     }
 
-    /// The transition since the last INS epoch and whether the filter restarts (module
-    /// doc, Epochs): a first epoch, a gap over [`MAX_GAP_S`] or time going back restarts
-    /// with `Φ = I`, `Q = 0`; otherwise [`federated::ins_transition`] over `dt`.
-    fn transition(
-        &self,
-        nav: &NavSolution,
-        t: f64,
-    ) -> Result<(LinearTransition<nalgebra::U15>, bool), StepError> {
+    /// The transition since the last INS epoch, into `self.trans`, and whether the filter
+    /// restarts (module doc, Epochs): a first epoch, a gap over [`MAX_GAP_S`] or time going
+    /// back restarts with `Φ = I`, `Q = 0`; otherwise [`federated::ins_transition`] over `dt`.
+    fn transition(&mut self, nav: &NavSolution, t: f64) -> Result<bool, StepError> {
         let dt = self.last_t.map(|last| t - last);
         let restart = !matches!(dt, Some(d) if (0.0..=MAX_GAP_S).contains(&d));
-        let trans = if restart {
-            LinearTransition {
-                f: ErrorMatrix::identity(),
-                q: ErrorMatrix::zeros(),
-            }
+        if restart {
+            self.trans.f = ErrorMatrix::identity();
+            self.trans.q = ErrorMatrix::zeros();
         } else {
-            federated::ins_transition(nav, &self.config.imu, dt.unwrap_or(0.0))
-                .map_err(|_| FilterError::NonFinite("prediction interval"))?
-        };
-        Ok((trans, restart))
+            federated::ins_transition_into(
+                nav,
+                &self.config.imu,
+                dt.unwrap_or(0.0),
+                &mut self.trans,
+            )
+            .map_err(|_| FilterError::NonFinite("prediction interval"))?;
+        }
+        Ok(restart)
     }
 
-    /// The federated filter's epoch, its state left pending. Each aid's tests go through
-    /// their policies with [`TestBank::preview`] (module doc, Tests: the filter follows
-    /// their combined decision); the previews are returned for the commit, so nothing in the
-    /// bank or the guards changes until the whole step has succeeded.
+    /// The federated filter's epoch over `self.trans`, its state left pending. Each aid's
+    /// tests go through their policies with [`TestBank::preview`] (module doc, Tests: the
+    /// filter follows their combined decision); the previews are kept in `self.pending` for
+    /// the commit, so nothing in the bank or the guards changes until the whole step has
+    /// succeeded.
     fn filter_step(
         &mut self,
-        trans: &LinearTransition<nalgebra::U15>,
         obs: &[Option<Observation>],
         restart: bool,
-    ) -> Result<(federated::FederatedStep, Previews), StepError> {
-        let mut pending: Previews = [None, None, None];
+    ) -> Result<federated::FederatedStep, StepError> {
+        let pending = &mut self.pending;
+        *pending = [None, None, None];
         let mut error: Option<StepError> = None;
         let (bank, guards, aids) = (&self.bank, &self.guards, &self.config.aids);
         let decide = |i: usize, test: Option<LocalTest>| {
@@ -305,6 +315,7 @@ impl FederatedMonitor {
                 }
             }
         };
+        let trans = &self.trans;
         let step = if restart {
             let initial = self.config.initial_estimate();
             self.filter.restart_step(&initial, trans, obs, decide)?
@@ -314,7 +325,7 @@ impl FederatedMonitor {
         if let Some(e) = error {
             return Err(e);
         }
-        Ok((step, pending))
+        Ok(step)
     }
 
     /// The protection level (module doc, Integrity): `HPL₁ = k_md σ_h` from the fused `P_g`,
@@ -373,21 +384,15 @@ impl FederatedMonitor {
         Ok(hpl2)
     }
 
-    /// Makes the step current: each aid's policy states, guard inputs and consistency
-    /// diagnostics, the filter's pending state (a restart included), the HPL terms and the
-    /// convergence, the time and the outputs. Returns the epoch's test outcomes, per aid its
-    /// χ² test then its guards.
-    fn commit(
-        &mut self,
-        t: f64,
-        pending: Previews,
-        hpl: HplStep,
-        solution: FederatedSolution,
-    ) -> Vec<TestOutcome> {
+    /// Makes the step current: each aid's policy states (`self.pending`), guard inputs and
+    /// consistency diagnostics, the filter's pending state (a restart included), the HPL
+    /// terms and the convergence, the time and the outputs. Returns the epoch's test
+    /// outcomes, per aid its χ² test then its guards.
+    fn commit(&mut self, t: f64, hpl: HplStep, solution: FederatedSolution) -> Vec<TestOutcome> {
         let n = self.config.aids.len();
         let mut tests = Vec::with_capacity(3 * n);
-        for (i, p) in pending.into_iter().enumerate().take(n) {
-            if let Some(p) = p {
+        for i in 0..n {
+            if let Some(p) = self.pending[i].take() {
                 let aid = self.config.aids[i];
                 self.bank.commit(i, p.state);
                 self.bank.observe(i, p.test.nu(), p.health);
@@ -432,6 +437,7 @@ fn aid_decision(
 }
 
 /// One aid's previewed tests, committed with the step.
+#[derive(Debug, Clone)]
 struct AidPreview {
     /// The χ² test's outcome and policy state.
     outcome: TestOutcome,
@@ -513,13 +519,13 @@ impl Monitor for FederatedMonitor {
             });
         };
         let nav = NavSolution::from_ins(ins);
-        let (trans, restart) = self.transition(&nav, epoch.t)?;
+        let restart = self.transition(&nav, epoch.t)?;
         let n = self.config.aids.len();
         let mut obs: [Option<Observation>; MAX_AIDS] = [None, None, None];
         for (i, &aid) in self.config.aids.iter().enumerate() {
             obs[i] = self.observation(aid, &nav, epoch);
         }
-        let (step, pending) = self.filter_step(&trans, &obs[..n], restart)?;
+        let step = self.filter_step(&obs[..n], restart)?;
         let Some(next) = self.filter.pending() else {
             return Err(FilterError::NonFinite("federated step").into());
         };
@@ -527,13 +533,13 @@ impl Monitor for FederatedMonitor {
             &mut self.lambda_det,
             self.hpl2,
             &step.aids[..n],
-            &pending,
+            &self.pending,
             restart,
         )?;
         let hpl = self.protection_level(&next.master, terms, epoch.t, restart);
         let solution = corrected_solution(&nav, &next.master)?;
         let integrity = hpl.integrity;
-        let tests = self.commit(epoch.t, pending, hpl, solution);
+        let tests = self.commit(epoch.t, hpl, solution);
         Ok(MonitorReport {
             tests,
             outputs: self.outputs.clone(),
