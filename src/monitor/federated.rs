@@ -292,28 +292,26 @@ impl FederatedMonitor {
             let Some(t) = test else {
                 return guards[i].idle(bank, bank.idle(i));
             };
+            // Written into the aid's slot as it is formed, not moved there.
             let previewed = bank.preview(i, t.statistic, t.dof).map_err(StepError::from);
-            let guarded = previewed.and_then(|p| {
-                let g = guards[i].preview(bank, guard_input(aids[i], &t))?;
-                Ok((p, g))
+            let decided = previewed.and_then(|(outcome, state)| {
+                let p = pending[i].insert(AidPreview {
+                    outcome,
+                    state,
+                    guard: GuardPreview::default(),
+                    test: t,
+                    health: Health::Healthy,
+                });
+                guards[i].preview_into(bank, guard_input(aids[i], &p.test), &mut p.guard)?;
+                let d = aid_decision(bank, &guards[i], i, &p.outcome, &p.guard);
+                p.health = d.health;
+                Ok(d)
             });
-            match guarded {
-                Ok(((outcome, state), guard)) => {
-                    let d = aid_decision(bank, &guards[i], i, &outcome, &guard);
-                    pending[i] = Some(AidPreview {
-                        outcome,
-                        state,
-                        guard,
-                        test: t,
-                        health: d.health,
-                    });
-                    d
-                }
-                Err(e) => {
-                    error = Some(e);
-                    guards[i].idle(bank, bank.idle(i))
-                }
-            }
+            decided.unwrap_or_else(|e| {
+                pending[i] = None;
+                error = Some(e);
+                guards[i].idle(bank, bank.idle(i))
+            })
         };
         let trans = &self.trans;
         let step = if restart {
@@ -392,14 +390,15 @@ impl FederatedMonitor {
         let n = self.config.aids.len();
         let mut tests = Vec::with_capacity(3 * n);
         for i in 0..n {
-            if let Some(p) = self.pending[i].take() {
+            // By reference: the preview stays in its slot until the next step clears it.
+            if let Some(p) = &mut self.pending[i] {
                 let aid = self.config.aids[i];
-                self.bank.commit(i, p.state);
+                self.bank.commit(i, p.state.clone());
                 self.bank.observe(i, p.test.nu(), p.health);
-                tests.push(p.outcome);
+                tests.push(p.outcome.clone());
                 let healthy = p.health == Health::Healthy;
                 let input = guard_input(aid, &p.test);
-                self.guards[i].commit(&mut self.bank, p.guard, input, healthy, &mut tests);
+                self.guards[i].commit(&mut self.bank, &mut p.guard, input, healthy, &mut tests);
             }
         }
         self.filter.commit();

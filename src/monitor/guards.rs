@@ -384,6 +384,20 @@ impl InnovationGuards {
     /// changing nothing; a test still warming up gives none.
     pub fn preview(&self, bank: &TestBank, input: &[f64]) -> Result<GuardPreview, StepError> {
         let mut out = GuardPreview::default();
+        self.preview_into(bank, input, &mut out)?;
+        Ok(out)
+    }
+
+    /// [`InnovationGuards::preview`] written into `out` (a caller's buffer: no preview is
+    /// moved through the step). On an error `out` is left partly written.
+    pub fn preview_into(
+        &self,
+        bank: &TestBank,
+        input: &[f64],
+        out: &mut GuardPreview,
+    ) -> Result<(), StepError> {
+        out.drift = None;
+        out.stuck = None;
         if let Some(g) = &self.drift
             && let Some(v) = g.test.evaluate(input).map_err(step_error)?
         {
@@ -394,7 +408,7 @@ impl InnovationGuards {
         {
             out.stuck = Some(bank.preview(g.index, v.value, 1)?);
         }
-        Ok(out)
+        Ok(())
     }
 
     /// `decision` combined with the guards' decisions for this epoch (`preview`), or,
@@ -446,19 +460,20 @@ impl InnovationGuards {
             .fold(Health::Healthy, worse)
     }
 
-    /// Commits a preview: the policy states, the outcomes appended to `tests`, and the
-    /// input to both tests (`healthy`: the guarded filter's combined health this epoch
-    /// was healthy, so the input may enter the healthy history).
+    /// Commits a preview (taking its outcomes, so it is left empty): the policy states, the
+    /// outcomes appended to `tests`, and the input to both tests (`healthy`: the guarded
+    /// filter's combined health this epoch was healthy, so the input may enter the healthy
+    /// history).
     pub fn commit(
         &mut self,
         bank: &mut TestBank,
-        preview: GuardPreview,
+        preview: &mut GuardPreview,
         input: &[f64],
         healthy: bool,
         tests: &mut Vec<TestOutcome>,
     ) {
         if let Some(g) = &mut self.drift {
-            if let Some((outcome, state)) = preview.drift {
+            if let Some((outcome, state)) = preview.drift.take() {
                 bank.commit(g.index, state);
                 tests.push(outcome);
             }
@@ -466,7 +481,7 @@ impl InnovationGuards {
             let _ = g.test.commit(input, healthy);
         }
         if let Some(g) = &mut self.stuck {
-            if let Some((outcome, state)) = preview.stuck {
+            if let Some((outcome, state)) = preview.stuck.take() {
                 bank.commit(g.index, state);
                 tests.push(outcome);
             }
@@ -614,18 +629,20 @@ mod tests {
         let mut stopped = None;
         for k in 0..DEFAULT_DRIFT_WINDOW as u32 {
             let input = [2.0 + 0.1 * f64::from(k % 3), 2.0 - 0.1 * f64::from(k % 2)];
-            let p = g.preview(&bank, &input).unwrap();
+            let mut p = g.preview(&bank, &input).unwrap();
             let d = g.combined(&bank, &p, healthy);
             if !d.update && stopped.is_none() {
                 stopped = Some(k);
             }
             g.commit(
                 &mut bank,
-                p,
+                &mut p,
                 &input,
                 d.health == Health::Healthy,
                 &mut tests,
             );
+            // The commit took the outcomes: a preview is committed once.
+            assert!(p.drift.is_none() && p.stuck.is_none());
         }
         assert_eq!(
             stopped,

@@ -368,7 +368,7 @@ impl Monitor for LinearMonitor {
             .l()
             .solve_lower_triangular(&innovation.r)
             .ok_or(FilterError::NotPositiveDefinite)?;
-        let guard = self.guards.preview(&self.bank, nu.as_slice())?;
+        let mut guard = self.guards.preview(&self.bank, nu.as_slice())?;
         let (outcome, state) = self.bank.preview(
             RESIDUAL,
             innovation.statistic,
@@ -379,8 +379,13 @@ impl Monitor for LinearMonitor {
         self.bank.observe(RESIDUAL, nu.as_slice(), decision.health);
         let mut tests = vec![outcome];
         let healthy = decision.health == crate::detect::Health::Healthy;
-        self.guards
-            .commit(&mut self.bank, guard, nu.as_slice(), healthy, &mut tests);
+        self.guards.commit(
+            &mut self.bank,
+            &mut guard,
+            nu.as_slice(),
+            healthy,
+            &mut tests,
+        );
         // seed 004 §2: a suspect or isolated filter predicts without updating (any of
         // its tests can say so); `traditional` always updates (no fusion to leave).
         self.estimate = if decision.update { posterior } else { prior };
