@@ -403,24 +403,33 @@ pub(super) fn joseph_update_body<const M: usize>(
     m: &AidMeasurement<M>,
 ) -> Result<(), FilterError> {
     let h = &m.obs.h;
-    let (hp, hph, r) = if bias_columns_zero(h) {
-        let hp = sparse_h_times(h, &est.p);
-        let hph = sparse_times_h_transpose(&hp, h);
-        (hp, hph, m.z - sparse_h_times(h, &est.x))
+    // H P, turned into U in place below (no tuple of products moved out of a branch).
+    let sparse = bias_columns_zero(h);
+    let mut u = if sparse {
+        sparse_h_times(h, &est.p)
     } else {
-        let hp = h * est.p;
-        (hp, hp * h.transpose(), m.z - h * est.x)
+        h * est.p
     };
+    let hph = if sparse {
+        sparse_times_h_transpose(&u, h)
+    } else {
+        u * h.transpose()
+    };
+    let r = m.z
+        - if sparse {
+            sparse_h_times(h, &est.x)
+        } else {
+            h * est.x
+        };
     let s = symmetrise(&(hph + m.obs.r));
     finite("innovation", &r)?;
     finite("innovation covariance", &s)?;
     // Kᵀ = S⁻¹ (H P): S is M × M and well conditioned (R bounds it below), so its inverse
     // S⁻¹ = L⁻ᵀ L⁻¹ costs less than 15 triangular solves and loses nothing.
     let l_inv = inverse_cholesky_factor(&s).ok_or(FilterError::NotPositiveDefinite)?;
-    let kt = lower_transpose_times(&l_inv, &lower_times(&l_inv, &hp));
+    let kt = lower_transpose_times(&l_inv, &lower_times(&l_inv, &u));
     finite("gain", &kt)?;
     let skt = product(&s, &kt);
-    let mut u = hp;
     for j in 0..N {
         for i in 0..M {
             u[(i, j)] -= skt[(i, j)] * 0.5;
