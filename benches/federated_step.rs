@@ -14,13 +14,19 @@
 //!   20,000 epochs (not timed).
 //!
 //! Run: `cargo bench --bench federated_step`
+//!
+//! Instruction counts (docs/performance.md): with `NAVGUARD_BENCH_STEPS=all:N` (or `ship:N`)
+//! the binary skips criterion and steps the all-aids monitor (or the ship stream) exactly `N`
+//! times, so that callgrind's count per step is repeatable:
+//! `NAVGUARD_BENCH_STEPS=all:11000 valgrind --tool=callgrind target/release/deps/federated_step-*`,
+//! then the inclusive count of `<FederatedMonitor as Monitor>::step` divided by `N`.
 
 // criterion_group! defines a public function it cannot document.
 #![allow(missing_docs)]
 
 use std::hint::black_box;
 
-use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use criterion::{Criterion, Throughput, criterion_group};
 use nalgebra::Vector3;
 use navguard::detect::{Decision, Health, PolicyConfig, ThresholdSpec};
 use navguard::epoch::{Aid, Epoch};
@@ -69,25 +75,75 @@ fn epoch(start: &Lla, k: u64) -> Epoch {
     }
 }
 
-fn bench(c: &mut Criterion) {
-    let start = Lla {
+/// Where the all-aids ship starts.
+fn start() -> Lla {
+    Lla {
         lat: 30f64.to_radians(),
         lon: 120f64.to_radians(),
         h: 0.0,
-    };
-    let config = FederatedConfig::try_from(FederatedConfigWire::new(vec![
+    }
+}
+
+/// The all-aids monitor's configuration.
+fn all_aids() -> FederatedConfig {
+    FederatedConfig::try_from(FederatedConfigWire::new(vec![
         Aid::Gnss,
         Aid::Dvl,
         Aid::Cns,
     ]))
-    .expect("config");
+    .expect("config")
+}
 
-    let mut monitor = FederatedMonitor::new(
+/// A fresh monitor on `config` under the counters policy.
+fn monitor_on(config: &FederatedConfig) -> FederatedMonitor {
+    FederatedMonitor::new(
         config.clone(),
         PolicyConfig::counters_default(),
         ThresholdSpec::Threshold(20.0),
     )
-    .expect("monitor");
+    .expect("monitor")
+}
+
+/// The simulated ship stream of seed 004 (20,000 epochs) and its monitor configuration.
+fn ship_stream() -> (sim::Scenario, FederatedConfig) {
+    let ship = sim::ship_with(4, Vec::new(), 1999.9).expect("ship scenario");
+    let config = FederatedConfig::try_from(ship.monitor_config()).expect("config");
+    (ship, config)
+}
+
+/// `NAVGUARD_BENCH_STEPS=all:N` or `ship:N`: `N` monitor steps, nothing else timed or
+/// printed (the module doc's instruction counts). The ship stream restarts on a fresh
+/// monitor after its 20,000 epochs, as its bench does.
+fn count_steps(spec: &str) {
+    let parsed = spec
+        .split_once(':')
+        .and_then(|(which, n)| Some((which, n.parse::<u64>().ok()?)));
+    match parsed {
+        Some(("all", n)) => {
+            let (start, config) = (start(), all_aids());
+            let mut monitor = monitor_on(&config);
+            for k in 1..=n {
+                black_box(monitor.step(black_box(&epoch(&start, k))).expect("step"));
+            }
+        }
+        Some(("ship", n)) => {
+            let (ship, config) = ship_stream();
+            let mut monitor = monitor_on(&config);
+            for (i, e) in ship.epochs.iter().cycle().take(n as usize).enumerate() {
+                if i > 0 && i % ship.epochs.len() == 0 {
+                    monitor = monitor_on(&config);
+                }
+                black_box(monitor.step(black_box(&e.epoch)).expect("step"));
+            }
+        }
+        _ => panic!("NAVGUARD_BENCH_STEPS is all:N or ship:N, not {spec:?}"),
+    }
+}
+
+fn bench(c: &mut Criterion) {
+    let start = start();
+    let config = all_aids();
+    let mut monitor = monitor_on(&config);
     let mut k = 0;
     let mut group = c.benchmark_group("federated_monitor");
     group.throughput(Throughput::Elements(1));
@@ -141,16 +197,8 @@ fn bench(c: &mut Criterion) {
 
     let mut group = c.benchmark_group("federated_monitor");
     group.throughput(Throughput::Elements(1));
-    let ship = sim::ship_with(4, Vec::new(), 1999.9).expect("ship scenario");
-    let ship_config = FederatedConfig::try_from(ship.monitor_config()).expect("config");
-    let ship_monitor = || {
-        FederatedMonitor::new(
-            ship_config.clone(),
-            PolicyConfig::counters_default(),
-            ThresholdSpec::Threshold(20.0),
-        )
-        .expect("monitor")
-    };
+    let (ship, ship_config) = ship_stream();
+    let ship_monitor = || monitor_on(&ship_config);
     let (mut monitor, mut next) = (ship_monitor(), 0);
     group.bench_function("step_ship_seed004", |b| {
         b.iter_custom(|iters| {
@@ -175,4 +223,13 @@ fn bench(c: &mut Criterion) {
 }
 
 criterion_group!(benches, bench);
-criterion_main!(benches);
+
+/// `criterion_main!`, unless `NAVGUARD_BENCH_STEPS` asks for a fixed number of steps.
+fn main() {
+    if let Ok(spec) = std::env::var("NAVGUARD_BENCH_STEPS") {
+        count_steps(&spec);
+        return;
+    }
+    benches();
+    Criterion::default().configure_from_args().final_summary();
+}
