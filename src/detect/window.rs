@@ -195,8 +195,8 @@ impl Scale {
     }
 
     fn discard_partial(&mut self) {
-        self.partial.0.fill(0.0);
-        self.partial.1.fill(0.0);
+        self.partial.0.as_mut_slice().fill(0.0);
+        self.partial.1.as_mut_slice().fill(0.0);
         self.partial.2 = 0;
     }
 
@@ -226,8 +226,8 @@ impl Scale {
         {
             add_outer(&mut self.sums.0, &old.mean, -1.0);
             self.sums.1 -= &old.sum_sq;
-            old.mean.fill(0.0);
-            old.sum_sq.fill(0.0);
+            old.mean.as_mut_slice().fill(0.0);
+            old.sum_sq.as_mut_slice().fill(0.0);
             (old.mean, old.sum_sq, 0)
         } else {
             (DVector::zeros(d), DMatrix::zeros(d, d), 0)
@@ -235,8 +235,8 @@ impl Scale {
         self.since_recompute += 1;
         if self.since_recompute >= self.max_blocks {
             self.since_recompute = 0;
-            self.sums.0.fill(0.0);
-            self.sums.1.fill(0.0);
+            self.sums.0.as_mut_slice().fill(0.0);
+            self.sums.1.as_mut_slice().fill(0.0);
             for b in &self.blocks {
                 add_outer(&mut self.sums.0, &b.mean, 1.0);
                 self.sums.1 += &b.sum_sq;
