@@ -19,7 +19,10 @@
 //! the binary skips criterion and steps the all-aids monitor (or the ship stream) exactly `N`
 //! times, so that callgrind's count per step is repeatable:
 //! `NAVGUARD_BENCH_STEPS=all:11000 valgrind --tool=callgrind target/release/deps/federated_step-*`,
-//! then the inclusive count of `<FederatedMonitor as Monitor>::step` divided by `N`.
+//! then the inclusive count of `<FederatedMonitor as Monitor>::step` divided by `N`. With
+//! `all:N:print` (or `ship:N:print`) it prints every step's report with `{:?}` (floats in
+//! their shortest round-trip form, so equal lines are equal bits): two builds' outputs can
+//! be compared with `cmp`.
 
 // criterion_group! defines a public function it cannot document.
 #![allow(missing_docs)]
@@ -112,31 +115,42 @@ fn ship_stream() -> (sim::Scenario, FederatedConfig) {
 }
 
 /// `NAVGUARD_BENCH_STEPS=all:N` or `ship:N`: `N` monitor steps, nothing else timed or
-/// printed (the module doc's instruction counts). The ship stream restarts on a fresh
-/// monitor after its 20,000 epochs, as its bench does.
+/// printed (the module doc's instruction counts); `…:print` prints each report. The ship
+/// stream restarts on a fresh monitor after its 20,000 epochs, as its bench does.
 fn count_steps(spec: &str) {
-    let parsed = spec
-        .split_once(':')
-        .and_then(|(which, n)| Some((which, n.parse::<u64>().ok()?)));
-    match parsed {
-        Some(("all", n)) => {
+    let mut parts = spec.split(':');
+    let (which, n, print) = (parts.next(), parts.next(), parts.next());
+    let (Some(n), None | Some("print"), None) =
+        (n.and_then(|n| n.parse::<usize>().ok()), print, parts.next())
+    else {
+        panic!("NAVGUARD_BENCH_STEPS is all:N or ship:N, optionally :print, not {spec:?}");
+    };
+    let step = |monitor: &mut FederatedMonitor, e: &Epoch| {
+        let report = monitor.step(black_box(e)).expect("step");
+        if print.is_some() {
+            println!("{report:?}");
+        }
+        black_box(report);
+    };
+    match which {
+        Some("all") => {
             let (start, config) = (start(), all_aids());
             let mut monitor = monitor_on(&config);
-            for k in 1..=n {
-                black_box(monitor.step(black_box(&epoch(&start, k))).expect("step"));
+            for k in 1..=n as u64 {
+                step(&mut monitor, &epoch(&start, k));
             }
         }
-        Some(("ship", n)) => {
+        Some("ship") => {
             let (ship, config) = ship_stream();
             let mut monitor = monitor_on(&config);
-            for (i, e) in ship.epochs.iter().cycle().take(n as usize).enumerate() {
+            for (i, e) in ship.epochs.iter().cycle().take(n).enumerate() {
                 if i > 0 && i % ship.epochs.len() == 0 {
                     monitor = monitor_on(&config);
                 }
-                black_box(monitor.step(black_box(&e.epoch)).expect("step"));
+                step(&mut monitor, &e.epoch);
             }
         }
-        _ => panic!("NAVGUARD_BENCH_STEPS is all:N or ship:N, not {spec:?}"),
+        _ => panic!("NAVGUARD_BENCH_STEPS is all:N or ship:N, optionally :print, not {spec:?}"),
     }
 }
 
