@@ -10,6 +10,8 @@
 //! the ones listed before it, never one after it (`tests/layering.rs` checks this
 //! for production code; tests may cross layers).
 //!
+//! - [`simd`]: whether the hot kernels run their AVX2 builds (`NAVGUARD_NO_AVX2`): a
+//!   leaf that every layer may use.
 //! - [`epoch`]: the domain epoch (sensor blocks in SI units and radians) and the
 //!   federated aids: a leaf that every layer may use.
 //! - [`geo`]: WGS84 geodesy (frames, radii, Earth and transport rates).
@@ -34,3 +36,4 @@ pub mod learn;
 pub mod monitor;
 pub mod service;
 pub mod sim;
+pub mod simd;

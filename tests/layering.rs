@@ -10,7 +10,9 @@ use std::path::{Path, PathBuf};
 /// Each rule: the folders (or files) under `src/` it covers and the paths they may not use.
 const RULES: &[(&[&str], &[&str])] = &[
     (
-        &["epoch.rs", "geo", "filter", "detect", "learn", "features"],
+        &[
+            "simd.rs", "epoch.rs", "geo", "filter", "detect", "learn", "features",
+        ],
         &[
             "crate::monitor",
             "crate::sim",
@@ -25,7 +27,7 @@ const RULES: &[(&[&str], &[&str])] = &[
     ),
     (
         &[
-            "epoch.rs", "geo", "filter", "detect", "learn", "features", "monitor", "sim",
+            "simd.rs", "epoch.rs", "geo", "filter", "detect", "learn", "features", "monitor", "sim",
         ],
         &["tokio", "axum", "sqlx", "tower", "reqwest"],
     ),

@@ -471,11 +471,12 @@ struct SlidePass<'a> {
 }
 
 impl SlidePass<'_> {
-    /// Runs the pass with AVX2 when the CPU has it (the default x86-64 target only
-    /// assumes SSE2; twice the vector width matters for this bandwidth-bound loop).
+    /// Runs the pass with AVX2 when [`crate::simd::avx2`] allows it (the default x86-64
+    /// target only assumes SSE2; twice the vector width matters for this bandwidth-bound
+    /// loop).
     fn run(&self, p: &mut [f64], u: &mut [f64]) {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
+        if crate::simd::avx2() {
             // SAFETY: the CPU supports AVX2, checked just above.
             unsafe { self.run_avx2(p, u) };
             return;
@@ -517,6 +518,35 @@ impl SlidePass<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::rngs::StdRng;
+    use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn the_avx2_slide_equals_the_baseline_build_to_the_bit() {
+        // `SlidePass::run` takes its AVX2 build on a CPU with AVX2 (`crate::simd::avx2`);
+        // `run_generic` called from this function is the baseline build.
+        let mut rng = StdRng::seed_from_u64(9);
+        let n = 23;
+        let mut draw =
+            |len: usize| -> Vec<f64> { (0..len).map(|_| rng.random::<f64>() - 0.5).collect() };
+        let (q, pending_u, k, p0, u0) = (draw(n), draw(n), draw(n), draw(n * n), draw(n));
+        for ps in [0.0, 0.37] {
+            let pass = SlidePass {
+                q: &q,
+                pending_u: &pending_u,
+                k: &k,
+                ps,
+                pss: 1.9,
+            };
+            let (mut p_fast, mut u_fast) = (p0.clone(), u0.clone());
+            let (mut p_base, mut u_base) = (p0.clone(), u0.clone());
+            pass.run(&mut p_fast, &mut u_fast);
+            pass.run_generic(&mut p_base, &mut u_base);
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&p_fast), bits(&p_base), "P, ps = {ps}");
+            assert_eq!(bits(&u_fast), bits(&u_base), "u, ps = {ps}");
+        }
+    }
 
     fn series(k: usize) -> ([f64; 3], f64) {
         // A smooth nonlinear channel embedded with m = 3.

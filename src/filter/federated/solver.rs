@@ -12,21 +12,8 @@ use crate::filter::ins::{ErrorMatrix, ErrorVector, N, POS};
 use crate::filter::kalman::{
     self, FilterError, LinearObservation, LinearTransition, StateEstimate,
 };
-
-/// True when the kernels below may run their AVX2 builds: the CPU has AVX2 and
-/// `NAVGUARD_NO_AVX2` is not set (the switch lets the baseline build be measured on the same
-/// machine). The AVX2 builds perform the same IEEE operations in the same order (no FMA is
-/// enabled and Rust never contracts or reassociates floating point), four lanes at a time
-/// instead of two, so their results are the baseline's to the bit (tested); only the
-/// instruction count changes.
 #[cfg(target_arch = "x86_64")]
-pub(super) fn avx2() -> bool {
-    static AVX2: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *AVX2.get_or_init(|| {
-        std::arch::is_x86_feature_detected!("avx2")
-            && std::env::var_os("NAVGUARD_NO_AVX2").is_none()
-    })
-}
+pub(super) use crate::simd::avx2;
 
 /// Defines `$name`, which runs `$body` compiled a second time for AVX2 (`$avx2`) when
 /// [`avx2`] allows it and the baseline build of `$body` otherwise. `$body` is

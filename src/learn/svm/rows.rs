@@ -87,7 +87,7 @@ impl QMatrix {
 
 /// `K(x_i, x_j)` for `j ∈ start..start + out.len()` into `out` (which starts at 0):
 /// the dot products column by column, then for RBF `exp(scale · ‖x_i − x_j‖²)`.
-/// Uses AVX2 when the CPU has it (4 lanes instead of SSE2's 2).
+/// Uses AVX2 when [`crate::simd::avx2`] allows it (4 lanes instead of SSE2's 2).
 fn kernel_tail(
     cols: &[Vec<f64>],
     sq: &[f64],
@@ -97,7 +97,7 @@ fn kernel_tail(
     out: &mut [f64],
 ) {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
+    if crate::simd::avx2() {
         // SAFETY: the CPU supports AVX2 (checked just above).
         unsafe { kernel_tail_avx2(cols, sq, i, start, rbf_scale, out) };
         return;
@@ -146,6 +146,33 @@ fn kernel_tail_body(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::rngs::StdRng;
+    use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn the_avx2_kernel_rows_equal_the_baseline_build_to_the_bit() {
+        // `kernel_tail` runs its AVX2 build on a CPU with AVX2 (`crate::simd::avx2`);
+        // `kernel_tail_body` called from this function (no target features) is the
+        // baseline build. Same operations in the same order: identical bits, not close ones.
+        let mut rng = StdRng::seed_from_u64(8);
+        let (n, d) = (37, 3);
+        let cols: Vec<Vec<f64>> = (0..d)
+            .map(|_| (0..n).map(|_| rng.random::<f64>() * 4.0 - 2.0).collect())
+            .collect();
+        let sq: Vec<f64> = (0..n)
+            .map(|j| cols.iter().map(|c| c[j] * c[j]).sum())
+            .collect();
+        for scale in [None, Some(-0.7)] {
+            for (i, start) in [(0, 0), (5, 3), (36, 1)] {
+                let mut fast = vec![0.0; n - start];
+                let mut base = fast.clone();
+                kernel_tail(&cols, &sq, i, start, scale, &mut fast);
+                kernel_tail_body(&cols, &sq, i, start, scale, &mut base);
+                let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&fast), bits(&base), "row {i} from {start}, {scale:?}");
+            }
+        }
+    }
 
     #[test]
     fn rows_hold_signed_kernel_values_in_the_permuted_order() {
