@@ -127,11 +127,10 @@ pub struct FederatedMonitor {
     /// Time of the last INS epoch.
     last_t: Option<f64>,
     outputs: Outputs,
-    /// Working buffers of a step, written in place rather than moved (3.6 kB and 1 kB per
-    /// epoch): the transition, and each aid's previewed tests until the commit. Neither is
-    /// state; a checkpoint does not save them.
+    /// The step's transition, written in place each epoch (not state: a checkpoint does not
+    /// save it). A field rather than a local because a local would be zero-filled every
+    /// epoch (3.6 kB) before being overwritten, and a returned one copied.
     trans: LinearTransition<nalgebra::U15>,
-    pending: Previews,
 }
 
 impl FederatedMonitor {
@@ -189,7 +188,6 @@ impl FederatedMonitor {
                 f: ErrorMatrix::identity(),
                 q: ErrorMatrix::zeros(),
             },
-            pending: [None, None, None],
         })
     }
 
@@ -259,33 +257,28 @@ impl FederatedMonitor {
     fn transition(&mut self, nav: &NavSolution, t: f64) -> Result<bool, StepError> {
         let dt = self.last_t.map(|last| t - last);
         let restart = !matches!(dt, Some(d) if (0.0..=MAX_GAP_S).contains(&d));
+        let trans = &mut self.trans;
         if restart {
-            self.trans.f = ErrorMatrix::identity();
-            self.trans.q = ErrorMatrix::zeros();
+            trans.f = ErrorMatrix::identity();
+            trans.q = ErrorMatrix::zeros();
         } else {
-            federated::ins_transition_into(
-                nav,
-                &self.config.imu,
-                dt.unwrap_or(0.0),
-                &mut self.trans,
-            )
-            .map_err(|_| FilterError::NonFinite("prediction interval"))?;
+            federated::ins_transition_into(nav, &self.config.imu, dt.unwrap_or(0.0), trans)
+                .map_err(|_| FilterError::NonFinite("prediction interval"))?;
         }
         Ok(restart)
     }
 
-    /// The federated filter's epoch over `self.trans`, its state left pending. Each aid's
-    /// tests go through their policies with [`TestBank::preview`] (module doc, Tests: the
-    /// filter follows their combined decision); the previews are kept in `self.pending` for
-    /// the commit, so nothing in the bank or the guards changes until the whole step has
-    /// succeeded.
+    /// The federated filter's epoch over `self.trans`, its state left pending. Each aid's tests
+    /// go through their policies with [`TestBank::preview`] (module doc, Tests: the filter
+    /// follows their combined decision); the previews are written into `pending` (all
+    /// `None` on entry) for the commit, so nothing in the bank or the guards changes until
+    /// the whole step has succeeded.
     fn filter_step(
         &mut self,
         obs: &[Option<Observation>],
         restart: bool,
+        pending: &mut Previews,
     ) -> Result<federated::FederatedStep, StepError> {
-        let pending = &mut self.pending;
-        *pending = [None, None, None];
         let mut error: Option<StepError> = None;
         let (bank, guards, aids) = (&self.bank, &self.guards, &self.config.aids);
         let decide = |i: usize, test: Option<LocalTest>| {
@@ -382,16 +375,22 @@ impl FederatedMonitor {
         Ok(hpl2)
     }
 
-    /// Makes the step current: each aid's policy states (`self.pending`), guard inputs and
-    /// consistency diagnostics, the filter's pending state (a restart included), the HPL
-    /// terms and the convergence, the time and the outputs. Returns the epoch's test
-    /// outcomes, per aid its χ² test then its guards.
-    fn commit(&mut self, t: f64, hpl: HplStep, solution: FederatedSolution) -> Vec<TestOutcome> {
+    /// Makes the step current: each aid's policy states (`pending`, committed by
+    /// reference: a preview is not moved again), guard inputs and consistency diagnostics,
+    /// the filter's pending state (a restart included), the HPL terms and the convergence,
+    /// the time and the outputs. Returns the epoch's test outcomes, per aid its χ² test then
+    /// its guards.
+    fn commit(
+        &mut self,
+        t: f64,
+        pending: &mut Previews,
+        hpl: HplStep,
+        solution: FederatedSolution,
+    ) -> Vec<TestOutcome> {
         let n = self.config.aids.len();
         let mut tests = Vec::with_capacity(3 * n);
-        for i in 0..n {
-            // By reference: the preview stays in its slot until the next step clears it.
-            if let Some(p) = &mut self.pending[i] {
+        for (i, slot) in pending.iter_mut().enumerate().take(n) {
+            if let Some(p) = slot {
                 let aid = self.config.aids[i];
                 self.bank.commit(i, p.state.clone());
                 self.bank.observe(i, p.test.nu(), p.health);
@@ -518,13 +517,16 @@ impl Monitor for FederatedMonitor {
             });
         };
         let nav = NavSolution::from_ins(ins);
+        // The aids' previews are written in place and passed by reference: three ~340-byte
+        // previews would otherwise be copied through the step.
+        let mut pending: Previews = [None, None, None];
         let restart = self.transition(&nav, epoch.t)?;
         let n = self.config.aids.len();
         let mut obs: [Option<Observation>; MAX_AIDS] = [None, None, None];
         for (i, &aid) in self.config.aids.iter().enumerate() {
             obs[i] = self.observation(aid, &nav, epoch);
         }
-        let step = self.filter_step(&obs[..n], restart)?;
+        let step = self.filter_step(&obs[..n], restart, &mut pending)?;
         let Some(next) = self.filter.pending() else {
             return Err(FilterError::NonFinite("federated step").into());
         };
@@ -532,13 +534,13 @@ impl Monitor for FederatedMonitor {
             &mut self.lambda_det,
             self.hpl2,
             &step.aids[..n],
-            &self.pending,
+            &pending,
             restart,
         )?;
         let hpl = self.protection_level(&next.master, terms, epoch.t, restart);
         let solution = corrected_solution(&nav, &next.master)?;
         let integrity = hpl.integrity;
-        let tests = self.commit(epoch.t, hpl, solution);
+        let tests = self.commit(epoch.t, &mut pending, hpl, solution);
         Ok(MonitorReport {
             tests,
             outputs: self.outputs.clone(),
