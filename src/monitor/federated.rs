@@ -435,7 +435,6 @@ fn aid_decision(
 }
 
 /// One aid's previewed tests, committed with the step.
-#[derive(Debug, Clone)]
 struct AidPreview {
     /// The χ² test's outcome and policy state.
     outcome: TestOutcome,
