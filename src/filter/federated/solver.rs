@@ -13,7 +13,7 @@ use crate::filter::kalman::{
     self, FilterError, LinearObservation, LinearTransition, StateEstimate,
 };
 #[cfg(target_arch = "x86_64")]
-pub(super) use crate::simd::avx2;
+use crate::simd::avx2;
 
 /// Defines `$name`, which runs `$body` compiled a second time for AVX2 (`$avx2`) when
 /// [`avx2`] allows it and the baseline build of `$body` otherwise. `$body` is
