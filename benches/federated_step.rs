@@ -118,39 +118,37 @@ fn ship_stream() -> (sim::Scenario, FederatedConfig) {
 /// printed (the module doc's instruction counts); `…:print` prints each report. The ship
 /// stream restarts on a fresh monitor after its 20,000 epochs, as its bench does.
 fn count_steps(spec: &str) {
-    let mut parts = spec.split(':');
-    let (which, n, print) = (parts.next(), parts.next(), parts.next());
-    let (Some(n), None | Some("print"), None) =
-        (n.and_then(|n| n.parse::<usize>().ok()), print, parts.next())
-    else {
+    let parts: Vec<&str> = spec.split(':').collect();
+    let parsed = match parts[..] {
+        [which @ ("all" | "ship"), n] => n.parse::<usize>().ok().map(|n| (which, n, false)),
+        [which @ ("all" | "ship"), n, "print"] => n.parse().ok().map(|n| (which, n, true)),
+        _ => None,
+    };
+    let Some((which, n, print)) = parsed else {
         panic!("NAVGUARD_BENCH_STEPS is all:N or ship:N, optionally :print, not {spec:?}");
     };
     let step = |monitor: &mut FederatedMonitor, e: &Epoch| {
         let report = monitor.step(black_box(e)).expect("step");
-        if print.is_some() {
+        if print {
             println!("{report:?}");
         }
         black_box(report);
     };
-    match which {
-        Some("all") => {
-            let (start, config) = (start(), all_aids());
-            let mut monitor = monitor_on(&config);
-            for k in 1..=n as u64 {
-                step(&mut monitor, &epoch(&start, k));
-            }
+    if which == "all" {
+        let (start, config) = (start(), all_aids());
+        let mut monitor = monitor_on(&config);
+        for k in 1..=n as u64 {
+            step(&mut monitor, &epoch(&start, k));
         }
-        Some("ship") => {
-            let (ship, config) = ship_stream();
-            let mut monitor = monitor_on(&config);
-            for (i, e) in ship.epochs.iter().cycle().take(n).enumerate() {
-                if i > 0 && i % ship.epochs.len() == 0 {
-                    monitor = monitor_on(&config);
-                }
-                step(&mut monitor, &e.epoch);
+    } else {
+        let (ship, config) = ship_stream();
+        let mut monitor = monitor_on(&config);
+        for (i, e) in ship.epochs.iter().cycle().take(n).enumerate() {
+            if i > 0 && i % ship.epochs.len() == 0 {
+                monitor = monitor_on(&config);
             }
+            step(&mut monitor, &e.epoch);
         }
-        _ => panic!("NAVGUARD_BENCH_STEPS is all:N or ship:N, optionally :print, not {spec:?}"),
     }
 }
 

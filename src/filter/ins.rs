@@ -196,16 +196,9 @@ pub fn discretize(
 /// path). With `A = −[ω_in×]`, `V = −[(2ω_ie + ω_en)×]`, `B = [fⁿ×]`, `C = C_bⁿ`, the nonzero
 /// blocks of F² are: `(φ,φ) A²`, `(φ,ε) −AC`, `(δv,φ) BA + VB`, `(δv,δv) V²`, `(δv,ε) −BC`,
 /// `(δv,∇) VC`, `(δp,φ) B`, `(δp,δv) V`, `(δp,∇) C`; and `Q_d` has the blocks
-/// `C diag(q_g) Cᵀ Δt` on φ and `C diag(q_a) Cᵀ Δt` on δv.
-#[inline]
-pub fn transition(nav: &NavSolution, imu: &ImuErrors, dt: f64) -> (ErrorMatrix, ErrorMatrix) {
-    let (mut phi, mut q) = (ErrorMatrix::zeros(), ErrorMatrix::zeros());
-    transition_into(nav, imu, dt, &mut phi, &mut q);
-    (phi, q)
-}
-
-/// [`transition`] written into `phi` and `q` (whatever they held): a 15 × 15 pair returned
-/// by value is copied on its way out, which the federated step's 10 Hz path avoids.
+/// `C diag(q_g) Cᵀ Δt` on φ and `C diag(q_a) Cᵀ Δt` on δv. Written into `phi` and `q`
+/// (whatever they held): a 15 × 15 pair returned by value is copied on its way out, which
+/// the federated step's 10 Hz path avoids.
 #[inline]
 pub fn transition_into(
     nav: &NavSolution,
@@ -352,7 +345,9 @@ mod tests {
         let imu = ImuErrors::default();
         for dt in [0.0, 0.01, 0.1, 1.0] {
             let (phi, q) = discretize(&error_dynamics(&nav), &noise_input(&nav), &imu, dt);
-            let (phi_b, q_b) = transition(&nav, &imu, dt);
+            // Whatever the buffers held is overwritten.
+            let (mut phi_b, mut q_b) = (ErrorMatrix::repeat(7.0), ErrorMatrix::repeat(7.0));
+            transition_into(&nav, &imu, dt, &mut phi_b, &mut q_b);
             assert_relative_eq!(phi_b, phi, epsilon = 1e-15, max_relative = 1e-13);
             // Off-diagonal entries are rounding-level (C Cᵀ = I): compare on Q's scale.
             assert_relative_eq!(q_b, q, epsilon = 1e-13 * q.amax(), max_relative = 1e-13);

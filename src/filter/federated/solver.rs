@@ -483,8 +483,7 @@ avx2_dispatch! {
     fn fused_slope<const M: usize>(
         p_g: &ErrorMatrix,
         m: &AidMeasurement<M>,
-        s_inv: &SVector<f64,
-        6>,
+        s_inv: &SVector<f64, 6>,
     ) -> Result<f64, hpl::HplError>
     => fused_slope_avx2, fused_slope_body
 }
