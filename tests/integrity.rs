@@ -328,3 +328,148 @@ async fn residual_stuck_alarms_on_a_frozen_measurement_through_the_server() {
     assert!(last.get("residual.stuck").is_some(), "{last}");
     server.shutdown().await;
 }
+
+/// Every message the ingest socket sends up to the `results`-th `result` since the
+/// stream began (`seen` of them already read), in arrival order.
+async fn messages_until(socket: &mut Socket, seen: &mut usize, results: usize) -> Vec<Value> {
+    let mut out = Vec::new();
+    while *seen < results {
+        let message = recv(socket).await;
+        assert_ne!(message["type"], "error", "{message}");
+        if message["type"] == "result" {
+            *seen += 1;
+        }
+        out.push(message);
+    }
+    out
+}
+
+/// What differs between two sessions fed the same stream is taken out: their ids, the
+/// alarm log's ids and the wall-clock times.
+fn without_identity(mut v: Value) -> Value {
+    if let Some(o) = v.as_object_mut() {
+        for key in ["session", "id", "log_id", "raised_at_ms"] {
+            o.remove(key);
+        }
+        for x in o.values_mut() {
+            *x = without_identity(x.take());
+        }
+    }
+    v
+}
+
+async fn counter(server: &Server, name: &str) -> u64 {
+    let text = client()
+        .get(format!("{}/metrics", http(server)))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    text.lines()
+        .find_map(|l| l.strip_prefix(name)?.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no {name} in {text}"))
+}
+
+/// Frames queued at a session (sent back to back) have their first slice stepped on the
+/// compute pool while the frame before is committed (docs/architecture.md §A2 step 3).
+/// The results, state changes, alarms, availability changes and the alarm log are those
+/// of the same frames sent one at a time, each after the results of the one before.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn queued_frames_are_stepped_ahead_with_the_messages_of_one_frame_at_a_time() {
+    // A GNSS offset from the start, standing when the monitor converges (30 s cap), whose
+    // alarm is raised from the monitor's own state then; and a GNSS jump well after
+    // convergence: warnings, an alarm, the return to healthy.
+    let gnss_step = |start_s, end_s| Fault {
+        aid: navguard::epoch::Aid::Gnss,
+        channel: Channel::Position,
+        component: 0,
+        kind: FaultKind::Step { value: 100.0 },
+        start_s,
+        end_s: Some(end_s),
+    };
+    let scenario = ship_1hz(
+        13,
+        vec![gnss_step(0.0, 60.0), gnss_step(300.0, 360.0)],
+        700.0,
+    );
+    // The first frame ends on the epoch that ends convergence (t = 30 s), so that epoch
+    // is committed while the next frame could be stepped (it must not be).
+    let frames = frames(&scenario);
+    assert_eq!(frames[30]["t"], 30.0);
+    let batches: Vec<Value> = std::iter::once(&frames[..31])
+        .chain(frames[31..].chunks(100))
+        .map(|c| Value::Array(c.to_vec()))
+        .collect();
+    let epochs = scenario.epochs.len();
+    let dir = tempfile::tempdir().unwrap();
+    let server = start(&dir.path().join("i.db"), None, Limits::default()).await;
+    for id in ["ahead", "serial"] {
+        create_session(
+            &client(),
+            &server,
+            &federated_session(id, &scenario, json!({"converge_max_s": 30.0})),
+        )
+        .await;
+    }
+
+    let mut socket = ingest(&server, "ahead").await;
+    for batch in &batches {
+        send(&mut socket, batch).await;
+    }
+    let ahead = messages_until(&mut socket, &mut 0, epochs).await;
+    let stepped_ahead = counter(&server, "navguard_frames_prestepped_total").await;
+    // The second frame is not taken early: the first one's commit ends convergence.
+    assert!(stepped_ahead < batches.len() as u64 - 1);
+    assert!(
+        stepped_ahead >= batches.len() as u64 / 2,
+        "{stepped_ahead} of {} frames stepped ahead",
+        batches.len()
+    );
+
+    let mut socket = ingest(&server, "serial").await;
+    let (mut serial, mut seen, mut sent) = (Vec::new(), 0, 0);
+    for batch in &batches {
+        send(&mut socket, batch).await;
+        sent += batch.as_array().unwrap().len();
+        serial.extend(messages_until(&mut socket, &mut seen, sent).await);
+    }
+    assert_eq!(
+        counter(&server, "navguard_frames_prestepped_total").await,
+        stepped_ahead,
+        "a frame sent after the results of the one before is never stepped ahead"
+    );
+
+    for kind in ["alarm", "state", "availability"] {
+        assert!(!of_type(&ahead, kind).is_empty(), "no {kind} message");
+    }
+    // The standing alarm raised at convergence, at the end of the converging stretch.
+    let converged = of_type(&ahead, "availability")[0]["t"].as_f64().unwrap();
+    assert!(
+        of_type(&ahead, "alarm")
+            .iter()
+            .any(|a| a["test"] == "gnss" && a["t"].as_f64() == Some(converged)),
+        "{ahead:?}"
+    );
+    assert_eq!(ahead.len(), serial.len());
+    for (a, s) in ahead.into_iter().zip(serial) {
+        assert_eq!(without_identity(a), without_identity(s));
+    }
+    let (log_ahead, log_serial) = (
+        alarm_log(&server, "ahead").await,
+        alarm_log(&server, "serial").await,
+    );
+    assert!(!log_ahead.is_empty());
+    assert_eq!(
+        log_ahead
+            .into_iter()
+            .map(without_identity)
+            .collect::<Vec<_>>(),
+        log_serial
+            .into_iter()
+            .map(without_identity)
+            .collect::<Vec<_>>()
+    );
+    server.shutdown().await;
+}

@@ -105,6 +105,9 @@ pub struct Metrics {
     pub epochs: AtomicU64,
     /// Frames refused with an `error` event.
     pub frame_errors: AtomicU64,
+    /// Frames whose first slice was stepped on the compute pool while the frame before
+    /// was still being committed (docs/architecture.md §A2).
+    pub frames_prestepped: AtomicU64,
     /// Alarms raised.
     pub alarms: AtomicU64,
     /// Warnings raised (stored, announced as `state` events only).
@@ -163,6 +166,12 @@ impl Metrics {
             "navguard_frame_errors_total",
             "Ingest frames refused with an error event.",
             get(&self.frame_errors),
+        );
+        counter(
+            &mut out,
+            "navguard_frames_prestepped_total",
+            "Ingest frames stepped while the frame before was committed.",
+            get(&self.frames_prestepped),
         );
         counter(
             &mut out,

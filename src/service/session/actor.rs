@@ -71,9 +71,12 @@ pub struct ActorDeps {
     pub cluster: Option<Arc<Cluster>>,
 }
 
+/// What the actor keeps beside each monitor (in [`Actor::engines`], same order): its
+/// name, alarm level and last availability. Committing an epoch needs only these, so a
+/// frame's last epochs can be committed while the monitors step the next frame on the
+/// compute pool ([`Actor::frame`]).
 struct NamedMonitor {
     name: String,
-    monitor: Box<dyn Monitor>,
     /// Which state change of its tests is an alarm.
     alarm_level: AlarmLevel,
     /// Availability at the last epoch that reported one; `None` for a monitor without
@@ -85,6 +88,9 @@ struct Actor {
     id: Arc<str>,
     echo: bool,
     monitors: Vec<NamedMonitor>,
+    /// The monitors themselves, in the order of [`Actor::monitors`]. Empty while a step
+    /// job has them on the compute pool.
+    engines: Vec<Box<dyn Monitor>>,
     stats: SessionStats,
     deps: ActorDeps,
     shared: Arc<SessionShared>,
@@ -160,18 +166,24 @@ struct Owned {
 }
 
 /// The built monitors of `stored`, each with its alarm level (its own, else the
-/// session's, else the default) and no availability seen yet.
-fn with_alarm_levels(monitors: NamedMonitors, stored: &StoredSession) -> Vec<NamedMonitor> {
+/// session's, else the default) and no availability seen yet, and the monitors
+/// themselves in the same order.
+fn with_alarm_levels(
+    monitors: NamedMonitors,
+    stored: &StoredSession,
+) -> (Vec<NamedMonitor>, Vec<Box<dyn Monitor>>) {
     monitors
         .into_iter()
         .zip(&stored.monitors)
-        .map(|((name, monitor), wire)| NamedMonitor {
-            name,
-            monitor,
-            alarm_level: wire.alarm_level.or(stored.alarm_level).unwrap_or_default(),
-            availability: None,
+        .map(|((name, monitor), wire)| {
+            let named = NamedMonitor {
+                name,
+                alarm_level: wire.alarm_level.or(stored.alarm_level).unwrap_or_default(),
+                availability: None,
+            };
+            (named, monitor)
         })
-        .collect()
+        .unzip()
 }
 
 /// Builds the monitors of `stored` and starts its actor.
@@ -228,10 +240,12 @@ fn spawn_inner(
         stored: std::sync::Mutex::new(stored.clone()),
         subscribers: Default::default(),
     });
+    let (monitors, engines) = with_alarm_levels(monitors, &stored);
     let mut actor = Actor {
         id: id.clone(),
         echo: stored.echo,
-        monitors: with_alarm_levels(monitors, &stored),
+        monitors,
+        engines,
         stats,
         deps,
         shared: shared.clone(),
@@ -324,31 +338,54 @@ enum Flow {
 
 /// One slice of a frame stepped on the compute pool: the monitors and epochs (moved in
 /// and handed back), each stepped epoch's reports (`None` for a monitor that failed on
-/// it) and the first failure.
+/// it) and the first failure (epoch index, monitor index, error).
 struct Slice {
-    monitors: Vec<NamedMonitor>,
+    engines: Vec<Box<dyn Monitor>>,
     epochs: Vec<Epoch>,
     stepped: Vec<Vec<Option<MonitorReport>>>,
-    failure: Option<(usize, String, StepError)>,
+    failure: Option<(usize, usize, StepError)>,
     /// Compute time the slice took.
     elapsed: Duration,
+}
+
+/// A frame the actor handles next (see [`Actor::frame`]).
+enum Next {
+    /// Not stepped yet: handled as a frame from the queue.
+    Queued(FrameCommand),
+    /// Checked, and its first slice stepped while the previous frame's last epochs were
+    /// committed; `frame.epochs` went with the step and come back in `slice`.
+    Stepped {
+        frame: FrameCommand,
+        total: usize,
+        slice: Result<Slice, ComputeError>,
+    },
+}
+
+/// What [`Actor::prefetch`] found in the queue.
+enum Prefetch {
+    /// Nothing, or a control command waits.
+    None,
+    /// A frame to handle after this one, as if it had stayed in the queue.
+    Queued(FrameCommand),
+    /// A frame to step now.
+    Step(FrameCommand),
 }
 
 /// Steps every monitor through the epochs from `from`, until the frame ends, a monitor
 /// fails (that epoch is the last, stepped by the others) or the slice has used
 /// [`SLICE_BUDGET`] of compute.
-fn step_slice(mut monitors: Vec<NamedMonitor>, epochs: Vec<Epoch>, from: usize) -> Slice {
+fn step_slice(mut engines: Vec<Box<dyn Monitor>>, epochs: Vec<Epoch>, from: usize) -> Slice {
     let start = Instant::now();
     let mut stepped = Vec::new();
     let mut failure = None;
     for (i, epoch) in epochs.iter().enumerate().skip(from) {
-        let mut reports = Vec::with_capacity(monitors.len());
-        for m in &mut monitors {
-            match m.monitor.step(epoch) {
+        let mut reports = Vec::with_capacity(engines.len());
+        for (k, engine) in engines.iter_mut().enumerate() {
+            match engine.step(epoch) {
                 Ok(report) => reports.push(Some(report)),
                 Err(e) => {
                     reports.push(None);
-                    failure.get_or_insert((i, m.name.clone(), e));
+                    failure.get_or_insert((i, k, e));
                 }
             }
         }
@@ -358,7 +395,7 @@ fn step_slice(mut monitors: Vec<NamedMonitor>, epochs: Vec<Epoch>, from: usize) 
         }
     }
     Slice {
-        monitors,
+        engines,
         epochs,
         stepped,
         failure,
@@ -402,7 +439,7 @@ impl Actor {
                 },
                 frame = frames.recv() => match frame {
                     Some(frame) => {
-                        if self.frame(frame, &mut control).await == Flow::Stop {
+                        if self.frames(frame, &mut frames, &mut control).await == Flow::Stop {
                             break;
                         }
                     }
@@ -423,6 +460,37 @@ impl Actor {
             .unwrap_or_else(|p| p.into_inner())
             .clear();
         tracing::debug!(session = %self.id, "session actor stopped");
+    }
+
+    /// Handles `frame` and any frame taken from the queue with it (see
+    /// [`Actor::frame`]). A frame taken early but not stepped waits behind the control
+    /// commands that came meanwhile, as it would have in the queue; one already stepped
+    /// is committed first.
+    async fn frames(
+        &mut self,
+        frame: FrameCommand,
+        frames: &mut mpsc::Receiver<FrameCommand>,
+        control: &mut mpsc::Receiver<ControlCommand>,
+    ) -> Flow {
+        let mut next = Some(Next::Queued(frame));
+        while let Some(frame) = next.take() {
+            if self.owned.as_ref().is_some_and(|o| o.fenced) {
+                break; // the run loop stops
+            }
+            if matches!(frame, Next::Queued(_)) {
+                while let Ok(command) = control.try_recv() {
+                    if self.command(command).await == Flow::Stop {
+                        return Flow::Stop;
+                    }
+                }
+            }
+            let (flow, carry) = self.frame(frame, frames, control).await;
+            if flow == Flow::Stop {
+                return Flow::Stop;
+            }
+            next = carry;
+        }
+        Flow::Continue
     }
 
     /// Serves one control command; `Stop` when the actor must end (shutdown, or the
@@ -534,7 +602,7 @@ impl Actor {
     ) -> Result<ThresholdView, SessionError> {
         let index = self.find(name)?;
         let before = (
-            self.monitors[index].monitor.tests().clone(),
+            self.engines[index].tests().clone(),
             self.monitors[index].alarm_level,
             self.stored(),
         );
@@ -547,9 +615,8 @@ impl Actor {
             .await
         {
             let (bank, level, spec) = before;
-            let m = &mut self.monitors[index];
-            *m.monitor.tests_mut() = bank;
-            m.alarm_level = level;
+            *self.engines[index].tests_mut() = bank;
+            self.monitors[index].alarm_level = level;
             *self.shared.stored.lock().unwrap_or_else(|p| p.into_inner()) = spec;
             return Err(self.store_error(e));
         }
@@ -569,13 +636,13 @@ impl Actor {
         // reconnects. Tests left suspect or isolated by the previous stream
         // return to healthy: say so, and clear their open alarms.
         let mut returned = Vec::new();
-        for m in &mut self.monitors {
-            for slot in m.monitor.tests().slots() {
+        for (m, engine) in self.monitors.iter_mut().zip(&mut self.engines) {
+            for slot in engine.tests().slots() {
                 if slot.policy.health() != Health::Healthy {
                     returned.push((m.name.clone(), slot.name.clone(), slot.policy.health()));
                 }
             }
-            m.monitor.reset();
+            engine.reset();
             m.availability = None;
         }
         let t = self.last_t;
@@ -620,11 +687,11 @@ impl Actor {
         self.stats.connected = true;
         // Stats are keyed by name (sorted), monitors and slots are in session
         // order: match them by name, never by position.
-        for m in &self.monitors {
+        for (m, engine) in self.monitors.iter().zip(&self.engines) {
             let Some(monitor_stats) = self.stats.monitors.get_mut(&m.name) else {
                 continue;
             };
-            for slot in m.monitor.tests().slots() {
+            for slot in engine.tests().slots() {
                 if let Some(test) = monitor_stats.tests.get_mut(&slot.name) {
                     test.state = slot.policy.health();
                     test.consistency = None;
@@ -809,7 +876,7 @@ impl Actor {
 
     fn threshold_view(&self, index: usize) -> ThresholdView {
         let m = &self.monitors[index];
-        let bank = m.monitor.tests();
+        let bank = self.engines[index].tests();
         let spec = bank.spec();
         ThresholdView {
             monitor: m.name.clone(),
@@ -856,7 +923,7 @@ impl Actor {
         }
         // Everything is applied to a copy of the bank first, so a refused part changes
         // nothing.
-        let mut bank = self.monitors[index].monitor.tests().clone();
+        let mut bank = self.engines[index].tests().clone();
         if update.p_fa.is_some() || update.threshold.is_some() {
             let spec = ThresholdSpec::from_parts(update.p_fa, update.threshold)
                 .map_err(|e| SessionError::invalid("p_fa", e.to_string()))?;
@@ -881,12 +948,11 @@ impl Actor {
             bank.set_test_spec(i, own)
                 .map_err(|e| SessionError::invalid(field, e.to_string()))?;
         }
-        let m = &mut self.monitors[index];
-        *m.monitor.tests_mut() = bank;
+        *self.engines[index].tests_mut() = bank;
         if let Some(level) = update.alarm_level {
-            m.alarm_level = level;
+            self.monitors[index].alarm_level = level;
         }
-        let bank = m.monitor.tests();
+        let bank = self.engines[index].tests();
         let (spec, policy) = (bank.spec(), bank.policy());
         if let Some(stats) = self.stats.monitors.get_mut(name) {
             for slot in bank.slots() {
@@ -920,9 +986,10 @@ impl Actor {
         Ok((self.threshold_view(index), stored))
     }
 
-    /// Checks a whole frame against the session before anything changes.
-    fn validate(&self, epochs: &[Epoch]) -> Result<(), FrameError> {
-        if let (Some(last), Some(first)) = (self.last_t, epochs.first())
+    /// Checks a whole frame against the session before anything changes, `last_t` being
+    /// the time of the last epoch before it.
+    fn validate(&self, epochs: &[Epoch], last_t: Option<f64>) -> Result<(), FrameError> {
+        if let (Some(last), Some(first)) = (last_t, epochs.first())
             && first.t < last
         {
             return Err(FrameError::new(
@@ -932,8 +999,8 @@ impl Actor {
             .at(0));
         }
         for (i, epoch) in epochs.iter().enumerate() {
-            for m in &self.monitors {
-                m.monitor.check_epoch(&m.name, epoch).map_err(|e| {
+            for (m, engine) in self.monitors.iter().zip(&self.engines) {
+                engine.check_epoch(&m.name, epoch).map_err(|e| {
                     let code = match e {
                         crate::monitor::EpochError::WrongLength { .. } => {
                             FrameErrorCode::WrongLength
@@ -989,18 +1056,39 @@ impl Actor {
     /// monitors that stepped it (their results, state changes and alarms are stored and
     /// announced; the failing monitor's state is unchanged), then refused as `numerical`,
     /// and the rest of the frame is not used.
+    ///
+    /// When the frame's last slice has stepped and the next frame is already queued, the
+    /// next frame's first slice is stepped on the pool while this frame's last epochs are
+    /// committed ([`Actor::prefetch`]); that frame comes back with the answer and must be
+    /// handled next, before anything else.
     async fn frame(
         &mut self,
-        frame: FrameCommand,
+        next: Next,
+        frames: &mut mpsc::Receiver<FrameCommand>,
         control: &mut mpsc::Receiver<ControlCommand>,
-    ) -> Flow {
-        if frame.stream != self.stream {
-            return Flow::Continue; // from a stream that has since been replaced
-        }
-        if let Err(error) = self.validate(&frame.epochs) {
-            self.reject(error).await;
-            return Flow::Continue;
-        }
+    ) -> (Flow, Option<Next>) {
+        let (frame, total, mut stepped_first) = match next {
+            Next::Queued(frame) => {
+                if frame.stream != self.stream {
+                    // from a stream that has since been replaced
+                    return (Flow::Continue, None);
+                }
+                if let Err(error) = self.validate(&frame.epochs, self.last_t) {
+                    self.reject(error).await;
+                    return (Flow::Continue, None);
+                }
+                let total = frame.epochs.len();
+                (frame, total, None)
+            }
+            Next::Stepped {
+                frame,
+                total,
+                slice,
+            } => {
+                self.note_cost(&slice);
+                (frame, total, Some(slice))
+            }
+        };
         self.stats.frames += 1;
         self.stats.last_frame_at_ms = Some(now_ms());
         self.deps.metrics.frames.fetch_add(1, Ordering::Relaxed);
@@ -1010,7 +1098,6 @@ impl Actor {
             stream: frame_stream,
             text,
         } = frame;
-        let total = epochs.len();
         if self.echo {
             // One buffer for the frame's results, with some room for longer ones.
             self.results
@@ -1022,8 +1109,19 @@ impl Actor {
         let mut epochs = epochs;
         let mut from = 0;
         let mut changed = false;
+        let mut carry = None;
         while from < total {
-            let slice = match self.step(epochs, from).await {
+            let slice = match stepped_first.take() {
+                Some(slice) => slice,
+                None => self.step(epochs, from).await,
+            };
+            let Slice {
+                engines,
+                epochs: returned,
+                stepped,
+                failure,
+                elapsed: _,
+            } = match slice {
                 Ok(slice) => slice,
                 Err(e) => {
                     // The monitors went with the job: start them afresh from the spec.
@@ -1037,16 +1135,49 @@ impl Actor {
                     break;
                 }
             };
-            self.monitors = slice.monitors;
-            epochs = slice.epochs;
-            for (k, reports) in slice.stepped.iter().enumerate() {
-                // An epoch no monitor could take changes nothing: it is not committed.
-                if reports.iter().any(Option::is_some) {
-                    changed |= self.commit_epoch(&epochs[from + k], reports).await;
+            self.engines = engines;
+            epochs = returned;
+            let end = from + stepped.len();
+            let committing = &epochs[from..end];
+            let prefetch = match (end == total, &failure, committing.last()) {
+                (true, None, Some(last)) => self.prefetch(frames, control, last.t, &stepped),
+                _ => Prefetch::None,
+            };
+            changed |= match prefetch {
+                Prefetch::Step(mut next) => {
+                    self.deps
+                        .metrics
+                        .frames_prestepped
+                        .fetch_add(1, Ordering::Relaxed);
+                    // The statistics published when this frame ends must not see the
+                    // next frame's epochs: what they read of the monitors is read now.
+                    self.refresh_consistency();
+                    let total = next.epochs.len();
+                    let engines = std::mem::take(&mut self.engines);
+                    let next_epochs = std::mem::take(&mut next.epochs);
+                    let compute = self.deps.compute.clone();
+                    let job = async move {
+                        compute
+                            .run(move || step_slice(engines, next_epochs, 0))
+                            .await
+                    };
+                    let (slice, changed) =
+                        tokio::join!(job, self.commit_slice(committing, &stepped));
+                    carry = Some(Next::Stepped {
+                        frame: next,
+                        total,
+                        slice,
+                    });
+                    changed
                 }
-            }
-            from += slice.stepped.len();
-            if slice.failure.is_none() && from < total {
+                Prefetch::Queued(next) => {
+                    carry = Some(Next::Queued(next));
+                    self.commit_slice(committing, &stepped).await
+                }
+                Prefetch::None => self.commit_slice(committing, &stepped).await,
+            };
+            from = end;
+            if failure.is_none() && from < total {
                 // Between slices: observers see progress, and control commands are served
                 // (a threshold change applies from the next epoch). A new stream or a
                 // delete ends this frame: its later epochs belong to the old stream.
@@ -1054,18 +1185,19 @@ impl Actor {
                 while let Ok(command) = control.try_recv() {
                     let new_stream = matches!(command, ControlCommand::Attach(..));
                     if self.command(command).await == Flow::Stop {
-                        return Flow::Stop;
+                        return (Flow::Stop, None);
                     }
                     if new_stream || frame_stream != self.stream {
                         self.record_frame(text, recording_stream, first_epoch, from)
                             .await;
                         self.finish_frame(received, from, changed);
-                        return Flow::Continue;
+                        return (Flow::Continue, None);
                     }
                 }
             }
-            if let Some((index, monitor, e)) = slice.failure {
+            if let Some((index, monitor, e)) = failure {
                 let t = epochs[index].t;
+                let monitor = &self.monitors[monitor].name;
                 let error = FrameError::new(
                     FrameErrorCode::Numerical,
                     format!(
@@ -1080,7 +1212,7 @@ impl Actor {
         self.record_frame(text, recording_stream, first_epoch, committed)
             .await;
         self.finish_frame(received, total, changed);
-        Flow::Continue
+        (Flow::Continue, carry)
     }
 
     /// Steps the session's monitors through `epochs[from..]` (one slice): on this task
@@ -1088,29 +1220,115 @@ impl Actor {
     /// compute pool. A panic is caught either way (the monitors are then lost, as on the
     /// pool).
     async fn step(&mut self, epochs: Vec<Epoch>, from: usize) -> Result<Slice, ComputeError> {
-        let monitors = std::mem::take(&mut self.monitors);
-        let remaining = u32::try_from(epochs.len() - from).unwrap_or(u32::MAX);
-        let inline = self
-            .epoch_cost
-            .is_some_and(|cost| cost.saturating_mul(remaining) <= INLINE_BUDGET);
-        let slice = if inline {
+        let engines = std::mem::take(&mut self.engines);
+        let slice = if self.inline(epochs.len() - from) {
             std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                step_slice(monitors, epochs, from)
+                step_slice(engines, epochs, from)
             }))
             .map_err(|_| ComputeError::Panicked)
         } else {
             self.deps
                 .compute
-                .run(move || step_slice(monitors, epochs, from))
+                .run(move || step_slice(engines, epochs, from))
                 .await
         };
-        if let Ok(slice) = &slice
+        self.note_cost(&slice);
+        slice
+    }
+
+    /// Whether `epochs` epochs fit in [`INLINE_BUDGET`] at the session's last measured
+    /// cost (never before the first measure).
+    fn inline(&self, epochs: usize) -> bool {
+        let epochs = u32::try_from(epochs).unwrap_or(u32::MAX);
+        self.epoch_cost
+            .is_some_and(|cost| cost.saturating_mul(epochs) <= INLINE_BUDGET)
+    }
+
+    /// Keeps a stepped slice's compute time per epoch (see [`Actor::inline`]).
+    fn note_cost(&mut self, slice: &Result<Slice, ComputeError>) {
+        if let Ok(slice) = slice
             && let Ok(n) = u32::try_from(slice.stepped.len())
             && n > 0
         {
             self.epoch_cost = Some(slice.elapsed / n);
         }
-        slice
+    }
+
+    /// At the end of a frame whose epochs all stepped (their commit still to come): takes
+    /// the next frame from the queue, if there is one, and says whether it may be stepped
+    /// now, on the compute pool, while those epochs are committed
+    /// ([`Prefetch::Step`], docs/architecture.md §A2). It may not ([`Prefetch::Queued`]:
+    /// it is handled after this frame as if it had stayed in the queue) when it would be
+    /// stepped on this task anyway, belongs to another stream, would be refused, or when
+    /// committing this frame's epochs needs the monitors themselves: a monitor leaving
+    /// `converging` raises the alarms its tests stand in (see
+    /// [`Actor::announce_availability`]), read from the monitors. Nothing is taken while
+    /// a control command waits, so a command waits at most one frame more.
+    fn prefetch(
+        &self,
+        frames: &mut mpsc::Receiver<FrameCommand>,
+        control: &mpsc::Receiver<ControlCommand>,
+        last_t: f64,
+        stepped: &[Vec<Option<MonitorReport>>],
+    ) -> Prefetch {
+        if !control.is_empty() {
+            return Prefetch::None;
+        }
+        let Ok(frame) = frames.try_recv() else {
+            return Prefetch::None;
+        };
+        // (An empty frame never gets here, the edge refuses it; it is not stepped early
+        // either, since no slice of it would bring the monitors back.)
+        if frame.stream != self.stream
+            || frame.epochs.is_empty()
+            || self.inline(frame.epochs.len())
+            || self.leaves_converging(stepped)
+            || self.validate(&frame.epochs, Some(last_t)).is_err()
+        {
+            return Prefetch::Queued(frame);
+        }
+        Prefetch::Step(frame)
+    }
+
+    /// Whether committing `stepped` would take a monitor out of `converging` (its first
+    /// report of a protection level in another state counts: a stream starts converging,
+    /// [`Actor::record`]).
+    fn leaves_converging(&self, stepped: &[Vec<Option<MonitorReport>>]) -> bool {
+        self.monitors.iter().enumerate().any(|(index, m)| {
+            let mut state = self
+                .stats
+                .monitors
+                .get(&m.name)
+                .and_then(|s| s.integrity.as_ref())
+                .map_or(Availability::Converging, |i| i.state);
+            stepped.iter().any(|reports| {
+                let Some(Some(report)) = reports.get(index) else {
+                    return false;
+                };
+                let Some(integrity) = &report.integrity else {
+                    return false;
+                };
+                let leaves = state == Availability::Converging && integrity.state != state;
+                state = integrity.state;
+                leaves
+            })
+        })
+    }
+
+    /// Commits the stepped epochs in order; true if any state changed.
+    async fn commit_slice(
+        &mut self,
+        epochs: &[Epoch],
+        stepped: &[Vec<Option<MonitorReport>>],
+    ) -> bool {
+        let mut changed = false;
+        for (epoch, reports) in epochs.iter().zip(stepped) {
+            // An epoch no monitor could take changes nothing: it is not committed.
+            if reports.iter().any(Option::is_some) {
+                changed |= self.commit_epoch(epoch, reports).await;
+            }
+        }
+        changed
     }
 
     /// Queues the frame for the recording: its text as sent, the epochs that were
@@ -1183,7 +1401,7 @@ impl Actor {
             .clone();
         match build_monitors(&stored, &*self.deps.models) {
             Ok(monitors) => {
-                self.monitors = with_alarm_levels(monitors, &stored);
+                (self.monitors, self.engines) = with_alarm_levels(monitors, &stored);
             }
             Err(e) => {
                 tracing::error!(session = %self.id, error = %e, "could not rebuild the monitors");
@@ -1470,8 +1688,13 @@ impl Actor {
     /// level counts as an alarm (see [`Actor::announce_availability`]).
     async fn raise_left_over(&mut self, index: usize, t: f64) {
         let m = &self.monitors[index];
-        let standing: Vec<_> = m
-            .monitor
+        let Some(engine) = self.engines.get(index) else {
+            // Only while a step job holds the monitors, which Actor::prefetch never
+            // allows when a commit can get here.
+            tracing::error!(session = %self.id, monitor = %m.name, "monitors away when raising standing alarms");
+            return;
+        };
+        let standing: Vec<_> = engine
             .tests()
             .slots()
             .iter()
@@ -1530,11 +1753,11 @@ impl Actor {
     /// Copies each test's consistency diagnostics into the statistics (done at
     /// publication, at most [`STATS_PERIOD`]⁻¹ times a second, not per epoch).
     fn refresh_consistency(&mut self) {
-        for m in &mut self.monitors {
+        for (m, engine) in self.monitors.iter().zip(&mut self.engines) {
             let Some(monitor_stats) = self.stats.monitors.get_mut(&m.name) else {
                 continue;
             };
-            for slot in m.monitor.tests_mut().slots_mut() {
+            for slot in engine.tests_mut().slots_mut() {
                 if let Some(test) = monitor_stats.tests.get_mut(&slot.name) {
                     test.consistency = slot.consistency.summary();
                 }

@@ -42,12 +42,11 @@ struct MonitorState {
 /// The actor's state as checkpoint bytes.
 pub(super) fn encode(actor: &Actor) -> Result<Vec<u8>, String> {
     let mut monitors = Vec::with_capacity(actor.monitors.len());
-    for m in &actor.monitors {
+    for (m, engine) in actor.monitors.iter().zip(&actor.engines) {
         monitors.push(MonitorState {
             name: m.name.clone(),
             availability: m.availability,
-            state: m
-                .monitor
+            state: engine
                 .checkpoint()
                 .map_err(|e| format!("monitor '{}': {e}", m.name))?,
         });
@@ -92,17 +91,17 @@ pub(super) fn restore(actor: &mut Actor, checkpoint: &Checkpoint) -> Result<(), 
         ));
     }
     for (k, saved) in envelope.monitors.iter().enumerate() {
-        let m = &mut actor.monitors[k];
-        let configured = m.monitor.tests().clone();
-        if let Err(e) = m.monitor.restore(&saved.state) {
-            for m in &mut actor.monitors[..k] {
-                m.monitor.reset();
+        let engine = &mut actor.engines[k];
+        let configured = engine.tests().clone();
+        if let Err(e) = engine.restore(&saved.state) {
+            for (m, engine) in actor.monitors[..k].iter_mut().zip(&mut actor.engines) {
+                engine.reset();
                 m.availability = None;
             }
             return Err(format!("monitor '{}': {e}", saved.name));
         }
-        reapply_configuration(m.monitor.tests_mut(), &configured);
-        m.availability = saved.availability;
+        reapply_configuration(engine.tests_mut(), &configured);
+        actor.monitors[k].availability = saved.availability;
     }
     let mut stats = envelope.stats;
     for (monitor, test, r) in &envelope.running {
@@ -125,9 +124,9 @@ pub(super) fn restore(actor: &mut Actor, checkpoint: &Checkpoint) -> Result<(), 
     }
     stats.connected = false;
     stats.epochs_per_s = 0.0;
-    for m in &actor.monitors {
+    for (m, engine) in actor.monitors.iter().zip(&actor.engines) {
         if let Some(ms) = stats.monitors.get_mut(&m.name) {
-            for slot in m.monitor.tests().slots() {
+            for slot in engine.tests().slots() {
                 if let Some(t) = ms.tests.get_mut(&slot.name) {
                     t.threshold = slot.threshold;
                     t.state = slot.policy.health();
