@@ -2,12 +2,12 @@
 
 use std::collections::BTreeMap;
 
-use serde::ser::SerializeMap;
-use serde::{Deserialize, Serialize, Serializer};
+use serde::{Deserialize, Serialize};
+use serde_json::ser::{CompactFormatter, Formatter};
 
 use super::ingest::{FrameError, FrameErrorCode};
-use crate::detect::{Health, Statistic};
-use crate::monitor::{Availability, Integrity, MonitorReport, TestOutcome};
+use crate::detect::Health;
+use crate::monitor::{Availability, MonitorReport, Outputs, TestOutcome};
 
 /// How loud a state change is (docs/architecture.md §A2): an `alarm` is stored,
 /// announced as an `alarm` event and counted; a `warning` is stored and announced only
@@ -43,134 +43,122 @@ impl Severity {
 
 // ------------------------------------------------------------- server messages
 
-/// One test's result in a `result` frame.
-#[derive(Debug, Clone, Serialize)]
-pub struct TestResultWire {
-    /// The statistic.
-    pub statistic: f64,
-    /// Effective threshold.
-    pub threshold: f64,
-    /// Degrees of freedom.
-    pub dof: u32,
-    /// statistic / threshold.
-    pub test_ratio: f64,
-    /// Health after this epoch.
-    pub state: Health,
-}
-
-impl TestResultWire {
-    /// From a statistic and the decided health.
-    pub fn new(s: &Statistic, state: Health) -> Self {
-        TestResultWire {
-            statistic: s.value,
-            threshold: s.threshold,
-            dof: s.dof,
-            test_ratio: s.test_ratio(),
-            state,
-        }
-    }
-}
-
-/// A monitor's integrity on the wire: availability, protection level, alert limit.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct IntegrityWire {
-    /// `converging`, `available` or `unavailable`.
-    pub state: Availability,
-    /// Protection level, m.
-    pub protection_level: f64,
-    /// Alert limit, m.
-    pub alert_limit: f64,
-}
-
-impl From<&Integrity> for IntegrityWire {
-    fn from(i: &Integrity) -> Self {
-        IntegrityWire {
-            state: i.state,
-            protection_level: i.protection_level,
-            alert_limit: i.alert_limit,
-        }
-    }
-}
-
-/// One monitor's part of a `result` frame.
-#[derive(Debug, Clone, Serialize)]
-pub struct MonitorResultWire<'a> {
-    /// Tests that ran this epoch, by name.
-    pub tests: TestsWire<'a>,
-    /// Integrity availability, for monitors with a protection level.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub integrity: Option<IntegrityWire>,
-    /// Monitor outputs, flattened beside `tests`.
-    #[serde(flatten)]
-    pub outputs: &'a crate::monitor::Outputs,
-}
-
-/// The tests of one report as a JSON object keyed by test name in name order, as a
-/// `BTreeMap` of them writes it (a name given twice keeps its last outcome), but without
-/// building that map when the report already lists its tests in name order.
-#[derive(Debug, Clone, Copy)]
-pub struct TestsWire<'a>(pub &'a [TestOutcome]);
-
-impl Serialize for TestsWire<'_> {
-    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-        let result = |o: &TestOutcome| TestResultWire::new(&o.statistic, o.decision.health);
-        let tests = self.0;
-        let mut map = serializer.serialize_map(Some(tests.len()))?;
-        if tests.windows(2).all(|w| w[0].name < w[1].name) {
-            for o in tests {
-                map.serialize_entry(&*o.name, &result(o))?;
-            }
-        } else {
-            let sorted: BTreeMap<&str, &TestOutcome> =
-                tests.iter().map(|o| (&*o.name, o)).collect();
-            for (name, o) in sorted {
-                map.serialize_entry(name, &result(o))?;
-            }
-        }
-        map.end()
-    }
-}
-
-/// Builds the wire form of one monitor's report.
-pub fn monitor_result(report: &MonitorReport) -> MonitorResultWire<'_> {
-    MonitorResultWire {
-        tests: TestsWire(&report.tests),
-        integrity: report.integrity.as_ref().map(IntegrityWire::from),
-        outputs: &report.outputs,
-    }
-}
-
 /// Room for one `result` frame: a federated monitor's is about 800 bytes.
 pub const RESULT_FRAME_BYTES: usize = 1024;
-
-/// The `result` frame of one epoch.
-#[derive(Serialize)]
-struct ResultFrame<'a> {
-    #[serde(rename = "type")]
-    kind: &'static str,
-    t: f64,
-    monitors: BTreeMap<&'a str, MonitorResultWire<'a>>,
-}
 
 /// Appends one epoch's `result` frame to `out`: its time and each reporting monitor's
 /// result by name (a monitor that failed on the epoch is left out by the caller). The
 /// session actor writes a frame's results into one buffer and sends each as a slice of it.
+///
+/// The frame is `{"type":"result","t":…,"monitors":{NAME:{"tests":{TEST:{"statistic",
+/// "threshold","dof","test_ratio","state"},…},"integrity":{"state","protection_level",
+/// "alert_limit"}?,…outputs}}}`: monitors and tests in name order (a name given twice
+/// keeps its last entry), numbers as serde_json writes them (shortest round trip,
+/// non-finite as `null`). The fixed keys are written as they are, and only names go
+/// through JSON escaping; the monitor's outputs are serialised by serde and spliced in.
+/// Byte for byte what serde writes for the same frame (tested against it below), in
+/// about a quarter less time (`cargo bench --bench wire`: 58.6 → 42.6 µs for 100 ship
+/// results); most of what remains is formatting the numbers.
 pub fn write_result_frame<'a>(
-    out: impl std::io::Write,
+    out: &mut Vec<u8>,
     t: f64,
     monitors: impl IntoIterator<Item = (&'a str, &'a MonitorReport)>,
 ) {
-    let monitors = monitors
-        .into_iter()
-        .map(|(name, report)| (name, monitor_result(report)))
-        .collect();
-    let frame = ResultFrame {
-        kind: "result",
-        t,
-        monitors,
-    };
-    // Numbers, strings and maps with string keys serialise into a Vec without error.
-    let _ = serde_json::to_writer(out, &frame);
+    let mut monitors: Vec<(&str, &MonitorReport)> = monitors.into_iter().collect();
+    // Stable: of two entries with one name, the later stays last and is the one kept.
+    monitors.sort_by(|a, b| a.0.cmp(b.0));
+    out.extend_from_slice(br#"{"type":"result","t":"#);
+    write_f64(out, t);
+    out.extend_from_slice(br#","monitors":{"#);
+    let mut first = true;
+    for (k, &(name, report)) in monitors.iter().enumerate() {
+        if monitors.get(k + 1).is_some_and(|next| next.0 == name) {
+            continue;
+        }
+        if !first {
+            out.push(b',');
+        }
+        first = false;
+        write_str(out, name);
+        out.extend_from_slice(br#":{"tests":{"#);
+        write_tests(out, &report.tests);
+        out.push(b'}');
+        if let Some(i) = &report.integrity {
+            out.extend_from_slice(br#","integrity":{"state":""#);
+            out.extend_from_slice(i.state.as_str().as_bytes());
+            out.extend_from_slice(br#"","protection_level":"#);
+            write_f64(out, i.protection_level);
+            out.extend_from_slice(br#","alert_limit":"#);
+            write_f64(out, i.alert_limit);
+            out.push(b'}');
+        }
+        write_outputs(out, &report.outputs);
+        out.push(b'}');
+    }
+    out.extend_from_slice(b"}}");
+}
+
+/// The tests of one report as a JSON object's members, by name; a report that lists
+/// them in name order (every monitor does) is written as it stands.
+fn write_tests(out: &mut Vec<u8>, tests: &[TestOutcome]) {
+    if tests.windows(2).all(|w| w[0].name < w[1].name) {
+        for (k, o) in tests.iter().enumerate() {
+            write_test(out, k == 0, o);
+        }
+    } else {
+        let sorted: BTreeMap<&str, &TestOutcome> = tests.iter().map(|o| (&*o.name, o)).collect();
+        for (k, o) in sorted.into_values().enumerate() {
+            write_test(out, k == 0, o);
+        }
+    }
+}
+
+fn write_test(out: &mut Vec<u8>, first: bool, o: &TestOutcome) {
+    if !first {
+        out.push(b',');
+    }
+    let s = &o.statistic;
+    write_str(out, &o.name);
+    out.extend_from_slice(br#":{"statistic":"#);
+    write_f64(out, s.value);
+    out.extend_from_slice(br#","threshold":"#);
+    write_f64(out, s.threshold);
+    out.extend_from_slice(br#","dof":"#);
+    let _ = CompactFormatter.write_u32(out, s.dof);
+    out.extend_from_slice(br#","test_ratio":"#);
+    write_f64(out, s.test_ratio());
+    out.extend_from_slice(br#","state":""#);
+    out.extend_from_slice(o.decision.health.as_str().as_bytes());
+    out.extend_from_slice(br#""}"#);
+}
+
+/// The outputs' members after the monitor's others: serde writes them as an object,
+/// whose braces are taken off (an empty one leaves nothing).
+fn write_outputs(out: &mut Vec<u8>, outputs: &Outputs) {
+    let at = out.len();
+    // Numbers, strings, sequences and maps with string keys serialise without error.
+    let _ = serde_json::to_writer(&mut *out, outputs);
+    if out.len() <= at + 2 {
+        out.truncate(at);
+    } else {
+        out[at] = b',';
+        out.pop();
+    }
+}
+
+/// A number as serde_json writes an `f64`: shortest round trip, non-finite as `null`.
+fn write_f64(out: &mut Vec<u8>, v: f64) {
+    if v.is_finite() {
+        let _ = CompactFormatter.write_f64(out, v);
+    } else {
+        out.extend_from_slice(b"null");
+    }
+}
+
+/// A JSON string, escaped.
+fn write_str(out: &mut Vec<u8>, s: &str) {
+    // Writing a string into a Vec cannot fail.
+    let _ = serde_json::to_writer(&mut *out, s);
 }
 
 /// The text of one epoch's `result` frame (see [`write_result_frame`]).
@@ -307,4 +295,240 @@ pub fn tagged<T: Serialize>(kind: &'static str, body: &T) -> String {
         // Serialising our own plain structs cannot fail; keep the socket alive if it ever does.
         format!(r#"{{"type":"error","code":"internal","message":"{e}"}}"#)
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeMap;
+    use std::sync::Arc;
+
+    use serde::ser::SerializeMap;
+    use serde::{Serialize, Serializer};
+
+    use super::*;
+    use crate::detect::{Decision, Statistic};
+    use crate::monitor::{Integrity, federated::FederatedSolution};
+
+    // The `result` frame as serde writes it from types: the form the hand-written writer
+    // replaced, kept as its reference.
+
+    #[derive(Serialize)]
+    struct TestResultWire {
+        statistic: f64,
+        threshold: f64,
+        dof: u32,
+        test_ratio: f64,
+        state: Health,
+    }
+
+    #[derive(Serialize)]
+    struct IntegrityWire {
+        state: Availability,
+        protection_level: f64,
+        alert_limit: f64,
+    }
+
+    struct TestsWire<'a>(&'a [TestOutcome]);
+
+    impl Serialize for TestsWire<'_> {
+        fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+            let sorted: BTreeMap<&str, &TestOutcome> =
+                self.0.iter().map(|o| (&*o.name, o)).collect();
+            let mut map = serializer.serialize_map(Some(sorted.len()))?;
+            for (name, o) in sorted {
+                let s = &o.statistic;
+                let result = TestResultWire {
+                    statistic: s.value,
+                    threshold: s.threshold,
+                    dof: s.dof,
+                    test_ratio: s.test_ratio(),
+                    state: o.decision.health,
+                };
+                map.serialize_entry(name, &result)?;
+            }
+            map.end()
+        }
+    }
+
+    #[derive(Serialize)]
+    struct MonitorResultWire<'a> {
+        tests: TestsWire<'a>,
+        #[serde(skip_serializing_if = "Option::is_none")]
+        integrity: Option<IntegrityWire>,
+        #[serde(flatten)]
+        outputs: &'a Outputs,
+    }
+
+    #[derive(Serialize)]
+    struct ResultFrame<'a> {
+        #[serde(rename = "type")]
+        kind: &'static str,
+        t: f64,
+        monitors: BTreeMap<&'a str, MonitorResultWire<'a>>,
+    }
+
+    fn by_serde(t: f64, monitors: &[(&str, &MonitorReport)]) -> String {
+        let monitors = monitors
+            .iter()
+            .map(|&(name, r)| {
+                let integrity = r.integrity.map(|i| IntegrityWire {
+                    state: i.state,
+                    protection_level: i.protection_level,
+                    alert_limit: i.alert_limit,
+                });
+                let wire = MonitorResultWire {
+                    tests: TestsWire(&r.tests),
+                    integrity,
+                    outputs: &r.outputs,
+                };
+                (name, wire)
+            })
+            .collect();
+        let frame = ResultFrame {
+            kind: "result",
+            t,
+            monitors,
+        };
+        serde_json::to_string(&frame).unwrap()
+    }
+
+    fn outcome(name: &str, value: f64, threshold: f64, dof: u32, health: Health) -> TestOutcome {
+        TestOutcome {
+            index: 0,
+            name: Arc::from(name),
+            statistic: Statistic {
+                value,
+                threshold,
+                dof,
+            },
+            decision: Decision {
+                health,
+                update: true,
+                fuse: true,
+                reset: false,
+            },
+            previous: Health::Healthy,
+        }
+    }
+
+    /// Reports of every monitor kind, with awkward numbers and names.
+    fn reports() -> Vec<(&'static str, MonitorReport)> {
+        let tests = vec![
+            outcome("cns", 1.25e-7, 11.345, 2, Health::Healthy),
+            outcome("dvl", 0.1 + 0.2, 16.27, 3, Health::Suspect),
+            outcome("gnss", 1e300, 22.457744484825326, 6, Health::Isolated),
+            outcome("hpl", f64::NAN, f64::INFINITY, 1, Health::Healthy),
+        ];
+        let federated = MonitorReport {
+            tests: tests.clone(),
+            outputs: Outputs::Federated {
+                solution: Some(FederatedSolution {
+                    lat: 30.123456789012345,
+                    lon: -120.5,
+                    h: -0.0,
+                    vel: [1.0, -2.5e-12, f64::NEG_INFINITY],
+                }),
+                hpl: Some(24.531182482419574),
+                isolated: vec!["gnss"],
+            },
+            integrity: Some(Integrity {
+                state: Availability::Converging,
+                protection_level: 32.95314407244513,
+                alert_limit: 25.0,
+            }),
+        };
+        // Tests out of order, one name twice (the later entry is kept).
+        let mut unsorted = tests.clone();
+        unsorted.reverse();
+        unsorted.push(outcome("dvl", 2.0, 16.27, 3, Health::Healthy));
+        let linear = MonitorReport {
+            tests: unsorted,
+            outputs: Outputs::Linear {
+                innovation: None,
+                x: vec![1.0, 2.0, 3.5, -4.0],
+            },
+            integrity: None,
+        };
+        let channel = MonitorReport {
+            tests: vec![outcome("a\"b\\c\u{7}é", 3.0, 9.0, 1, Health::Healthy)],
+            outputs: Outputs::Channel {
+                prediction: [(Arc::from("a\"b\\c\u{7}é"), vec![0.5])].into(),
+                residual: BTreeMap::new(),
+            },
+            integrity: None,
+        };
+        let rimu = MonitorReport {
+            tests: Vec::new(),
+            outputs: Outputs::Rimu {
+                parity: Some(vec![0.1, 0.2]),
+                flagged: vec![1],
+                isolated: Vec::new(),
+                omega: Some([0.0, 1e-5, 3.0]),
+            },
+            integrity: None,
+        };
+        let tacan = MonitorReport {
+            tests: vec![outcome("range", 0.0, 0.0, 0, Health::Healthy)],
+            outputs: Outputs::Tacan {
+                features: None,
+                decision: None,
+            },
+            integrity: Some(Integrity {
+                state: Availability::Unavailable,
+                protection_level: f64::NAN,
+                alert_limit: 40.0,
+            }),
+        };
+        vec![
+            ("nav", federated),
+            ("lin", linear),
+            ("ch \u{1F680}", channel),
+            ("gyros", rimu),
+            ("tacan", tacan),
+        ]
+    }
+
+    fn by_hand(t: f64, monitors: &[(&str, &MonitorReport)]) -> String {
+        let mut out = Vec::new();
+        write_result_frame(&mut out, t, monitors.iter().copied());
+        String::from_utf8(out).unwrap()
+    }
+
+    #[test]
+    fn the_result_frame_is_what_serde_writes_byte_for_byte() {
+        let reports = reports();
+        let all: Vec<(&str, &MonitorReport)> = reports.iter().map(|(n, r)| (*n, r)).collect();
+        for (t, monitors) in [
+            (0.0, vec![all[0]]),
+            (12.3, all.clone()),
+            (-1e-9, all.iter().rev().copied().collect()),
+            // A monitor named twice: the later entry is kept, as a map keeps it.
+            (f64::NAN, vec![all[0], all[1], ("nav", all[2].1)]),
+            (1e21, Vec::new()),
+        ] {
+            let hand = by_hand(t, &monitors);
+            assert_eq!(hand, by_serde(t, &monitors));
+            serde_json::from_str::<serde_json::Value>(&hand).expect("valid JSON");
+        }
+    }
+
+    #[test]
+    fn a_federated_report_of_the_ship_is_written_as_serde_writes_it() {
+        let scenario = crate::sim::ship_with(4, Vec::new(), 30.0).unwrap();
+        let spec = crate::monitor::MonitorSpec {
+            kind: crate::monitor::MonitorKind::Federated,
+            config: crate::monitor::MonitorConfig::Federated(scenario.monitor_config()),
+            policy: crate::detect::PolicyConfig::Counters { n1: 10, n2: 5 },
+            threshold: crate::detect::ThresholdSpec::PFa(1e-3),
+        };
+        let mut monitor = crate::monitor::build(&spec, &crate::monitor::NoModels).unwrap();
+        for e in &scenario.epochs {
+            let report = monitor.step(&e.epoch).unwrap();
+            let monitors = [("federated", &report)];
+            assert_eq!(
+                by_hand(e.epoch.t, &monitors),
+                by_serde(e.epoch.t, &monitors)
+            );
+        }
+    }
 }
