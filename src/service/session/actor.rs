@@ -484,7 +484,10 @@ impl Actor {
                     }
                 }
             }
-            let (flow, carry) = self.frame(frame, frames, control).await;
+            // Boxed, allocated per frame: a frame's future is large (its commits' store
+            // and send futures, the step overlapping a commit), and held inline it would
+            // be part of every session's task, idle or not (about 1.5 kB).
+            let (flow, carry) = Box::pin(self.frame(frame, frames, control)).await;
             if flow == Flow::Stop {
                 return Flow::Stop;
             }
