@@ -10,7 +10,7 @@
 
 mod common;
 
-use common::{Socket, client, create_session, http, ingest, recv, send, ship_1hz, start};
+use common::{Socket, client, create_session, get_text, http, ingest, recv, send, ship_1hz, start};
 use navguard::service::wire::epoch_to_wire;
 use navguard::service::{Limits, Server};
 use navguard::sim::{Channel, Fault, FaultKind, Scenario};
@@ -359,14 +359,7 @@ fn without_identity(mut v: Value) -> Value {
 }
 
 async fn counter(server: &Server, name: &str) -> u64 {
-    let text = client()
-        .get(format!("{}/metrics", http(server)))
-        .send()
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let text = get_text(&format!("{}/metrics", http(server))).await;
     text.lines()
         .find_map(|l| l.strip_prefix(name)?.trim().parse().ok())
         .unwrap_or_else(|| panic!("no {name} in {text}"))

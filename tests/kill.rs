@@ -224,16 +224,10 @@ async fn every_announced_alarm_survives_five_kills_exactly_once() {
         );
         for (cycle, stream) in streams.iter().enumerate() {
             let epochs = &sent[&(id.to_owned(), cycle)];
-            let text = client
-                .get(format!(
-                    "{base}/api/v1/sessions/{id}/recording?stream={stream}"
-                ))
-                .send()
-                .await
-                .unwrap()
-                .text()
-                .await
-                .unwrap();
+            let text = get_text(&format!(
+                "{base}/api/v1/sessions/{id}/recording?stream={stream}"
+            ))
+            .await;
             let recorded: Vec<&str> = text.lines().collect();
             assert!(recorded.len() <= epochs.len(), "{id}/{cycle}");
             assert!(!recorded.is_empty(), "{id}/{cycle}: nothing recorded");

@@ -113,16 +113,10 @@ async fn a_replayed_recording_reproduces_every_result_and_alarm_bit_for_bit() {
     std::fs::write(&file, &text).unwrap();
 
     // The events it caused, with their epoch index.
-    let events = client()
-        .get(format!(
-            "{base}/api/v1/sessions/orig/recording?format=events"
-        ))
-        .send()
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let events = get_text(&format!(
+        "{base}/api/v1/sessions/orig/recording?format=events"
+    ))
+    .await;
     let events: Vec<Value> = events
         .lines()
         .map(|l| serde_json::from_str(l).unwrap())

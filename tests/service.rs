@@ -1005,14 +1005,7 @@ async fn chi2_health_metrics_and_unknown_routes_answer_in_json() {
 
     let (status, v) = get_json(&format!("{base}/healthz")).await;
     assert_eq!((status, v["status"].as_str()), (200, Some("ok")));
-    let text = client()
-        .get(format!("{base}/metrics"))
-        .send()
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let text = get_text(&format!("{base}/metrics")).await;
     for metric in [
         "navguard_frames_total",
         "navguard_epochs_total",
@@ -1473,14 +1466,7 @@ async fn consistency_diagnostics_name_a_mis_tuned_model() {
     // both sessions.
     let mut text = String::new();
     for _ in 0..250 {
-        text = c
-            .get(format!("{}/metrics", http(&server)))
-            .send()
-            .await
-            .unwrap()
-            .text()
-            .await
-            .unwrap();
+        text = get_text(&format!("{}/metrics", http(&server))).await;
         if text.contains("navguard_tests_by_consistency{flag=\"ok\"} 1")
             && text.contains("navguard_tests_by_consistency{flag=\"overconfident\"} 1")
         {

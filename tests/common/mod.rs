@@ -67,6 +67,13 @@ pub(crate) async fn get_json(url: &str) -> (u16, Value) {
     (status, resp.json().await.unwrap_or(Value::Null))
 }
 
+/// GETs `url` and returns its body as text (asserting a 200).
+pub(crate) async fn get_text(url: &str) -> String {
+    let resp = reqwest::get(url).await.unwrap();
+    assert_eq!(resp.status(), 200, "GET {url}");
+    resp.text().await.unwrap()
+}
+
 /// Seed 004's ship at a 1 Hz INS rate: the same route, sensors, aid rates and faults as
 /// the 10 Hz scenario with one prediction per second, which keeps every property the
 /// tests assert while a debug build runs it ten times faster.
