@@ -20,6 +20,7 @@
 //! healthy are left out (a fault is not mis-tuning) and break the lag chain.
 
 use std::collections::VecDeque;
+use std::sync::OnceLock;
 
 use serde::{Deserialize, Serialize};
 
@@ -248,9 +249,30 @@ impl Consistency {
 /// `[χ²_{α/2}(N d), χ²_{1−α/2}(N d)] / N` with `α = 1 −` [`CONFIDENCE`].
 fn nis_bounds(n: usize, d: u32) -> [f64; 2] {
     let dof = (n as u32).saturating_mul(d.max(1));
-    let lo = chi2::threshold(dof, 1.0 - HALF_ALPHA).unwrap_or(0.0);
-    let hi = chi2::threshold(dof, HALF_ALPHA).unwrap_or(f64::INFINITY);
+    let [lo, hi] = nis_quantiles(dof);
     [lo / n as f64, hi / n as f64]
+}
+
+/// Total degrees of freedom whose quantiles [`nis_quantiles`] keeps, shared by every
+/// session (a window of 100 epochs of a 3-component test is 300).
+const SHARED_DOF: usize = 2048;
+
+/// The χ²(`dof`) quantiles at `1 − HALF_ALPHA` and `HALF_ALPHA`. While a window fills,
+/// each publication of a session's statistics asks for a new `dof` per test; a stream's
+/// first seconds asked for the same few hundred inversions in every session, so they are
+/// computed once per process (the same numbers: a table of what `chi2::threshold` says).
+fn nis_quantiles(dof: u32) -> [f64; 2] {
+    static SHARED: [OnceLock<[f64; 2]>; SHARED_DOF] = [const { OnceLock::new() }; SHARED_DOF];
+    let compute = || {
+        [
+            chi2::threshold(dof, 1.0 - HALF_ALPHA).unwrap_or(0.0),
+            chi2::threshold(dof, HALF_ALPHA).unwrap_or(f64::INFINITY),
+        ]
+    };
+    match SHARED.get(dof as usize) {
+        Some(cell) => *cell.get_or_init(compute),
+        None => compute(),
+    }
 }
 
 #[cfg(test)]
@@ -326,6 +348,29 @@ mod tests {
         let hi = chi2::threshold(30, 0.0005).unwrap() / 30.0;
         assert_eq!(s.nis_bounds, [lo, hi]);
         assert_eq!(s.flag, Some(ConsistencyFlag::Correlated));
+    }
+
+    #[test]
+    fn shared_quantiles_are_the_inversions_themselves() {
+        // In the table, at its edge, past it, and asked twice (the second from the table).
+        for dof in [
+            1,
+            2,
+            3,
+            29,
+            300,
+            SHARED_DOF as u32 - 1,
+            SHARED_DOF as u32,
+            5_000,
+        ] {
+            let direct = [
+                chi2::threshold(dof, 1.0 - HALF_ALPHA).unwrap(),
+                chi2::threshold(dof, HALF_ALPHA).unwrap(),
+            ];
+            assert_eq!(nis_quantiles(dof), direct, "dof {dof}");
+            assert_eq!(nis_quantiles(dof), direct, "dof {dof}, again");
+        }
+        assert!(nis_quantiles(300)[0] < 300.0 && nis_quantiles(300)[1] > 300.0);
     }
 
     #[test]
