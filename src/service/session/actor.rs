@@ -418,15 +418,30 @@ impl Actor {
         mut frames: mpsc::Receiver<FrameCommand>,
         mut control: mpsc::Receiver<ControlCommand>,
     ) {
+        // The two timers live across iterations and are moved only when their deadline
+        // does: made afresh in every iteration, each 10 Hz frame registered and removed
+        // a timer in the runtime's wheel.
+        let trailing = tokio::time::sleep(Duration::ZERO);
+        let checkpoint_at = tokio::time::sleep(Duration::ZERO);
+        tokio::pin!(trailing, checkpoint_at);
         loop {
             if self.owned.as_ref().is_some_and(|o| o.fenced) {
                 tracing::warn!(session = %self.id, "lease fenced: another node owns the session; stopping here");
                 break;
             }
-            let trailing =
-                tokio::time::Instant::from_std(self.last_published + self.stats_period());
+            if self.stats_pending {
+                let at = tokio::time::Instant::from_std(self.last_published + self.stats_period());
+                if trailing.deadline() != at {
+                    trailing.as_mut().reset(at);
+                }
+            }
             let due = self.owned.as_ref().and_then(|o| o.due);
-            let checkpoint_at = tokio::time::Instant::from_std(due.unwrap_or_else(Instant::now));
+            if let Some(due) = due {
+                let at = tokio::time::Instant::from_std(due);
+                if checkpoint_at.deadline() != at {
+                    checkpoint_at.as_mut().reset(at);
+                }
+            }
             tokio::select! {
                 biased;
                 command = control.recv() => match command {
@@ -445,10 +460,10 @@ impl Actor {
                     }
                     None => break,
                 },
-                () = tokio::time::sleep_until(trailing), if self.stats_pending => {
+                () = &mut trailing, if self.stats_pending => {
                     self.publish(true);
                 }
-                () = tokio::time::sleep_until(checkpoint_at), if due.is_some() => {
+                () = &mut checkpoint_at, if due.is_some() => {
                     self.checkpoint(false).await;
                 }
             }
