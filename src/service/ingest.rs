@@ -11,6 +11,7 @@ use axum::extract::{Path, RawQuery, State};
 use axum::response::Response;
 use futures_util::SinkExt;
 use serde_json::json;
+use tokio::sync::mpsc::error::TrySendError;
 
 use super::app::AppState;
 use super::error::ApiError;
@@ -196,7 +197,14 @@ async fn run(mut socket: WebSocket, state: AppState, handle: SessionHandle, link
                     }
                 };
                 match on_text(&text, (stream, record), &state) {
-                    Next::Forward(frame) => pending = Some(frame),
+                    // Straight into the actor's queue when it has room (one pass of this
+                    // loop less per frame); when full, the frame waits for a permit while
+                    // the socket is still written.
+                    Next::Forward(frame) => match handle.frames().try_send(frame) {
+                        Ok(()) => {}
+                        Err(TrySendError::Full(frame)) => pending = Some(frame),
+                        Err(TrySendError::Closed(_)) => break,
+                    },
                     Next::Refuse(e) => {
                         if send_error(&mut socket, &state, &e).await.is_err() { break; }
                     }
