@@ -135,6 +135,48 @@ fn write_test(out: &mut Vec<u8>, first: bool, o: &TestOutcome) {
 /// The outputs' members after the monitor's others: serde writes them as an object,
 /// whose braces are taken off (an empty one leaves nothing).
 fn write_outputs(out: &mut Vec<u8>, outputs: &Outputs) {
+    if let Outputs::Federated {
+        solution,
+        hpl,
+        isolated,
+    } = outputs
+    {
+        // The most common outputs, written as serde would (its field order) without it.
+        out.extend_from_slice(br#","solution":"#);
+        match solution {
+            Some(s) => {
+                out.extend_from_slice(br#"{"lat":"#);
+                write_f64(out, s.lat);
+                out.extend_from_slice(br#","lon":"#);
+                write_f64(out, s.lon);
+                out.extend_from_slice(br#","h":"#);
+                write_f64(out, s.h);
+                out.extend_from_slice(br#","vel":["#);
+                for (k, &v) in s.vel.iter().enumerate() {
+                    if k > 0 {
+                        out.push(b',');
+                    }
+                    write_f64(out, v);
+                }
+                out.extend_from_slice(b"]}");
+            }
+            None => out.extend_from_slice(b"null"),
+        }
+        out.extend_from_slice(br#","hpl":"#);
+        match hpl {
+            Some(v) => write_f64(out, *v),
+            None => out.extend_from_slice(b"null"),
+        }
+        out.extend_from_slice(br#","isolated":["#);
+        for (k, name) in isolated.iter().enumerate() {
+            if k > 0 {
+                out.push(b',');
+            }
+            write_str(out, name);
+        }
+        out.push(b']');
+        return;
+    }
     let at = out.len();
     // Numbers, strings, sequences and maps with string keys serialise without error.
     let _ = serde_json::to_writer(&mut *out, outputs);
@@ -479,8 +521,19 @@ mod tests {
                 alert_limit: 40.0,
             }),
         };
+        // Before the first INS epoch, and with two aids isolated.
+        let federated_bare = MonitorReport {
+            tests: Vec::new(),
+            outputs: Outputs::Federated {
+                solution: None,
+                hpl: None,
+                isolated: vec!["dvl", "gnss"],
+            },
+            integrity: None,
+        };
         vec![
             ("nav", federated),
+            ("nav0", federated_bare),
             ("lin", linear),
             ("ch \u{1F680}", channel),
             ("gyros", rimu),
