@@ -128,10 +128,13 @@ async fn run_cluster(mut socket: WebSocket, state: AppState, cluster: Arc<Cluste
     ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let mut latest_stats: Option<bytes::Bytes> = None;
     let mut order = bus::SeqCheck::default();
+    // Made once, not per pass (see `ingest::run`).
+    let shutting_down = shutdown.changed();
+    tokio::pin!(shutting_down);
     loop {
         tokio::select! {
             biased;
-            _ = shutdown.changed() => {
+            _ = &mut shutting_down => {
                 close(&mut socket, 1001, "server shutting down").await;
                 break;
             }
@@ -189,10 +192,13 @@ async fn run(mut socket: WebSocket, state: AppState, handle: SessionHandle) {
     ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     // The first stats message goes out at once so a dashboard has something to draw.
     stats.mark_changed();
+    // Made once, not per pass (see `ingest::run`).
+    let shutting_down = shutdown.changed();
+    tokio::pin!(shutting_down);
     loop {
         tokio::select! {
             biased;
-            _ = shutdown.changed() => {
+            _ = &mut shutting_down => {
                 let _ = socket.send(Message::Close(Some(CloseFrame { code: 1001, reason: Utf8Bytes::from_static("server shutting down") }))).await;
                 break;
             }

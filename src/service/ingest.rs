@@ -147,10 +147,14 @@ async fn run(mut socket: WebSocket, state: AppState, handle: SessionHandle, link
         return;
     }
     let mut pending: Option<FrameCommand> = None;
+    // Made once: a fresh `changed()` in every pass of the loop joined and left the
+    // shutdown signal's waiter list, shared by every socket, three or four times a frame.
+    let shutting_down = shutdown.changed();
+    tokio::pin!(shutting_down);
     loop {
         tokio::select! {
             biased;
-            _ = shutdown.changed() => {
+            _ = &mut shutting_down => {
                 let _ = socket.send(Message::Close(Some(CloseFrame { code: 1001, reason: Utf8Bytes::from_static("server shutting down") }))).await;
                 break;
             }
