@@ -403,6 +403,14 @@ fn step_slice(mut engines: Vec<Box<dyn Monitor>>, epochs: Vec<Epoch>, from: usiz
     }
 }
 
+/// Moves a kept timer to `at`, touching the runtime's timer wheel only when it changes.
+fn rearm(timer: std::pin::Pin<&mut tokio::time::Sleep>, at: Instant) {
+    let at = tokio::time::Instant::from_std(at);
+    if timer.deadline() != at {
+        timer.reset(at);
+    }
+}
+
 /// The 422 reason for a test name the monitor does not have.
 fn unknown_test(test: &str, bank: &crate::monitor::TestBank) -> String {
     let names: Vec<&str> = bank.slots().iter().map(|s| &*s.name).collect();
@@ -430,17 +438,11 @@ impl Actor {
                 break;
             }
             if self.stats_pending {
-                let at = tokio::time::Instant::from_std(self.last_published + self.stats_period());
-                if trailing.deadline() != at {
-                    trailing.as_mut().reset(at);
-                }
+                rearm(trailing.as_mut(), self.last_published + self.stats_period());
             }
             let due = self.owned.as_ref().and_then(|o| o.due);
             if let Some(due) = due {
-                let at = tokio::time::Instant::from_std(due);
-                if checkpoint_at.deadline() != at {
-                    checkpoint_at.as_mut().reset(at);
-                }
+                rearm(checkpoint_at.as_mut(), due);
             }
             tokio::select! {
                 biased;

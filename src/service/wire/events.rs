@@ -7,6 +7,7 @@ use serde_json::ser::{CompactFormatter, Formatter};
 
 use super::ingest::{FrameError, FrameErrorCode};
 use crate::detect::Health;
+use crate::monitor::federated::FederatedSolution;
 use crate::monitor::{Availability, MonitorReport, Outputs, TestOutcome};
 
 /// How loud a state change is (docs/architecture.md §A2): an `alarm` is stored,
@@ -143,40 +144,7 @@ fn write_outputs(out: &mut Vec<u8>, outputs: &Outputs) {
         isolated,
     } = outputs
     {
-        // The most common outputs, written as serde would (its field order) without it.
-        out.extend_from_slice(br#","solution":"#);
-        match solution {
-            Some(s) => {
-                out.extend_from_slice(br#"{"lat":"#);
-                write_f64(out, s.lat);
-                out.extend_from_slice(br#","lon":"#);
-                write_f64(out, s.lon);
-                out.extend_from_slice(br#","h":"#);
-                write_f64(out, s.h);
-                out.extend_from_slice(br#","vel":["#);
-                for (k, &v) in s.vel.iter().enumerate() {
-                    if k > 0 {
-                        out.push(b',');
-                    }
-                    write_f64(out, v);
-                }
-                out.extend_from_slice(b"]}");
-            }
-            None => out.extend_from_slice(b"null"),
-        }
-        out.extend_from_slice(br#","hpl":"#);
-        match hpl {
-            Some(v) => write_f64(out, *v),
-            None => out.extend_from_slice(b"null"),
-        }
-        out.extend_from_slice(br#","isolated":["#);
-        for (k, name) in isolated.iter().enumerate() {
-            if k > 0 {
-                out.push(b',');
-            }
-            write_str(out, name);
-        }
-        out.push(b']');
+        write_federated_outputs(out, solution.as_ref(), *hpl, isolated);
         return;
     }
     let at = out.len();
@@ -188,6 +156,48 @@ fn write_outputs(out: &mut Vec<u8>, outputs: &Outputs) {
         out[at] = b',';
         out.pop();
     }
+}
+
+/// The federated monitor's outputs, the most common, written as serde writes them (its
+/// field order) without it.
+fn write_federated_outputs(
+    out: &mut Vec<u8>,
+    solution: Option<&FederatedSolution>,
+    hpl: Option<f64>,
+    isolated: &[&str],
+) {
+    out.extend_from_slice(br#","solution":"#);
+    match solution {
+        Some(s) => {
+            out.extend_from_slice(br#"{"lat":"#);
+            write_f64(out, s.lat);
+            out.extend_from_slice(br#","lon":"#);
+            write_f64(out, s.lon);
+            out.extend_from_slice(br#","h":"#);
+            write_f64(out, s.h);
+            out.extend_from_slice(br#","vel":"#);
+            write_array(out, &s.vel, |out, &v| write_f64(out, v));
+            out.push(b'}');
+        }
+        None => out.extend_from_slice(b"null"),
+    }
+    out.extend_from_slice(br#","hpl":"#);
+    // `None` is `null`, as a non-finite number is.
+    write_f64(out, hpl.unwrap_or(f64::NAN));
+    out.extend_from_slice(br#","isolated":"#);
+    write_array(out, isolated, |out, name| write_str(out, name));
+}
+
+/// A JSON array of `items`, each written by `each`.
+fn write_array<T>(out: &mut Vec<u8>, items: &[T], mut each: impl FnMut(&mut Vec<u8>, &T)) {
+    out.push(b'[');
+    for (k, item) in items.iter().enumerate() {
+        if k > 0 {
+            out.push(b',');
+        }
+        each(out, item);
+    }
+    out.push(b']');
 }
 
 /// A number as serde_json writes an `f64`: shortest round trip, non-finite as `null`.
@@ -351,7 +361,7 @@ mod tests {
 
     use super::*;
     use crate::detect::{Decision, Statistic};
-    use crate::monitor::{Integrity, federated::FederatedSolution};
+    use crate::monitor::Integrity;
 
     // The `result` frame as serde writes it from types: the form the hand-written writer
     // replaced, kept as its reference.
