@@ -392,6 +392,9 @@ pub(super) fn joseph_update_body<const M: usize>(
     let h = &m.obs.h;
     // H P, turned into U in place below (no tuple of products moved out of a branch).
     let sparse = bias_columns_zero(h);
+    if sparse && diagonal(&m.obs.r) {
+        return sequential_update(est, m);
+    }
     let mut u = if sparse {
         sparse_h_times(h, &est.p)
     } else {
@@ -430,6 +433,88 @@ pub(super) fn joseph_update_body<const M: usize>(
         for i in 0..N {
             est.p[(i, j)] -= ktu[(i, j)] + ktu[(j, i)];
         }
+    }
+    finite("updated state", &est.x)?;
+    finite("updated covariance", &est.p)
+}
+
+/// True when `R` has no off-diagonal entries (every aid model's): its components are
+/// independent, and may be taken one at a time.
+#[inline(always)]
+fn diagonal<const M: usize>(r: &SMatrix<f64, M, M>) -> bool {
+    (0..M).all(|i| (0..M).all(|j| i == j || r[(i, j)] == 0.0))
+}
+
+/// [`joseph_update_body`] for a diagonal `R` and an `H` with zero bias columns, one
+/// component at a time: with independent components the block update equals the `M`
+/// scalar updates in turn (each against the estimate the one before left), and each is
+/// the same Joseph form with `M = 1`: `c = P hᵀ`, `s = hᵀ c + r`, `k = c/s`,
+/// `u = c − ½ s k`, `P − (k uᵀ + u kᵀ)` — no Cholesky factor, no `M × 15` products, and
+/// `P` read and written once per component. `k uᵀ + u kᵀ` adds the same two products in
+/// either order for `(i, j)` and `(j, i)`, so `P` stays exactly symmetric.
+#[inline(always)]
+fn sequential_update<const M: usize>(
+    est: &mut ErrorEstimate,
+    m: &AidMeasurement<M>,
+) -> Result<(), FilterError> {
+    /// A column of `P` padded to 16 entries: four whole AVX2 vectors, no remainder loop.
+    type Column = [f64; 16];
+    let (h, r) = (&m.obs.h, &m.obs.r);
+    // P in padded columns for the M updates (row 15 stays zero: every gain and `u` has a
+    // zero there), copied back once at the end.
+    let mut p = [[0.0; 16]; N];
+    for (j, col) in p.iter_mut().enumerate() {
+        col[..N].copy_from_slice(&est.p.as_slice()[N * j..N * (j + 1)]);
+    }
+    for row in 0..M {
+        // c = P hᵀ over h's non-zero columns (P is symmetric: columns, not rows, of P).
+        let mut c: Column = [0.0; 16];
+        let mut hx = 0.0;
+        for k in 0..9 {
+            let v = h[(row, k)];
+            if v != 0.0 {
+                for i in 0..16 {
+                    c[i] += p[k][i] * v;
+                }
+                hx += v * est.x[k];
+            }
+        }
+        let mut hph = 0.0;
+        for k in 0..9 {
+            let v = h[(row, k)];
+            if v != 0.0 {
+                hph += v * c[k];
+            }
+        }
+        let innovation = m.z[row] - hx;
+        let s = hph + r[(row, row)];
+        if !innovation.is_finite() {
+            return Err(FilterError::NonFinite("innovation"));
+        }
+        if !s.is_finite() {
+            return Err(FilterError::NonFinite("innovation covariance"));
+        }
+        if s <= 0.0 {
+            return Err(FilterError::NotPositiveDefinite);
+        }
+        let gain: Column = std::array::from_fn(|i| c[i] / s);
+        if !gain.iter().fold(true, |ok, v| ok & v.is_finite()) {
+            return Err(FilterError::NonFinite("gain"));
+        }
+        let half_s = s * 0.5;
+        let u: Column = std::array::from_fn(|i| c[i] - gain[i] * half_s);
+        for i in 0..N {
+            est.x[i] += gain[i] * innovation;
+        }
+        for (j, col) in p.iter_mut().enumerate() {
+            let (kj, uj) = (gain[j], u[j]);
+            for i in 0..16 {
+                col[i] -= gain[i] * uj + u[i] * kj;
+            }
+        }
+    }
+    for (j, col) in p.iter().enumerate() {
+        est.p.as_mut_slice()[N * j..N * (j + 1)].copy_from_slice(&col[..N]);
     }
     finite("updated state", &est.x)?;
     finite("updated covariance", &est.p)
