@@ -3,9 +3,9 @@
 //! computed once per law. Those tests evaluate the same law every epoch once their
 //! references are full, and a fresh `ln B` (three `ln Γ`) was a third of each tail's cost.
 //!
-//! `I_x(a, b)` is the continued fraction of DLMF 8.17.22, evaluated by Lentz's method on
-//! `I_x(a, b)` when `x < (a + 1)/(a + b + 2)` (where it converges fast) and as
-//! `1 − I_{1−x}(b, a)` otherwise; `1 − x` is passed in, formed from the F statistic
+//! `I_x(a, b)` is the continued fraction of DLMF 8.17.22, evaluated by its fundamental
+//! recurrences (no division per term) on `I_x(a, b)` when `x < (a + 1)/(a + b + 2)` (where
+//! it converges fast) and as `1 − I_{1−x}(b, a)` otherwise; `1 − x` is passed in, formed from the F statistic
 //! without cancellation, rather than rounded from `x`.
 
 use statrs::function::gamma::ln_gamma;
@@ -13,8 +13,6 @@ use statrs::function::gamma::ln_gamma;
 /// Terms of the continued fraction before it is taken as converged: about
 /// `√max(a, b)` are needed, so this covers any dof a test can be configured with.
 const MAX_TERMS: u32 = 100_000;
-/// Floor of Lentz's denominators (they may pass through zero).
-const TINY: f64 = 1e-300;
 
 /// The law `F(d1, d2)` with `ln B(d1/2, d2/2)`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -101,38 +99,42 @@ fn beta_reg(a: f64, b: f64, x: f64, y: f64, ln_beta: f64) -> f64 {
 
 /// `1/(1 + d₁/(1 + d₂/(1 + …)))` of DLMF 8.17.22, with
 /// `d_{2m} = m(b − m)x / ((a + 2m − 1)(a + 2m))` and
-/// `d_{2m+1} = −(a + m)(a + b + m)x / ((a + 2m)(a + 2m + 1))`, by Lentz's method.
+/// `d_{2m+1} = −(a + m)(a + b + m)x / ((a + 2m)(a + 2m + 1))`.
+///
+/// Evaluated by the fundamental recurrences `A_n = β_n A_{n−1} + α_n A_{n−2}` (and `B_n`
+/// alike) of the equivalent fraction with `β_n = a + n`, `α_1 = −(a + b)x`,
+/// `α_{2m} = m(b − m)x`, `α_{2m+1} = −(a + m)(a + b + m)x` (each `d_n` multiplied through by
+/// `(a + n − 1)(a + n)`): the value is `B_n / A_n`. That needs no division per term, where
+/// Lentz's method needs six in one dependency chain; division latency was most of the
+/// stuck test's cost. `A` and `B` grow like `n!`, so both are scaled down by an exact power
+/// of two when they pass `2⁴⁰⁰` (so that the products of the check cannot overflow). The fraction has converged when two successive
+/// convergents agree to `ε` (`|A_n B_{n−1} − A_{n−1} B_n| ≤ ε |A_{n−1} B_n|`), checked after
+/// each odd term as Lentz's method checks it.
 fn continued_fraction(a: f64, b: f64, x: f64) -> f64 {
-    // One Lentz step with partial numerator `num`: the updated (c, d).
-    let step = |num: f64, c: f64, d: f64| {
-        let mut d = 1.0 + num * d;
-        if d.abs() < TINY {
-            d = TINY;
-        }
-        let mut c = 1.0 + num / c;
-        if c.abs() < TINY {
-            c = TINY;
-        }
-        (c, 1.0 / d)
+    /// Where the recurrences are rescaled, and by how much (both exact).
+    const BIG: f64 = 2.582_249_878_086_908_6e120; // 2^400
+    const SMALL: f64 = 3.872_591_914_849_318e-121; // 2^-400
+    // One term: (A_{n−2}, A_{n−1}, B_{n−2}, B_{n−1}) → (A_{n−1}, A_n, B_{n−1}, B_n).
+    let term = |[a0, a1, b0, b1]: [f64; 4], alpha: f64, beta: f64| {
+        [a1, beta * a1 + alpha * a0, b1, beta * b1 + alpha * b0]
     };
-    let (_, mut d) = step(-(a + b) * x / (a + 1.0), 1.0, 1.0);
-    let mut c = 1.0;
-    let mut h = d;
+    // From A_{−1} = 1, A_0 = 1, B_{−1} = 0, B_0 = 1.
+    let mut r = term([1.0, 1.0, 0.0, 1.0], -(a + b) * x, a + 1.0);
     for m in 1..=MAX_TERMS {
         let m = f64::from(m);
         let m2 = 2.0 * m;
-        let even = m * (b - m) * x / ((a - 1.0 + m2) * (a + m2));
-        (c, d) = step(even, c, d);
-        h *= d * c;
-        let odd = -(a + m) * (a + b + m) * x / ((a + m2) * (a + 1.0 + m2));
-        (c, d) = step(odd, c, d);
-        let delta = d * c;
-        h *= delta;
-        if (delta - 1.0).abs() <= f64::EPSILON {
+        r = term(r, m * (b - m) * x, a + m2);
+        r = term(r, -(a + m) * (a + b + m) * x, a + m2 + 1.0);
+        let [a0, a1, b0, b1] = r;
+        if a1.abs() > BIG || b1.abs() > BIG {
+            r = r.map(|v| v * SMALL);
+        }
+        if (a1 * b0 - a0 * b1).abs() <= f64::EPSILON * (a0 * b1).abs() {
             break;
         }
     }
-    h
+    let [_, a1, _, b1] = r;
+    b1 / a1
 }
 
 #[cfg(test)]
