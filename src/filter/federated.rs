@@ -46,7 +46,8 @@
 //! The hot path uses the same algebra as [`kalman::predict`], [`kalman::innovation`] and
 //! [`kalman::update`] in kernels that exploit the INS structure (tested equal to them to
 //! rounding): the prediction uses `Φ`'s constant bias rows, every aid's `H` has zero bias
-//! columns, the Joseph form is written out as a rank-`M` correction, and the two state
+//! columns, the Joseph form is written out as a rank-`M` correction (one rank-1
+//! correction per component for the aids, whose `R` is diagonal), and the two state
 //! buffers are flipped on commit rather than copied. Nothing is allocated per epoch. The
 //! kernels run a second, AVX2 build of themselves when the CPU has it (a runtime check;
 //! the same IEEE operations in the same order, so the same results to the bit, tested).
