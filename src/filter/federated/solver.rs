@@ -503,8 +503,8 @@ fn sequential_update<const M: usize>(
         }
         let half_s = s * 0.5;
         let u: Column = std::array::from_fn(|i| c[i] - gain[i] * half_s);
-        for i in 0..N {
-            est.x[i] += gain[i] * innovation;
+        for (xi, gi) in est.x.iter_mut().zip(&gain) {
+            *xi += gi * innovation;
         }
         for (j, col) in p.iter_mut().enumerate() {
             let (kj, uj) = (gain[j], u[j]);
