@@ -267,6 +267,41 @@ fn fast_kernels_equal_the_generic_kalman_filter() {
 }
 
 #[test]
+fn aid_updates_one_component_at_a_time_equal_the_block_update_and_stay_symmetric() {
+    // Every aid's R is diagonal and its H has zero bias columns, so `joseph_update` takes
+    // the sequential path; the block path is the same Joseph form with all M components at
+    // once. Both must agree to rounding, at the INS state's scales, over many epochs, and
+    // the sequential P must be exactly symmetric.
+    let mut rng = StdRng::seed_from_u64(31);
+    let nav = ship();
+    let trans = ins_transition(&nav, &ImuErrors::default(), 0.1).unwrap();
+    let mut est = initial(seed004_p0());
+    for epoch in 0..200 {
+        let mut prior = est.clone();
+        predict_into(&est, &trans, &mut prior).unwrap();
+        let truth =
+            ErrorVector::from_fn(|i, _| 1e-3 * (rng.random::<f64>() - 0.5) * (i + 1) as f64);
+        for o in aid_observations(&nav, &truth, Some(&mut rng))
+            .iter()
+            .flatten()
+        {
+            with_measurement!(o, m => {
+                assert!(bias_columns_zero(&m.obs.h));
+                assert!((0..m.z.len()).all(|i| (0..m.z.len()).all(|j| i == j || m.obs.r[(i, j)] == 0.0)));
+                let mut sequential = prior.clone();
+                joseph_update(&mut sequential, m).unwrap();
+                let block = kalman_update(&prior, m).unwrap();
+                assert_cov_close(&sequential.p, &block.p, 1e-10);
+                assert_state_close(&sequential.x, &block.x, &block.p, 1e-10);
+                assert_eq!(sequential.p, sequential.p.transpose(), "epoch {epoch}");
+                prior = sequential;
+            });
+        }
+        est = prior;
+    }
+}
+
+#[test]
 fn the_inlined_products_equal_nalgebras_to_the_bit() {
     // Same operations in the same order as nalgebra's `*` (also inside `a1 * b1 + a2 * b2`), so
     // every bit agrees, signed zeros included.
