@@ -5,8 +5,8 @@
 //!
 //! `I_x(a, b)` is the continued fraction of DLMF 8.17.22, evaluated by its fundamental
 //! recurrences (no division per term) on `I_x(a, b)` when `x < (a + 1)/(a + b + 2)` (where
-//! it converges fast) and as `1 − I_{1−x}(b, a)` otherwise; `1 − x` is passed in, formed from the F statistic
-//! without cancellation, rather than rounded from `x`.
+//! it converges fast) and as `1 − I_{1−x}(b, a)` otherwise; `1 − x` is passed in, formed
+//! from the F statistic without cancellation, rather than rounded from `x`.
 
 use statrs::function::gamma::ln_gamma;
 
@@ -103,13 +103,14 @@ fn beta_reg(a: f64, b: f64, x: f64, y: f64, ln_beta: f64) -> f64 {
 ///
 /// Evaluated by the fundamental recurrences `A_n = β_n A_{n−1} + α_n A_{n−2}` (and `B_n`
 /// alike) of the equivalent fraction with `β_n = a + n`, `α_1 = −(a + b)x`,
-/// `α_{2m} = m(b − m)x`, `α_{2m+1} = −(a + m)(a + b + m)x` (each `d_n` multiplied through by
-/// `(a + n − 1)(a + n)`): the value is `B_n / A_n`. That needs no division per term, where
-/// Lentz's method needs six in one dependency chain; division latency was most of the
-/// stuck test's cost. `A` and `B` grow like `n!`, so both are scaled down by an exact power
-/// of two when they pass `2⁴⁰⁰` (so that the products of the check cannot overflow). The fraction has converged when two successive
-/// convergents agree to `ε` (`|A_n B_{n−1} − A_{n−1} B_n| ≤ ε |A_{n−1} B_n|`), checked after
-/// each odd term as Lentz's method checks it.
+/// `α_{2m} = m(b − m)x`, `α_{2m+1} = −(a + m)(a + b + m)x` (`d_n` multiplied through by
+/// `(a + n − 1)(a + n)`, `d_1` by `a + 1`): the value is `B_n / A_n`. That needs no division
+/// per term, where Lentz's method needs six in one dependency chain; division latency was
+/// most of the stuck test's cost. `A` and `B` grow like `n!`, so both are scaled down by an
+/// exact power of two when they pass `2⁴⁰⁰` (the products of the check cannot overflow).
+/// The fraction has converged when two successive convergents agree to `ε`
+/// (`|A_n B_{n−1} − A_{n−1} B_n| ≤ ε |A_{n−1} B_n|`), checked after each odd term as
+/// Lentz's method checks it.
 fn continued_fraction(a: f64, b: f64, x: f64) -> f64 {
     /// Where the recurrences are rescaled, and by how much (both exact).
     const BIG: f64 = 2.582_249_878_086_908_6e120; // 2^400
