@@ -448,7 +448,7 @@ fn diagonal<const M: usize>(r: &SMatrix<f64, M, M>) -> bool {
 /// [`joseph_update_body`] for a diagonal `R` and an `H` with zero bias columns, one
 /// component at a time: with independent components the block update equals the `M`
 /// scalar updates in turn (each against the estimate the one before left), and each is
-/// the same Joseph form with `M = 1`: `c = P hᵀ`, `s = hᵀ c + r`, `k = c/s`,
+/// the same Joseph form with `M = 1`: `c = P hᵀ`, `s = hᵀ c + r`, `k = c · (1/s)`,
 /// `u = c − ½ s k`, `P − (k uᵀ + u kᵀ)` — no Cholesky factor, no `M × 15` products, and
 /// `P` read and written once per component. `k uᵀ + u kᵀ` adds the same two products in
 /// either order for `(i, j)` and `(j, i)`, so `P` stays exactly symmetric.
@@ -497,7 +497,8 @@ fn sequential_update<const M: usize>(
         if s <= 0.0 {
             return Err(FilterError::NotPositiveDefinite);
         }
-        let gain: Column = std::array::from_fn(|i| c[i] / s);
+        let inv_s = 1.0 / s;
+        let gain: Column = std::array::from_fn(|i| c[i] * inv_s);
         if !gain.iter().fold(true, |ok, v| ok & v.is_finite()) {
             return Err(FilterError::NonFinite("gain"));
         }
