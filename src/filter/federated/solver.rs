@@ -441,7 +441,7 @@ pub(super) fn joseph_update_body<const M: usize>(
 /// True when `R` has no off-diagonal entries (every aid model's): its components are
 /// independent, and may be taken one at a time.
 #[inline(always)]
-fn diagonal<const M: usize>(r: &SMatrix<f64, M, M>) -> bool {
+pub(super) fn diagonal<const M: usize>(r: &SMatrix<f64, M, M>) -> bool {
     (0..M).all(|i| (0..M).all(|j| i == j || r[(i, j)] == 0.0))
 }
 
@@ -591,9 +591,8 @@ pub(super) fn fused_slope_body<const M: usize>(
         m.obs.h * ph
     };
     let r = &m.obs.r;
-    let diagonal = (0..M).all(|i| (0..M).all(|j| i == j || r[(i, j)] == 0.0));
     // K_h = P_g[h, :] Hᵀ R⁻¹  ⇔  R K_hᵀ = H P_g[:, h]  (R symmetric).
-    let k_h_t = if diagonal {
+    let k_h_t = if diagonal(r) {
         SMatrix::<f64, M, 2>::from_fn(|i, j| hph[(i, j)] / r[(i, i)])
     } else {
         let chol = r.cholesky().ok_or(hpl::HplError::NotPositiveDefinite)?;

@@ -2,7 +2,7 @@
 //! fusion against the information form, and the filter's behaviour under faults.
 
 use super::solver::{
-    bias_columns_zero, fused_slope_body, inverse_cholesky_factor, joseph_update_body,
+    bias_columns_zero, diagonal, fused_slope_body, inverse_cholesky_factor, joseph_update_body,
     kalman_update, predict_into_body, product, share_test_body,
 };
 use super::*;
@@ -269,8 +269,8 @@ fn fast_kernels_equal_the_generic_kalman_filter() {
 #[test]
 fn aid_updates_one_component_at_a_time_equal_the_block_update_and_stay_symmetric() {
     // Every aid's R is diagonal and its H has zero bias columns, so `joseph_update` takes
-    // the sequential path; the block path is the same Joseph form with all M components at
-    // once. Both must agree to rounding, at the INS state's scales, over many epochs, and
+    // the sequential path; the generic filter's update takes all M components at once.
+    // Both must agree to rounding, at the INS state's scales, over many epochs, and
     // the sequential P must be exactly symmetric.
     let mut rng = StdRng::seed_from_u64(31);
     let nav = ship();
@@ -287,7 +287,7 @@ fn aid_updates_one_component_at_a_time_equal_the_block_update_and_stay_symmetric
         {
             with_measurement!(o, m => {
                 assert!(bias_columns_zero(&m.obs.h));
-                assert!((0..m.z.len()).all(|i| (0..m.z.len()).all(|j| i == j || m.obs.r[(i, j)] == 0.0)));
+                assert!(diagonal(&m.obs.r));
                 let mut sequential = prior.clone();
                 joseph_update(&mut sequential, m).unwrap();
                 let block = kalman_update(&prior, m).unwrap();
