@@ -101,12 +101,13 @@ where
 
 avx2_dispatch! {
     /// [`kalman::predict`] into `out`, with the INS transition's structure used when `Φ` has
-    /// it: the bias rows of an INS `Φ` are `[0 I]` (biases are random constants), so with
-    /// `Φ = [[A, B], [0, I]]` (A 9 × 9, B 9 × 6) `Φ P Φᵀ` needs only
-    /// `M₁ = A P₁₁ + B P₂₁`, `M₂ = A P₁₂ + B P₂₂`, top-left `M₁ Aᵀ + M₂ Bᵀ`, top-right `M₂`,
-    /// bottom-right `P₂₂` — half the multiplications. Any other `Φ` takes the generic path.
-    /// On `Err`, `out` may hold a partial result. Runs the AVX2 build when the CPU has it
-    /// ([`avx2`]).
+    /// it. The bias rows of an INS `Φ` are `[0 I]` (biases are random constants), so
+    /// `W = P Φᵀ` needs only its first 9 columns and `Φ P Φᵀ = Φ W` only its top-left 9 × 9
+    /// block, of which the upper triangle is computed and mirrored (exactly symmetric); the
+    /// bias rows and columns are `W`'s and `P`'s own. Both products skip the zeros of `Φ`'s
+    /// navigation rows (its zero 3 × 3 blocks: 84 of 135 entries are non-zero) and run on
+    /// columns padded to whole vectors. Any other `Φ` takes the generic path. On `Err`,
+    /// `out` may hold a partial result. Runs the AVX2 build when the CPU has it ([`avx2`]).
     fn predict_into(
         est: &ErrorEstimate,
         trans: &LinearTransition<U15>,
@@ -122,6 +123,8 @@ pub(super) fn predict_into_body(
     trans: &LinearTransition<U15>,
     out: &mut ErrorEstimate,
 ) -> Result<(), FilterError> {
+    /// A column padded to 16 entries: four whole AVX2 vectors, no remainder loop.
+    type Column = [f64; 16];
     let phi = &trans.f;
     // Column-major: rows 9..15 of column c are as_slice()[15c + 9 .. 15c + 15].
     let structured = phi.as_slice().chunks_exact(N).enumerate().all(|(c, col)| {
@@ -134,38 +137,84 @@ pub(super) fn predict_into_body(
         *out = kalman::predict(est, trans)?;
         return Ok(());
     }
-    let a = phi.fixed_view::<9, 9>(0, 0);
-    let b = phi.fixed_view::<9, 6>(0, 9);
-    let p = &est.p;
-    let m1 = product(&a, &p.fixed_view::<9, 9>(0, 0)) + product(&b, &p.fixed_view::<6, 9>(9, 0));
-    let m2 = product(&a, &p.fixed_view::<9, 6>(0, 9)) + product(&b, &p.fixed_view::<6, 6>(9, 9));
-    let top_left = product(&m1, &a.transpose()) + product(&m2, &b.transpose());
-    let p22 = p.fixed_view::<6, 6>(9, 9);
-    out.x = product(phi, &est.x);
-    // Each block symmetrised so that Φ P Φᵀ + Q is exactly symmetric, then `(Q + Qᵀ)/2`
-    // added: entry by entry, the same operations as the block copies and the matrix sum
-    // without their temporaries.
-    let q = &trans.q;
-    let half_q = |i: usize, j: usize| (q[(i, j)] + q[(j, i)]) * 0.5;
-    for j in 0..9 {
-        for i in 0..9 {
-            out.p[(i, j)] = (top_left[(i, j)] + top_left[(j, i)]) * 0.5 + half_q(i, j);
+    // P in padded columns (row 15 zero).
+    let mut p: [Column; N] = [[0.0; 16]; N];
+    for (j, col) in p.iter_mut().enumerate() {
+        col[..N].copy_from_slice(&est.p.as_slice()[N * j..N * (j + 1)]);
+    }
+    // W = P Φᵀ, its first 9 columns (the rest are P's): W[:, i] = Σ_l P[:, l] Φ[i, l] over
+    // the non-zero entries of Φ's row i (84 of 135 for an INS Φ: its zero blocks).
+    // (Loops, not `array::from_fn`: that is a function of its own, outside the AVX2 build.)
+    let mut w: [Column; 9] = [[0.0; 16]; 9];
+    let mut row = [0.0; N];
+    for (i, wi) in w.iter_mut().enumerate() {
+        for (l, v) in row.iter_mut().enumerate() {
+            *v = phi[(i, l)];
         }
-        for i in 9..N {
-            out.p[(i, j)] = m2[(j, i - 9)] + half_q(i, j);
+        *wi = weighted_sum::<16, 16>(&p, &row);
+    }
+    // Φ's navigation rows, its columns padded to 12 entries (three vectors; rows 9..12 zero).
+    let mut phi_nav = [[0.0; 12]; N];
+    for (k, col) in phi_nav.iter_mut().enumerate() {
+        col[..9].copy_from_slice(&phi.as_slice()[N * k..N * k + 9]);
+    }
+    // Φ P Φᵀ = Φ W; its top-left 9 × 9 block in column j, rows 0..=j only (rounded up to
+    // whole vectors), mirrored below: exactly symmetric.
+    let mut top = [[0.0; 12]; 9];
+    for (j, tj) in top.iter_mut().enumerate() {
+        let weights = &w[j];
+        match j {
+            0..4 => tj[..4].copy_from_slice(&weighted_sum::<12, 4>(&phi_nav, weights)),
+            4..8 => tj[..8].copy_from_slice(&weighted_sum::<12, 8>(&phi_nav, weights)),
+            _ => *tj = weighted_sum::<12, 12>(&phi_nav, weights),
         }
     }
-    for j in 9..N {
-        for i in 0..9 {
-            out.p[(i, j)] = m2[(i, j - 9)] + half_q(i, j);
+    // Φ x: the navigation rows from Φ's padded columns, the bias rows x's own.
+    let x_nav = weighted_sum::<12, 12>(&phi_nav, est.x.as_slice());
+    out.x.as_mut_slice()[..9].copy_from_slice(&x_nav[..9]);
+    out.x.as_mut_slice()[9..].copy_from_slice(&est.x.as_slice()[9..]);
+    // `(Q + Qᵀ)/2` added entry by entry.
+    let q = &trans.q;
+    let half_q = |i: usize, j: usize| (q[(i, j)] + q[(j, i)]) * 0.5;
+    for (j, (tj, wj)) in top.iter().zip(&w).enumerate() {
+        for (i, t) in tj.iter().enumerate().take(j + 1) {
+            let v = t + half_q(i, j);
+            out.p[(i, j)] = v;
+            out.p[(j, i)] = v;
         }
-        for i in 9..N {
-            out.p[(i, j)] = (p22[(i - 9, j - 9)] + p22[(j - 9, i - 9)]) * 0.5 + half_q(i, j);
+        // The bias rows of column j, and so of row j: W's.
+        for (i, wij) in wj.iter().enumerate().take(N).skip(9) {
+            let v = wij + half_q(i, j);
+            out.p[(i, j)] = v;
+            out.p[(j, i)] = v;
+        }
+    }
+    for (j, pj) in p.iter().enumerate().skip(9) {
+        for (i, pi) in p.iter().enumerate().skip(9) {
+            out.p[(i, j)] = (pj[i] + pi[j]) * 0.5 + half_q(i, j);
         }
     }
     finite("predicted state", &out.x)?;
     finite("predicted covariance", &out.p)?;
     Ok(())
+}
+
+/// `Σ_k c_k[..R] · w_k` over the non-zero weights (the first 15 of `weights`), in `k` order,
+/// the sum kept in registers (`R` a multiple of 4: whole AVX2 vectors).
+#[inline(always)]
+fn weighted_sum<const C: usize, const R: usize>(
+    columns: &[[f64; C]; N],
+    weights: &[f64],
+) -> [f64; R] {
+    let mut acc = [0.0; R];
+    for (column, &w) in columns.iter().zip(weights) {
+        if w != 0.0 {
+            for r in 0..R {
+                acc[r] += column[r] * w;
+            }
+        }
+    }
+    acc
 }
 
 /// True when `H`'s bias columns 9..15 are zero (every aid's H): column-major, they are the

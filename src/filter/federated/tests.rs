@@ -845,3 +845,41 @@ fn innovations_are_chi_square_consistent_on_a_simulated_ship() {
     // χ²(6) at p = 1e-4: 27.86.
     assert!(nees < 27.86, "NEES {nees}");
 }
+
+#[test]
+fn the_structured_prediction_takes_any_navigation_rows_and_skips_only_zeros() {
+    // Φ with the INS bias rows [0 I] but navigation rows of random values, a random third of
+    // them zero (not the INS zero blocks): the structured path must equal the generic
+    // prediction, skip nothing that is non-zero and keep P exactly symmetric.
+    let mut rng = StdRng::seed_from_u64(41);
+    for _ in 0..50 {
+        let mut f = ErrorMatrix::identity();
+        for i in 0..9 {
+            for j in 0..N {
+                f[(i, j)] = if rng.random::<f64>() < 1.0 / 3.0 {
+                    0.0
+                } else {
+                    rng.random::<f64>() - 0.5
+                };
+            }
+        }
+        let g = ErrorMatrix::from_fn(|_, _| rng.random::<f64>() - 0.5);
+        let trans = LinearTransition {
+            f,
+            q: g * g.transpose(),
+        };
+        let a = ErrorMatrix::from_fn(|_, _| rng.random::<f64>() - 0.5);
+        let est = StateEstimate {
+            x: ErrorVector::from_fn(|_, _| rng.random::<f64>() - 0.5),
+            p: a * a.transpose() + ErrorMatrix::identity(),
+        };
+        let mut fast = est.clone();
+        predict_into_body(&est, &trans, &mut fast).unwrap();
+        let slow = kalman::predict(&est, &trans).unwrap();
+        assert_cov_close(&fast.p, &slow.p, 1e-13);
+        assert_eq!(fast.p, fast.p.transpose());
+        for i in 0..N {
+            assert!((fast.x[i] - slow.x[i]).abs() <= 1e-14 * (1.0 + slow.x[i].abs()));
+        }
+    }
+}
