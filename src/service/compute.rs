@@ -8,8 +8,9 @@
 //! epochs), so a session streaming big batches takes turns with the others instead of
 //! holding a thread for the whole batch; one epoch is bounded by the dimension limits.
 
+use std::collections::VecDeque;
 use std::panic::{AssertUnwindSafe, catch_unwind};
-use std::sync::{Arc, Mutex, mpsc};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::time::Duration;
 
 use tokio::sync::oneshot;
@@ -30,44 +31,85 @@ pub enum ComputeError {
     Stopped,
 }
 
+/// The jobs waiting for a thread, and whether the pool still takes new ones.
+#[derive(Default)]
+struct Queue {
+    jobs: VecDeque<Job>,
+    stopped: bool,
+}
+
+/// What the pool's handle and its threads share. Idle threads wait on `ready`, and a new
+/// job wakes exactly one of them (`notify_one`). A receiver shared behind a mutex (this
+/// pool's first form) woke two threads per job: the one that took it, and, as it let the
+/// mutex go, the next in line, only to go back to sleep in `recv`. Under a virtual
+/// machine each wake-up of another core is an interrupt to the hypervisor.
+struct Shared {
+    queue: Mutex<Queue>,
+    ready: Condvar,
+}
+
+impl Shared {
+    fn lock(&self) -> MutexGuard<'_, Queue> {
+        // A job never runs under the lock, so a poisoned lock still holds a whole queue.
+        self.queue.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// The next job, waiting while the queue is empty; `None` once the pool has stopped
+    /// and its queue is drained.
+    fn next(&self) -> Option<Job> {
+        let mut queue = self.lock();
+        loop {
+            if let Some(job) = queue.jobs.pop_front() {
+                return Some(job);
+            }
+            if queue.stopped {
+                return None;
+            }
+            queue = self
+                .ready
+                .wait(queue)
+                .unwrap_or_else(PoisonError::into_inner);
+        }
+    }
+}
+
 /// The pool. Cheap to share (`Arc`); its threads end when the last handle is dropped.
-#[derive(Debug)]
 pub struct ComputePool {
-    jobs: Mutex<Option<mpsc::Sender<Job>>>,
+    shared: Arc<Shared>,
     threads: usize,
+}
+
+impl std::fmt::Debug for ComputePool {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ComputePool")
+            .field("threads", &self.threads)
+            .field("queued", &self.shared.lock().jobs.len())
+            .finish()
+    }
 }
 
 impl ComputePool {
     /// A pool of `threads` threads (at least 1).
     pub fn new(threads: usize) -> Arc<Self> {
         let threads = threads.max(1);
-        let (tx, rx) = mpsc::channel::<Job>();
-        let rx = Arc::new(Mutex::new(rx));
+        let shared = Arc::new(Shared {
+            queue: Mutex::new(Queue::default()),
+            ready: Condvar::new(),
+        });
         for i in 0..threads {
-            let rx = rx.clone();
+            let shared = shared.clone();
             let spawned = std::thread::Builder::new()
                 .name(format!("navguard-compute-{i}"))
                 .spawn(move || {
-                    loop {
-                        // The lock is held only to take the next job, never while it runs.
-                        let job = match rx.lock() {
-                            Ok(rx) => rx.recv(),
-                            Err(poisoned) => poisoned.into_inner().recv(),
-                        };
-                        match job {
-                            Ok(job) => job(),
-                            Err(_) => break, // every sender dropped: the pool is gone
-                        }
+                    while let Some(job) = shared.next() {
+                        job();
                     }
                 });
             if let Err(e) = spawned {
                 tracing::error!(error = %e, "could not start a compute thread");
             }
         }
-        Arc::new(ComputePool {
-            jobs: Mutex::new(Some(tx)),
-            threads,
-        })
+        Arc::new(ComputePool { shared, threads })
     }
 
     /// A pool with one thread per available core.
@@ -92,16 +134,26 @@ impl ComputePool {
             let _ = tx.send(answer);
         });
         {
-            let jobs = self.jobs.lock().unwrap_or_else(|p| p.into_inner());
-            let sender = jobs.as_ref().ok_or(ComputeError::Stopped)?;
-            sender.send(job).map_err(|_| ComputeError::Stopped)?;
+            let mut queue = self.shared.lock();
+            if queue.stopped {
+                return Err(ComputeError::Stopped);
+            }
+            queue.jobs.push_back(job);
         }
+        self.shared.ready.notify_one();
         rx.await.map_err(|_| ComputeError::Stopped)?
     }
 
     /// Stops taking jobs; threads end once the queued jobs are done.
     pub fn stop(&self) {
-        self.jobs.lock().unwrap_or_else(|p| p.into_inner()).take();
+        self.shared.lock().stopped = true;
+        self.shared.ready.notify_all();
+    }
+}
+
+impl Drop for ComputePool {
+    fn drop(&mut self) {
+        self.stop();
     }
 }
 
@@ -130,6 +182,37 @@ mod tests {
         assert_eq!(pool.run(|| 7).await, Ok(7));
         pool.stop();
         assert_eq!(pool.run(|| 8).await, Err(ComputeError::Stopped));
+    }
+
+    #[tokio::test(flavor = "current_thread")]
+    async fn stopping_runs_the_queued_jobs_and_dropping_ends_the_threads() {
+        // One thread, held by the first job until released: the second waits in the queue.
+        let pool = ComputePool::new(1);
+        let (release, held) = std::sync::mpsc::channel::<()>();
+        let first = pool.run(move || held.recv_timeout(Duration::from_secs(10)).is_ok());
+        let second = pool.run(|| 2);
+        let stop_then_release = async {
+            tokio::task::yield_now().await; // both jobs are queued by now
+            pool.stop();
+            release.send(()).unwrap();
+        };
+        let (first, second, ()) = tokio::join!(first, second, stop_then_release);
+        assert_eq!(first, Ok(true));
+        assert_eq!(second, Ok(2), "a job queued before the stop still runs");
+        assert_eq!(pool.run(|| 3).await, Err(ComputeError::Stopped));
+
+        // The threads hold the shared queue until they end.
+        let pool = ComputePool::new(2);
+        assert_eq!(pool.run(|| 4).await, Ok(4));
+        let shared = Arc::downgrade(&pool.shared);
+        drop(pool);
+        for _ in 0..1000 {
+            if shared.upgrade().is_none() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        panic!("the pool's threads did not end after its last handle was dropped");
     }
 
     #[tokio::test(flavor = "current_thread")]
