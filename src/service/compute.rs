@@ -39,10 +39,10 @@ struct Queue {
 }
 
 /// What the pool's handle and its threads share. Idle threads wait on `ready`, and a new
-/// job wakes exactly one of them (`notify_one`). A receiver shared behind a mutex (this
-/// pool's first form) woke two threads per job: the one that took it, and, as it let the
-/// mutex go, the next in line, only to go back to sleep in `recv`. Under a virtual
-/// machine each wake-up of another core is an interrupt to the hypervisor.
+/// job wakes exactly one of them (`notify_one`). A channel receiver shared behind a mutex
+/// would wake two threads per job: the one that takes it and, as that one lets the mutex
+/// go, the next in line, only to sleep again in `recv`. Under a virtual machine each
+/// wake-up of another core is an interrupt through the hypervisor.
 struct Shared {
     queue: Mutex<Queue>,
     ready: Condvar,
