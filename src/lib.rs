@@ -23,6 +23,9 @@
 //! - [`features`]: time-domain and wavelet-packet features.
 //! - [`monitor`]: the `Monitor` trait and one monitor per sensor set; each
 //!   wires filters and detectors and yields tests and outputs per epoch.
+//! - [`session`]: the session core: the roster, the alarm rule, thresholds, statistics
+//!   and history of one session; it commits stepped epochs into ordered effects that
+//!   the server carries out and the experiments count.
 //! - [`sim`]: trajectories, sensors, faults and the papers' experiments.
 //! - [`service`]: the async edge: sockets and REST (axum), one actor task per
 //!   session, the SQLite store, auth and limits.
@@ -35,5 +38,6 @@ pub mod geo;
 pub mod learn;
 pub mod monitor;
 pub mod service;
+pub mod session;
 pub mod sim;
 pub mod simd;

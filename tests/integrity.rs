@@ -372,7 +372,7 @@ async fn counter(server: &Server, name: &str) -> u64 {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn queued_frames_are_stepped_ahead_with_the_messages_of_one_frame_at_a_time() {
     // A GNSS offset from the start, standing when the monitor converges (30 s cap), whose
-    // alarm is raised from the monitor's own state then; and a GNSS jump well after
+    // alarm is raised then; and a GNSS jump well after
     // convergence: warnings, an alarm, the return to healthy.
     let gnss_step = |start_s, end_s| Fault {
         aid: navguard::epoch::Aid::Gnss,
@@ -388,7 +388,7 @@ async fn queued_frames_are_stepped_ahead_with_the_messages_of_one_frame_at_a_tim
         700.0,
     );
     // The first frame ends on the epoch that ends convergence (t = 30 s), so that epoch
-    // is committed while the next frame could be stepped (it must not be).
+    // is committed while the next frame steps ahead.
     let frames = frames(&scenario);
     assert_eq!(frames[30]["t"], 30.0);
     let batches: Vec<Value> = std::iter::once(&frames[..31])
@@ -413,8 +413,8 @@ async fn queued_frames_are_stepped_ahead_with_the_messages_of_one_frame_at_a_tim
     }
     let ahead = messages_until(&mut socket, &mut 0, epochs).await;
     let stepped_ahead = counter(&server, "navguard_frames_prestepped_total").await;
-    // The second frame is not taken early: the first one's commit ends convergence.
-    assert!(stepped_ahead < batches.len() as u64 - 1);
+    // The second frame may be stepped while the first one's commit ends convergence: the
+    // standing alarm is read from the committed statistics, not from the monitors.
     assert!(
         stepped_ahead >= batches.len() as u64 / 2,
         "{stepped_ahead} of {} frames stepped ahead",

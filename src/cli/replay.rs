@@ -24,9 +24,9 @@ use navguard::detect::PolicyConfig;
 use navguard::epoch::Aid;
 use navguard::monitor::MonitorKind;
 use navguard::monitor::federated::FederatedConfigWire;
-use navguard::service::session::SessionStats;
 use navguard::service::session::spec::valid_name;
 use navguard::service::wire::{CreateSession, MonitorSpecWire};
+use navguard::session::SessionStats;
 use serde::de::IgnoredAny;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
@@ -940,8 +940,8 @@ mod tests {
     use super::*;
     use clap::Parser;
     use navguard::detect::Health;
-    use navguard::service::session::stats::TestStats;
     use navguard::service::wire::{AlarmRecord, StateChange, tagged};
+    use navguard::session::stats::TestStats;
 
     #[derive(Debug, Parser)]
     struct Wrap {

@@ -63,7 +63,7 @@ pub struct SessionGauges {
 
 impl SessionGauges {
     /// Adds one session's statistics.
-    pub fn add(&mut self, stats: &crate::service::session::stats::SessionStats) {
+    pub fn add(&mut self, stats: &crate::session::SessionStats) {
         use crate::detect::Health;
         use crate::detect::consistency::ConsistencyFlag;
         use crate::monitor::Availability;

@@ -25,10 +25,10 @@ use crate::service::app::AppState;
 use crate::service::error::ApiError;
 use crate::service::extract::{ApiQuery, query_integer_opt};
 use crate::service::session::SessionError;
-use crate::service::session::history::HistoryView;
 use crate::service::session::spec::build_monitors;
 use crate::service::store::{RecordedFrame, Store};
 use crate::service::wire::{TestThresholdSpec, calibrated_tests, parse_frame};
+use crate::session::history::HistoryView;
 
 /// Frames read from the store per chunk of the response.
 const PAGE: i64 = 500;

@@ -13,9 +13,10 @@ use crate::service::error::ApiError;
 use crate::service::extract::{JsonBody, from_value, integral_numbers, refuse_nulls};
 use crate::service::now_ms;
 use crate::service::session::actor;
-use crate::service::session::{SessionHandle, SessionStats, validate_session};
+use crate::service::session::{SessionHandle, validate_session};
 use crate::service::store::{Fence, StoredSession};
 use crate::service::wire::{CreateSession, MonitorSpecWire};
+use crate::session::SessionStats;
 
 /// A test's effective threshold and current state, in a session view.
 #[derive(Debug, Serialize)]

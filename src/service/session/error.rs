@@ -76,3 +76,12 @@ impl SessionError {
         )
     }
 }
+
+impl From<crate::session::ThresholdRefusal> for SessionError {
+    fn from(e: crate::session::ThresholdRefusal) -> Self {
+        SessionError::Invalid {
+            field: e.field,
+            reason: e.reason,
+        }
+    }
+}

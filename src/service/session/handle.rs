@@ -7,10 +7,10 @@ use std::time::{Duration, Instant};
 use tokio::sync::{mpsc, oneshot, watch};
 
 use super::SessionError;
-use super::stats::SessionStats;
 use crate::epoch::Epoch;
 use crate::service::store::StoredSession;
 use crate::service::wire::{ThresholdUpdate, ThresholdView};
+use crate::session::SessionStats;
 
 /// How long a REST call waits for a busy session actor before answering 503.
 const CONTROL_TIMEOUT: Duration = Duration::from_secs(5);
@@ -63,11 +63,21 @@ pub enum ControlCommand {
     /// Attach a new ingest stream: filter state starts afresh, unless `resume` (true) and
     /// the session holds a stream's state (restored from a checkpoint, or left by the
     /// previous stream), which then carries on.
-    Attach(bool, oneshot::Sender<Result<IngestLink, SessionError>>),
+    Attach {
+        /// Carry on from the session's state when it holds a stream's.
+        resume: bool,
+        /// The new stream, or why not.
+        reply: oneshot::Sender<Result<IngestLink, SessionError>>,
+    },
     /// Hand the session over (cluster): refused while a stream is attached unless
     /// `force` (a drain: the stream is told `moved` and closed); then a final checkpoint
     /// is written, the lease released and the actor stops.
-    Release(bool, oneshot::Sender<Result<(), SessionError>>),
+    Release {
+        /// Hand over even with a stream attached (a drain).
+        force: bool,
+        /// Answered once handed over, or why not.
+        reply: oneshot::Sender<Result<(), SessionError>>,
+    },
     /// The ingest socket of `stream` closed.
     Detach(u64),
     /// Read a monitor's thresholds.
@@ -85,7 +95,10 @@ pub enum ControlCommand {
     /// Current statistics.
     Stats(oneshot::Sender<SessionStats>),
     /// The statistics history at or after an epoch time.
-    History(Option<f64>, oneshot::Sender<super::history::HistoryView>),
+    History(
+        Option<f64>,
+        oneshot::Sender<crate::session::history::HistoryView>,
+    ),
     /// Stop the actor.
     Shutdown,
 }
@@ -194,13 +207,15 @@ impl SessionHandle {
     /// Attaches an ingest stream (409 if one is already attached); `resume` carries on
     /// from the session's state when it holds one.
     pub async fn attach(&self, resume: bool) -> Result<IngestLink, SessionError> {
-        self.ask(|tx| ControlCommand::Attach(resume, tx)).await?
+        self.ask(|tx| ControlCommand::Attach { resume, reply: tx })
+            .await?
     }
 
     /// Hands the session over (see [`ControlCommand::Release`]); the actor has stopped
     /// when this returns `Ok`.
     pub async fn release(&self, force: bool) -> Result<(), SessionError> {
-        self.ask(|tx| ControlCommand::Release(force, tx)).await?
+        self.ask(|tx| ControlCommand::Release { force, reply: tx })
+            .await?
     }
 
     /// Detaches ingest stream `stream` (best effort: the actor may be gone).
@@ -244,7 +259,7 @@ impl SessionHandle {
     pub async fn history(
         &self,
         since: Option<f64>,
-    ) -> Result<super::history::HistoryView, SessionError> {
+    ) -> Result<crate::session::history::HistoryView, SessionError> {
         self.ask(|tx| ControlCommand::History(since, tx)).await
     }
 

@@ -7,7 +7,8 @@ use crate::monitor::{self, BuildError, ModelSource, Monitor, MonitorConfig, Moni
 use crate::service::config::Limits;
 use crate::service::extract::integral_numbers;
 use crate::service::store::StoredSession;
-use crate::service::wire::{CreateSession, MonitorSpecWire, TestThresholdSpec};
+use crate::service::wire::{CreateSession, MonitorSpecWire};
+use crate::session::thresholds::{test_spec, unknown_test};
 
 /// Ids and names: 1–64 characters of `A–Z a–z 0–9 _ - .`, so they are safe in
 /// URLs and logs; `.` and `..` are refused, as no client can address them (a
@@ -37,15 +38,6 @@ pub fn monitor_spec(wire: &MonitorSpecWire) -> Result<MonitorSpec, BuildError> {
     })
 }
 
-/// A test's own threshold spec from its wire form: exactly one of `p_fa` and
-/// `threshold`, each in range.
-pub fn test_spec(wire: &TestThresholdSpec) -> Result<ThresholdSpec, String> {
-    if wire.p_fa.is_none() && wire.threshold.is_none() {
-        return Err("give `p_fa` or `threshold` (or null to follow the monitor's)".into());
-    }
-    ThresholdSpec::from_parts(wire.p_fa, wire.threshold).map_err(|e| e.to_string())
-}
-
 /// Applies a monitor's stored per-test thresholds to its freshly built bank; errors name
 /// the test (`tests.<name>`) and why.
 fn apply_test_specs(
@@ -56,14 +48,7 @@ fn apply_test_specs(
         let field = format!("thresholds.{test}");
         let bank = monitor.tests_mut();
         let Some(i) = bank.index_of(test) else {
-            let names: Vec<&str> = bank.slots().iter().map(|s| &*s.name).collect();
-            return Err((
-                field,
-                format!(
-                    "no test '{test}' in this monitor; its tests are {}",
-                    names.join(", ")
-                ),
-            ));
+            return Err((field, unknown_test(test, bank)));
         };
         let spec = test_spec(own).map_err(|e| (field.clone(), e))?;
         bank.set_test_spec(i, Some(spec))

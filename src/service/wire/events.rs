@@ -2,45 +2,13 @@
 
 use std::collections::BTreeMap;
 
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 use serde_json::ser::{CompactFormatter, Formatter};
 
 use super::ingest::{FrameError, FrameErrorCode};
-use crate::detect::Health;
 use crate::monitor::federated::FederatedSolution;
-use crate::monitor::{Availability, MonitorReport, Outputs, TestOutcome};
-
-/// How loud a state change is (docs/architecture.md §A2): an `alarm` is stored,
-/// announced as an `alarm` event and counted; a `warning` is stored and announced only
-/// as a `state` event.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Severity {
-    /// An alarm.
-    #[default]
-    Alarm,
-    /// A warning.
-    Warning,
-}
-
-impl Severity {
-    /// The wire and store name.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Severity::Alarm => "alarm",
-            Severity::Warning => "warning",
-        }
-    }
-
-    /// Parses the store name.
-    pub fn parse(s: &str) -> Option<Self> {
-        match s {
-            "alarm" => Some(Severity::Alarm),
-            "warning" => Some(Severity::Warning),
-            _ => None,
-        }
-    }
-}
+use crate::monitor::{MonitorReport, Outputs, TestOutcome};
+pub use crate::session::{AlarmRecord, AvailabilityChange, Severity, StateChange};
 
 // ------------------------------------------------------------- server messages
 
@@ -225,87 +193,6 @@ pub fn result_frame<'a>(
     String::from_utf8(out).unwrap_or_default()
 }
 
-/// An entry of the alarm log: a test's transition into suspect or isolated, as stored
-/// (alarms and warnings) and sent (alarms, as the `alarm` event).
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-pub struct AlarmRecord {
-    /// Store id (increasing).
-    pub id: i64,
-    /// `alarm` or `warning` (docs/architecture.md §A2); entries stored before severities
-    /// existed read as `alarm`.
-    #[serde(default)]
-    pub severity: Severity,
-    /// Session id.
-    pub session: String,
-    /// Monitor name.
-    pub monitor: String,
-    /// Test name.
-    pub test: String,
-    /// The state entered: `suspect` or `isolated`.
-    pub state: Health,
-    /// Epoch time of the transition, s.
-    pub t: f64,
-    /// Statistic at the transition.
-    pub statistic: f64,
-    /// Threshold at the transition.
-    pub threshold: f64,
-    /// Degrees of freedom.
-    pub dof: u32,
-    /// statistic / threshold.
-    pub test_ratio: f64,
-    /// Seconds from the first exceedance of this episode to the alarm.
-    pub delay_s: f64,
-    /// Wall-clock time the alarm was raised, Unix milliseconds.
-    pub raised_at_ms: i64,
-    /// Epoch time the test returned to healthy, once it has.
-    pub cleared_t: Option<f64>,
-}
-
-/// A health change of one test.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-pub struct StateChange {
-    /// Session id.
-    pub session: String,
-    /// Monitor name.
-    pub monitor: String,
-    /// Test name.
-    pub test: String,
-    /// Epoch time, s.
-    pub t: f64,
-    /// Previous state.
-    pub from: Health,
-    /// New state.
-    pub to: Health,
-    /// Entering suspect or isolated: `alarm` or `warning`; absent on the return to
-    /// healthy.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub severity: Option<Severity>,
-    /// The alarm-log entry of this change (absent on the return to healthy, and `-1`
-    /// when the store failed).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub log_id: Option<i64>,
-}
-
-/// A change of a monitor's integrity availability (docs/methods.md §M24): not a fault,
-/// so neither stored as an alarm nor counted as one.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-pub struct AvailabilityChange {
-    /// Session id.
-    pub session: String,
-    /// Monitor name.
-    pub monitor: String,
-    /// Epoch time, s.
-    pub t: f64,
-    /// Previous availability (a stream starts `converging`).
-    pub from: Availability,
-    /// New availability.
-    pub to: Availability,
-    /// Protection level, m.
-    pub protection_level: f64,
-    /// Alert limit, m.
-    pub alert_limit: f64,
-}
-
 /// The `error` event.
 #[derive(Debug, Clone, Serialize)]
 pub struct ErrorEvent<'a> {
@@ -360,7 +247,8 @@ mod tests {
     use serde::{Serialize, Serializer};
 
     use super::*;
-    use crate::detect::{Decision, Statistic};
+    use crate::detect::{Decision, Health, Statistic};
+    use crate::monitor::Availability;
     use crate::monitor::Integrity;
 
     // The `result` frame as serde writes it from types: the form the hand-written writer

@@ -4,35 +4,12 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::detect::{Health, PolicyConfig};
+use crate::detect::PolicyConfig;
 use crate::monitor::MonitorKind;
 
-use super::events::Severity;
-
-/// Which state change is an *alarm* (docs/architecture.md §A2): entering `isolated`
-/// only (the default: entering `suspect` is then a *warning*, stored and announced as a
-/// `state` event but not as an `alarm`), or entering `suspect` already. Under the
-/// `classic` and `traditional` policies a test never is suspect, so both read the same.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum AlarmLevel {
-    /// Entering `suspect` (and `isolated`) raises an alarm.
-    Suspect,
-    /// Entering `isolated` raises an alarm; entering `suspect` a warning.
-    #[default]
-    Isolated,
-}
-
-impl AlarmLevel {
-    /// The severity of entering `state` (`None` for healthy).
-    pub fn severity(self, state: Health) -> Option<Severity> {
-        match (state, self) {
-            (Health::Healthy, _) => None,
-            (Health::Isolated, _) | (Health::Suspect, AlarmLevel::Suspect) => Some(Severity::Alarm),
-            (Health::Suspect, AlarmLevel::Isolated) => Some(Severity::Warning),
-        }
-    }
-}
+pub use crate::session::{
+    AlarmLevel, TestThreshold, TestThresholdSpec, ThresholdUpdate, ThresholdView,
+};
 
 /// `POST /api/v1/sessions` body.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -90,73 +67,8 @@ pub struct MonitorSpecWire {
     pub tests: BTreeMap<String, TestThresholdSpec>,
 }
 
-/// One test's own threshold: exactly one of `p_fa` and `threshold`.
-#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct TestThresholdSpec {
-    /// False-alarm probability for the test's dof.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub p_fa: Option<f64>,
-    /// Raw threshold.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub threshold: Option<f64>,
-}
-
 fn empty_object() -> serde_json::Value {
     serde_json::Value::Object(serde_json::Map::new())
-}
-
-/// `PUT /api/v1/sessions/{id}/monitors/{name}/threshold` body.
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ThresholdUpdate {
-    /// New false-alarm probability.
-    #[serde(default)]
-    pub p_fa: Option<f64>,
-    /// New raw threshold.
-    #[serde(default)]
-    pub threshold: Option<f64>,
-    /// New policy.
-    #[serde(default)]
-    pub policy: Option<PolicyConfig>,
-    /// New alarm level for the monitor.
-    #[serde(default)]
-    pub alarm_level: Option<AlarmLevel>,
-    /// Per-test thresholds to set (a test's `p_fa` or `threshold`), or with `null` to
-    /// return to the monitor's. Tests not named keep what they have.
-    #[serde(default)]
-    pub tests: Option<BTreeMap<String, Option<TestThresholdSpec>>>,
-}
-
-/// A test's effective threshold, as reported by the threshold routes.
-#[derive(Debug, Clone, Serialize)]
-pub struct TestThreshold {
-    /// Degrees of freedom.
-    pub dof: u32,
-    /// Effective threshold.
-    pub threshold: f64,
-    /// False-alarm probability that threshold gives for the dof.
-    pub p_fa: f64,
-    /// The test has a threshold of its own (per-test setting or its kind's default),
-    /// which the monitor's `p_fa`/`threshold` does not change.
-    pub own: bool,
-}
-
-/// Threshold and policy of one monitor (`GET`/`PUT …/threshold`).
-#[derive(Debug, Clone, Serialize)]
-pub struct ThresholdView {
-    /// Monitor name.
-    pub monitor: String,
-    /// The stated false-alarm probability, when the spec is a probability.
-    pub p_fa: Option<f64>,
-    /// The stated raw threshold, when the spec is a raw value.
-    pub threshold: Option<f64>,
-    /// Decision policy.
-    pub policy: PolicyConfig,
-    /// Which state change is an alarm.
-    pub alarm_level: AlarmLevel,
-    /// Effective threshold per test.
-    pub tests: BTreeMap<String, TestThreshold>,
 }
 
 /// The `tests` of a `PUT …/threshold` body that sets every calibrated test's proposed

@@ -193,7 +193,7 @@ impl History {
 mod tests {
     use super::*;
     use crate::monitor::MonitorKind;
-    use crate::service::session::stats::{MonitorStats, TestStats};
+    use crate::session::stats::{MonitorStats, TestStats};
     use std::collections::BTreeMap;
 
     fn stats(last: f64) -> SessionStats {

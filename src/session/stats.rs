@@ -2,16 +2,16 @@
 //! event): per monitor and test, counts, statistic summary, time in each state,
 //! the detection delay of the last alarm and the consistency diagnostics; per
 //! monitor with a protection level, its availability timeline. Updated by the
-//! session actor.
+//! session core as it commits epochs.
 
 use std::collections::{BTreeMap, VecDeque};
 
 use serde::{Deserialize, Serialize};
 
+use super::rule::Severity;
 use crate::detect::Health;
 use crate::detect::consistency::ConsistencySummary;
 use crate::monitor::{Availability, Integrity, MonitorKind, TestName, TestOutcome};
-use crate::service::wire::Severity;
 
 /// Availability changes kept in a monitor's timeline.
 pub const TIMELINE_SPANS: usize = 64;
@@ -412,7 +412,7 @@ mod tests {
             let o = bank.evaluate(0, *v);
             let delay = stats.record(k as f64, &o);
             if o.previous != o.decision.health && o.decision.health != Health::Healthy {
-                let severity = crate::service::wire::AlarmLevel::Isolated
+                let severity = crate::session::AlarmLevel::Isolated
                     .severity(o.decision.health)
                     .unwrap();
                 stats.count(severity, delay);
