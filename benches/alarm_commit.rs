@@ -1,5 +1,5 @@
 //! Criterion bench: a burst of alarms committed together, the store's share of
-//! alarm-to-event latency (issue 15 item 3; docs/performance.md). `N` sessions each hand
+//! alarm-to-event latency (docs/performance.md). `N` sessions each hand
 //! one log entry to the store at the same moment, as when every session fails the same
 //! epoch; the bench times the burst until the last entry is committed (every entry is
 //! committed before it is announced). SQLite in a temporary directory, WAL, as

@@ -1,6 +1,6 @@
-//! Golden run of the federated monitor on the simulated ship (issue 15 item 1): the
-//! speed work on the federated step must leave its results as they were, to 1e-9
-//! relative. Two runs, blessed from the code before that work (commit c9c17be):
+//! Golden run of the federated monitor on the simulated ship: the optimised
+//! federated step must give the results of the straightforward one, to 1e-9
+//! relative. Two runs, blessed from that straightforward step (commit c9c17be):
 //!
 //! - the 10 Hz ship (aids at their own rates between INS epochs) under counters, with a
 //!   GNSS position jump on [150, 210) s and a DVL velocity step from 300 s: suspect,

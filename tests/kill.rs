@@ -1,4 +1,4 @@
-//! `kill -9` in the middle of alarms (issue 13 item 9): the real binary as a child
+//! `kill -9` in the middle of alarms: the real binary as a child
 //! process streams three recording sessions whose faults keep raising alarms; it is
 //! killed five times at random moments (seeded) and restarted on the same database.
 //! Every alarm announced on a socket must be in the log exactly once, the database must
@@ -119,7 +119,7 @@ async fn every_announced_alarm_survives_five_kills_exactly_once() {
                     .or_default()
                     .push(text);
                 if cycle < KILLS && n == frames - 1 && i == 1 {
-                    // Mid-round: kill -9 with frames in flight on some sockets.
+                    // Mid-cycle: kill -9 with frames in flight on some sockets.
                     break 'stream;
                 }
                 loop {

@@ -1199,7 +1199,7 @@ async fn federated_stats_with_a_track_match_their_schemas() {
     server.shutdown().await;
 }
 
-/// The spec and the server agree where they used to differ (issue 13 item 7):
+/// The spec and the server agree on the cases that are easy to get wrong:
 /// integral floats are integers, `null` is refused where the spec has no
 /// null, `.` and `..` are not names, the `tacan-window` window minimum, the
 /// "exactly one of" rules of the missed-detection query, and a params schema

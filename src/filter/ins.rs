@@ -3,7 +3,7 @@
 //! predicts every local filter with the Φ and Q_d built here; the simulator
 //! propagates its true INS errors with the same model.
 //!
-//! Error state, ENU navigation frame (contract of issue 3):
+//! Error state, ENU navigation frame (docs/methods.md §M4):
 //! `φ` (0..3, rad; `C̃_bⁿ = (I − [φ×]) C_bⁿ`), `δv` (3..6, m/s, INS − true),
 //! `δp` (6..9, m, local level ENU, INS − true), `ε` gyro bias (9..12, rad/s, body),
 //! `∇` accelerometer bias (12..15, m/s², body). Continuous model:

@@ -2,7 +2,7 @@
 //! angles and back, and the skew-symmetric (cross-product) matrix. Used by the
 //! INS error model (`filter::ins`), the DVL aiding model and the simulator.
 //!
-//! Convention (contract of issue 3): navigation frame ENU, body frame RFU
+//! Convention: navigation frame ENU, body frame RFU
 //! (x right, y forward, z up); yaw = heading clockwise from north, pitch
 //! nose-up positive, roll right-wing-down positive;
 //! `C_bⁿ = R_z(−yaw) · R_x(pitch) · R_y(roll)`.

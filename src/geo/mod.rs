@@ -3,7 +3,7 @@
 //! the INS error model and federated filters (`filter::ins`, `filter::aiding`)
 //! and by the simulator (`sim`). Pure maths: no I/O, no allocation.
 //!
-//! Conventions (docs/architecture.md §A6, contract of issue 3): angles in radians, lengths in
+//! Conventions (docs/architecture.md §A6): angles in radians, lengths in
 //! metres, the navigation frame is ENU (x east, y north, z up), the body frame
 //! is RFU (x right, y forward, z up).
 //!

@@ -185,8 +185,8 @@ fn t_bits(t: f64) -> u64 {
 /// are matched back by what names them (the order of `RETURNING` rows is not
 /// guaranteed); an entry with no returned row was already stored under its key (replayed
 /// after a failover) and takes the stored entry's id. One statement per chunk instead of
-/// one per entry: on SQLite every statement is a round trip to its worker thread, which
-/// was most of a burst's commit time (docs/performance.md).
+/// one per entry: on SQLite every statement is a round trip to its worker thread, and one
+/// per entry would make those most of a burst's commit time (docs/performance.md).
 macro_rules! insert_rows {
     ($tx:ident, $rows:expr, $done:ident) => {
         for chunk in $rows.chunks(INSERT_ROWS) {
