@@ -1,25 +1,28 @@
-//! Alarms an operator can live with (docs/methods.md §M23, §M24; issue 12 item 9): the
-//! `federated` monitor under counters at a `p_fa` (default 1e-3) over fault-free ship runs
-//! (several seeds) and the real RTK track, counting per hour of fault-free time the
-//! *alarms* (entries into `isolated`) and *warnings* (entries into `suspect`) of every test
-//! of the session — the aids' χ² tests, their drift and stuck tests — and, on the same
-//! scenarios with seed 004's faults injected, whether every fault still raises an alarm
-//! (an entry into `isolated` of a test of the faulted aid while the fault lasts). HPL above
-//! the HAL is integrity availability, not an alarm (docs/methods.md §M24); the epochs spent
-//! converging and unavailable are reported beside.
+//! Alarms an operator can live with (docs/methods.md §M23, §M24): the `federated`
+//! monitor under counters at a `p_fa` (default 1e-3) over fault-free ship runs (several
+//! seeds) and the real RTK track, counting per hour of fault-free time the *alarms* and
+//! *warnings* of every test of the session — the aids' χ² tests, their drift and stuck
+//! tests — as the server logs them: each run goes through the session core, whose rule
+//! makes entering `isolated` an alarm and entering `suspect` a warning under the default
+//! alarm level, every change a warning while the monitor converges, and raises a test
+//! standing in `isolated` as an alarm when it has converged (docs/architecture.md §A2).
+//! On the same scenarios with seed 004's faults injected, it checks that every fault still
+//! raises an alarm (an alarm entry of a test of the faulted aid while the fault lasts).
+//! HPL above the HAL is integrity availability, not an alarm (docs/methods.md §M24); the
+//! epochs spent converging and unavailable are reported beside.
 //!
 //! Each configuration is run as given: the monitor's defaults, and the same with the drift
 //! test on for every aid (the evidence behind the default of docs/methods.md §M23).
 
 use std::fmt::Write as _;
 
-use super::scorecard;
 use super::{ExperimentError, MonitorRun, fault_windows};
-use crate::detect::{Health, PolicyConfig, ThresholdSpec};
+use crate::detect::{PolicyConfig, ThresholdSpec};
 use crate::epoch::Aid;
 use crate::monitor::federated::{CnsNoise, DvlNoise, FederatedConfigWire, GnssNoise};
 use crate::monitor::guards::{DriftConfigWire, StuckConfigWire};
 use crate::monitor::{self, MonitorConfig, MonitorKind, MonitorSpec};
+use crate::session::Severity;
 use crate::sim::{self, Scenario, Track};
 
 /// The issue's target: at most this many alarms per fault-free hour per session.
@@ -100,14 +103,14 @@ impl Default for AlarmsParams {
     }
 }
 
-/// One test of one session: its entries into `isolated` and `suspect` outside faults.
+/// One test of one session: its alarm and warning entries outside faults.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TestAlarms {
     /// Test name.
     pub test: String,
-    /// Entries into `isolated` from a clear epoch.
+    /// Alarm entries at a clear epoch.
     pub alarms: usize,
-    /// Entries into `suspect` from a clear epoch.
+    /// Warning entries at a clear epoch.
     pub warnings: usize,
     /// Clear hours of the test.
     pub hours: f64,
@@ -122,10 +125,11 @@ pub struct FaultAlarm {
     pub start_s: f64,
     /// End, s (infinite: to the end of the run).
     pub end_s: f64,
-    /// Seconds from onset to the first entry of one of the aid's tests into `suspect` or
-    /// `isolated` inside the fault (`None`: none).
+    /// Seconds from onset to the first log entry (warning or alarm) of one of the aid's
+    /// tests inside the fault (`None`: none).
     pub warning_s: Option<f64>,
-    /// Seconds from onset to the first entry into `isolated` inside the fault.
+    /// Seconds from onset to the first alarm entry of one of the aid's tests inside the
+    /// fault.
     pub alarm_s: Option<f64>,
 }
 
@@ -227,27 +231,19 @@ fn aid_of(test: &str) -> Option<Aid> {
         .find(|a| a.as_str() == name)
 }
 
-/// The first entry of any of `aid`'s tests into a state `bad` accepts at or after `from`
-/// and before `to`.
+/// The time of the first log entry of any of `aid`'s tests at or after `from` and before
+/// `to` whose severity `counts` accepts.
 fn first_entry(
     run: &MonitorRun,
     aid: Aid,
     from: f64,
     to: f64,
-    bad: impl Fn(Health) -> bool,
+    counts: impl Fn(Severity) -> bool,
 ) -> Option<f64> {
-    run.tests
-        .iter()
-        .filter(|(name, _)| aid_of(name) == Some(aid))
-        .filter_map(|(_, samples)| {
-            let mut previous = Health::Healthy;
-            samples.iter().find_map(|s| {
-                let entered = bad(s.health) && !bad(previous);
-                previous = s.health;
-                (entered && s.t >= from && s.t < to).then_some(s.t)
-            })
-        })
-        .reduce(f64::min)
+    run.aid_entries(aid.as_str())
+        .into_iter()
+        .find(|&(t, severity)| counts(severity) && t >= from && t < to)
+        .map(|(t, _)| t)
 }
 
 /// Scores one run.
@@ -264,7 +260,7 @@ fn score(
             let faults = aid_of(test)
                 .map(|a| fault_windows(&scenario.faults, a))
                 .unwrap_or_default();
-            let card = scorecard::score(test, "", &run.health_trace(test), &faults, None);
+            let card = run.scorecard(test, "", &faults, None);
             TestAlarms {
                 test: test.clone(),
                 alarms: card.clear_alarms,
@@ -284,9 +280,8 @@ fn score(
             aid,
             start_s: w.start,
             end_s: w.end,
-            warning_s: first_entry(run, aid, w.start, w.end, |h| h != Health::Healthy)
-                .map(|t| t - w.start),
-            alarm_s: first_entry(run, aid, w.start, w.end, |h| h == Health::Isolated)
+            warning_s: first_entry(run, aid, w.start, w.end, |_| true).map(|t| t - w.start),
+            alarm_s: first_entry(run, aid, w.start, w.end, |s| s == Severity::Alarm)
                 .map(|t| t - w.start),
         })
         .collect();
@@ -367,7 +362,8 @@ pub fn render(r: &AlarmsResult) -> String {
     let _ = writeln!(
         s,
         "alarms — federated monitor, counters N1 = 10, N2 = 5, p_fa = {} for every test under the monitor's spec (stuck tests: their own 1e-6).\n\
-         alarm = entry into isolated, warning = entry into suspect, of any test of the session, outside faults and recovery tails, per fault-free hour;\n\
+         alarms and warnings as the server logs them (entering isolated an alarm, entering suspect a warning, warnings while converging, standing alarms at convergence),\n\
+         of any test of the session, outside faults and recovery tails, per fault-free hour;\n\
          HPL above the HAL is integrity (INS epochs converging / available / unavailable), not an alarm. Target: ≤ {} alarm per hour per session,\n\
          and every injected fault raising one.\n",
         r.p_fa, TARGET_ALARMS_PER_HOUR

@@ -21,11 +21,12 @@
 use std::fmt::Write as _;
 
 use super::{ExperimentError, MonitorRun, run_monitor};
-use crate::detect::{Health, PolicyConfig, ThresholdSpec};
+use crate::detect::{PolicyConfig, ThresholdSpec};
 use crate::epoch::Aid;
 use crate::monitor::federated::{DvlNoise, FederatedConfigWire, GnssNoise};
 use crate::monitor::guards::{DriftConfigWire, StuckConfigWire};
 use crate::monitor::{self, MonitorConfig, MonitorKind, MonitorSpec};
+use crate::session::Severity;
 use crate::sim::{self, Channel, Fault, FaultKind, Scenario};
 
 /// A fault case of the experiment.
@@ -190,25 +191,19 @@ fn spec(
     })
 }
 
-/// The first epoch in `[from, to)` on which a test of `aid` is in a state `bad` accepts,
+/// The first log entry in `[from, to)` of a test of `aid` whose severity `counts` accepts,
 /// as seconds after `from`, with the test's name.
 fn first(
     run: &MonitorRun,
     aid: Aid,
     (from, to): (f64, f64),
-    bad: impl Fn(Health) -> bool,
+    counts: impl Fn(Severity) -> bool,
 ) -> Option<(f64, String)> {
-    let prefix = format!("{}.", aid.as_str());
-    run.tests
+    run.entries
         .iter()
-        .filter(|(name, _)| name.as_str() == aid.as_str() || name.starts_with(&prefix))
-        .filter_map(|(name, samples)| {
-            samples
-                .iter()
-                .find(|s| s.t >= from && s.t < to && bad(s.health))
-                .map(|s| (s.t - from, name.clone()))
-        })
-        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .filter(|e| e.test.split('.').next() == Some(aid.as_str()))
+        .find(|e| e.t >= from && e.t < to && counts(e.severity))
+        .map(|e| (e.t - from, e.test.clone()))
 }
 
 /// Runs every case under both configurations on every seed.
@@ -234,8 +229,8 @@ pub fn run(params: GuardsParams) -> Result<GuardsResult, ExperimentError> {
                 let run = run_monitor(&scenario, &spec)?;
                 let (from, to) = case.window;
                 row.runs.push(GuardRun {
-                    warning: first(&run, case.aid, case.window, |h| h != Health::Healthy),
-                    alarm: first(&run, case.aid, case.window, |h| h == Health::Isolated),
+                    warning: first(&run, case.aid, case.window, |_| true),
+                    alarm: first(&run, case.aid, case.window, |s| s == Severity::Alarm),
                     max_error_m: run
                         .errors
                         .iter()

@@ -46,7 +46,8 @@ use crate::epoch::Aid;
 use crate::features::FeatureError;
 use crate::geo::{self, Lla};
 use crate::learn::LearnError;
-use crate::monitor::{self, Availability, BuildError, MonitorSpec, StepError};
+use crate::monitor::{self, Availability, BuildError, MonitorReport, MonitorSpec, StepError};
+use crate::session::{AlarmLevel, Seat, SessionCore, Severity};
 use scorecard::FaultWindow;
 
 /// Why an experiment could not run.
@@ -128,9 +129,79 @@ pub struct MonitorRun {
     pub integrity_counts: [usize; 3],
     /// Mean wall-clock time of one monitor step, s.
     pub time_per_epoch_s: f64,
+    /// The alarm-log entries the session core wrote, in order (the server's rule).
+    pub entries: Vec<LogEntry>,
+}
+
+/// One alarm-log entry of a run, as the session core wrote it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LogEntry {
+    /// Epoch time, s.
+    pub t: f64,
+    /// Test name.
+    pub test: String,
+    /// The state entered.
+    pub state: Health,
+    /// Alarm or warning.
+    pub severity: Severity,
 }
 
 impl MonitorRun {
+    /// The log entries `(t, severity)` of the tests `keep` accepts, in order.
+    pub fn entries_where(&self, keep: impl Fn(&str) -> bool) -> Vec<(f64, Severity)> {
+        self.entries
+            .iter()
+            .filter(|e| keep(&e.test))
+            .map(|e| (e.t, e.severity))
+            .collect()
+    }
+
+    /// The log entries `(t, severity)` of one test.
+    pub fn entries_of(&self, test: &str) -> Vec<(f64, Severity)> {
+        self.entries_where(|name| name == test)
+    }
+
+    /// The log entries `(t, severity)` of an aid's tests: its χ² test `aid` and its guards
+    /// `aid.*`.
+    pub fn aid_entries(&self, aid: &str) -> Vec<(f64, Severity)> {
+        self.entries_where(|name| name.split('.').next() == Some(aid))
+    }
+
+    /// The scorecard of one test: rates from its health trace, alarms and warnings from
+    /// the entries the session core logged for it.
+    pub fn scorecard(
+        &self,
+        test: &str,
+        policy: &str,
+        faults: &[FaultWindow],
+        time_per_epoch_s: Option<f64>,
+    ) -> scorecard::Scorecard {
+        let (trace, entries) = (self.health_trace(test), self.entries_of(test));
+        let run = scorecard::TestRun {
+            trace: &trace,
+            entries: &entries,
+            run_starts: &[],
+        };
+        scorecard::score_test(test, policy, run, faults, time_per_epoch_s)
+    }
+
+    /// The scorecard of an aid: rates from its combined trace ([`MonitorRun::aid_health_trace`]),
+    /// alarms and warnings from the entries of all its tests.
+    pub fn aid_scorecard(
+        &self,
+        aid: &str,
+        policy: &str,
+        faults: &[FaultWindow],
+    ) -> scorecard::Scorecard {
+        let (trace, entries) = (self.aid_health_trace(aid), self.aid_entries(aid));
+        let run = scorecard::TestRun {
+            trace: &trace,
+            entries: &entries,
+            run_starts: &[],
+        };
+        scorecard::score_test(aid, policy, run, faults, None)
+    }
+
     /// The `(t, health)` trace of a test, for [`scorecard::score`].
     pub fn health_trace(&self, test: &str) -> Vec<(f64, Health)> {
         self.tests
@@ -203,59 +274,92 @@ fn solution(outputs: &Value) -> Option<(Lla, [f64; 3], Option<f64>)> {
 /// Runs `scenario` through the monitor `spec` describes, epoch by epoch, and
 /// records the corrected solution's error against the truth and every test.
 pub fn run_monitor(scenario: &Scenario, spec: &MonitorSpec) -> Result<MonitorRun, ExperimentError> {
-    let mut monitor = monitor::build(spec, &monitor::NoModels)?;
+    let seat = Seat {
+        name: "experiment".into(),
+        monitor: monitor::build(spec, &monitor::NoModels)?,
+        alarm_level: AlarmLevel::default(),
+    };
+    // The server's session core, without history: it decides the log entries.
+    let mut core = SessionCore::new("experiment", vec![seat], 0);
     let mut run = MonitorRun {
         errors: Vec::with_capacity(scenario.epochs.len()),
         tests: BTreeMap::new(),
         hpl: Vec::new(),
         integrity_counts: [0; 3],
         time_per_epoch_s: 0.0,
+        entries: Vec::new(),
     };
     let mut busy = std::time::Duration::ZERO;
+    let mut effects = Vec::new();
     for e in &scenario.epochs {
         let t = e.epoch.t;
         let started = Instant::now();
-        let report = monitor
-            .step(&e.epoch)
-            .map_err(|source| ExperimentError::Step { t, source })?;
+        let (reports, failure) = core.step(&e.epoch);
         busy += started.elapsed();
-        for o in &report.tests {
-            run.tests
-                .entry(o.name.to_string())
-                .or_default()
-                .push(TestSample {
-                    t,
-                    statistic: o.statistic.value,
-                    threshold: o.statistic.threshold,
-                    health: o.decision.health,
-                });
+        if let Some((_, source)) = failure {
+            return Err(ExperimentError::Step { t, source });
         }
-        if let Some(i) = report.integrity {
-            run.integrity_counts[match i.state {
-                Availability::Converging => 0,
-                Availability::Available => 1,
-                Availability::Unavailable => 2,
-            }] += 1;
-        }
-        let outputs = serde_json::to_value(&report.outputs).unwrap_or(Value::Null);
-        let (lla, vel, hpl) = solution(&outputs).ok_or(ExperimentError::NoSolution(t))?;
-        if let Some(hpl) = hpl {
-            run.hpl.push((t, hpl));
-        }
-        // ENU metres of solution − truth at the truth (small-offset form).
-        let d = geo::local_offset(&lla, &e.truth.lla);
-        run.errors.push(NavError {
-            t,
-            north_m: d.y,
-            east_m: d.x,
-            up_m: d.z,
-            ve_mps: vel[0] - e.truth.vel.x,
-            vn_mps: vel[1] - e.truth.vel.y,
-        });
+        let Some(report) = reports.first().and_then(Option::as_ref) else {
+            return Err(ExperimentError::NoSolution(t));
+        };
+        record(&mut run, report, e)?;
+        core.commit(&e.epoch, &reports, &mut effects);
+        run.entries.extend(effects.drain(..).filter_map(|x| {
+            x.entry().map(|entry| LogEntry {
+                t: entry.t,
+                test: entry.test.clone(),
+                state: entry.state,
+                severity: entry.severity,
+            })
+        }));
     }
     let n = scenario.epochs.len().max(1) as f64;
     run.time_per_epoch_s = busy.as_secs_f64() / n;
     Ok(run)
+}
+
+/// Records one epoch's report: every test's sample, the integrity, the HPL and the
+/// solution's error against the truth.
+fn record(
+    run: &mut MonitorRun,
+    report: &MonitorReport,
+    e: &crate::sim::scenario::SimEpoch,
+) -> Result<(), ExperimentError> {
+    let t = e.epoch.t;
+    for o in &report.tests {
+        run.tests
+            .entry(o.name.to_string())
+            .or_default()
+            .push(TestSample {
+                t,
+                statistic: o.statistic.value,
+                threshold: o.statistic.threshold,
+                health: o.decision.health,
+            });
+    }
+    if let Some(i) = report.integrity {
+        run.integrity_counts[match i.state {
+            Availability::Converging => 0,
+            Availability::Available => 1,
+            Availability::Unavailable => 2,
+        }] += 1;
+    }
+    let outputs = serde_json::to_value(&report.outputs).unwrap_or(Value::Null);
+    let (lla, vel, hpl) = solution(&outputs).ok_or(ExperimentError::NoSolution(t))?;
+    if let Some(hpl) = hpl {
+        run.hpl.push((t, hpl));
+    }
+    // ENU metres of solution − truth at the truth (small-offset form).
+    let d = geo::local_offset(&lla, &e.truth.lla);
+    run.errors.push(NavError {
+        t,
+        north_m: d.y,
+        east_m: d.x,
+        up_m: d.z,
+        ve_mps: vel[0] - e.truth.vel.x,
+        vn_mps: vel[1] - e.truth.vel.y,
+    });
+    Ok(())
 }
 
 /// The fault windows of a scenario that concern one aid's test, merged where

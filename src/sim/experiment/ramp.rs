@@ -29,7 +29,6 @@
 
 use std::fmt::Write as _;
 
-use super::scorecard;
 use super::{ExperimentError, MonitorRun, run_monitor};
 use crate::detect::{Health, PolicyConfig, ThresholdSpec, chi2};
 use crate::epoch::Aid;
@@ -381,7 +380,7 @@ fn fault_free_row(
         epochs += aid.len();
         chi2_bad += chi2.iter().filter(|(_, h)| *h != Health::Healthy).count();
         aid_bad += aid.iter().filter(|(_, h)| *h != Health::Healthy).count();
-        let card = scorecard::score("gnss", &case.label(), &aid, &[], None);
+        let card = run.aid_scorecard("gnss", &case.label(), &[]);
         hours += card.clear_hours;
         alarms += card.clear_alarms;
         warnings += card.clear_warnings;

@@ -23,15 +23,19 @@
 //!   ended. A fault lasting past the run's end has no recovery at all. (Before this
 //!   distinction, seed 003's dense jumps made every card read "never" although the
 //!   test always recovered: the next jump came first.)
-//! - *Alarms* and *warnings per fault-free hour*: entries into `isolated` (the alarm
-//!   under the default alarm level, docs/architecture.md §A2) and into `suspect` (a
-//!   warning under counters) from a clear epoch, over the clear time (the sum of the
-//!   intervals that start at a clear epoch). `FAR / p_fa` compares the false-alarm rate
-//!   with the nominal rate the threshold was set for ([`Scorecard::with_p_fa`]).
+//! - *Alarms* and *warnings per fault-free hour*: the test's alarm-log entries of each
+//!   severity at a clear epoch, over the clear time (the sum of the intervals that start
+//!   at a clear epoch). The entries are those the server writes: the session core's rule
+//!   (docs/architecture.md §A2), as the core wrote them for a monitor run through it
+//!   ([`score_test`]), or by the same rule from the health trace for a monitor without a
+//!   protection level ([`score`]: entering `isolated` an alarm, entering `suspect` a
+//!   warning). `FAR / p_fa` compares the false-alarm rate with the nominal rate the
+//!   threshold was set for ([`Scorecard::with_p_fa`]).
 
 use std::fmt::Write as _;
 
 use crate::detect::Health;
+use crate::session::rule::{self, AlarmLevel, Severity};
 
 /// A fault interval `[start, end)` in epoch time, s.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -85,9 +89,9 @@ pub struct Scorecard {
     pub time_per_epoch_s: Option<f64>,
     /// Clear (fault-free, outside recovery tails) time, h.
     pub clear_hours: f64,
-    /// Entries into `isolated` from a clear epoch.
+    /// Log entries of severity `alarm` at a clear epoch.
     pub clear_alarms: usize,
-    /// Entries into `suspect` from a clear epoch.
+    /// Log entries of severity `warning` at a clear epoch.
     pub clear_warnings: usize,
     /// The nominal per-epoch false-alarm probability of the test, when it has one.
     pub p_fa: Option<f64>,
@@ -105,12 +109,12 @@ impl Scorecard {
         Some(self.false_alarm_rate? / self.p_fa?)
     }
 
-    /// Alarms (entries into `isolated`) per fault-free hour.
+    /// Alarms per fault-free hour.
     pub fn alarms_per_hour(&self) -> Option<f64> {
         (self.clear_hours > 0.0).then(|| self.clear_alarms as f64 / self.clear_hours)
     }
 
-    /// Warnings (entries into `suspect`) per fault-free hour.
+    /// Warnings per fault-free hour.
     pub fn warnings_per_hour(&self) -> Option<f64> {
         (self.clear_hours > 0.0).then(|| self.clear_warnings as f64 / self.clear_hours)
     }
@@ -125,7 +129,9 @@ impl Scorecard {
 }
 
 /// Scores one test's health trace `(t, health)` (in time order) against the
-/// fault windows that concern it.
+/// fault windows that concern it. Its alarms and warnings are the entries the session
+/// core's rule writes for a monitor without a protection level under the default alarm
+/// level ([`rule::trace_entries`]).
 pub fn score(
     detector: &str,
     policy: &str,
@@ -148,81 +154,68 @@ pub fn score_runs(
     time_per_epoch_s: Option<f64>,
     run_starts: &[f64],
 ) -> Scorecard {
-    let alarms = |h: Health| h != Health::Healthy;
-    let mut faults: Vec<FaultWindow> = faults.iter().copied().filter(|f| f.end > f.start).collect();
-    faults.sort_by(|a, b| a.start.total_cmp(&b.start));
-    let (t_first, t_last) = match (trace.first(), trace.last()) {
-        (Some(a), Some(b)) => (a.0, b.0),
-        _ => (f64::NAN, f64::NAN),
+    let entries: Vec<(f64, Severity)> = rule::trace_entries(trace, AlarmLevel::default())
+        .into_iter()
+        .map(|(t, _, severity)| (t, severity))
+        .collect();
+    let run = TestRun {
+        trace,
+        entries: &entries,
+        run_starts,
     };
-    faults.retain(|f| f.start <= t_last && f.end > t_first);
+    score_test(detector, policy, run, faults, time_per_epoch_s)
+}
 
-    // Recovery tails: from each fault's end to the first healthy epoch after it.
-    let mut tails: Vec<FaultWindow> = Vec::new();
-    let mut recovery_s = Vec::new();
-    let mut recoveries_censored = 0;
-    let mut delays = Vec::new();
-    for (i, f) in faults.iter().enumerate() {
-        if let Some(&(t, _)) = trace.iter().find(|(t, h)| f.contains(*t) && alarms(*h)) {
-            delays.push(t - f.start);
-        }
-        if f.end > t_last {
-            continue;
-        }
-        let next_fault = faults.get(i + 1).map_or(f64::INFINITY, |n| n.start);
-        let next_run = run_starts
-            .iter()
-            .copied()
-            .filter(|&r| r > f.end)
-            .fold(f64::INFINITY, f64::min);
-        let next_start = next_fault.min(next_run);
-        let back = trace
-            .iter()
-            .find(|(t, h)| *t >= f.end && *t < next_start && !alarms(*h));
-        match back {
-            Some(&(t, _)) => {
-                recovery_s.push(Some(t - f.end));
-                tails.push(FaultWindow {
-                    start: f.end,
-                    end: t,
-                });
-            }
-            None => {
-                if next_start <= t_last {
-                    recoveries_censored += 1;
-                } else {
-                    recovery_s.push(None);
-                }
-                tails.push(FaultWindow {
-                    start: f.end,
-                    end: next_start,
-                });
-            }
-        }
-    }
+/// What one test did over a run, as scored.
+#[derive(Debug, Clone, Copy)]
+pub struct TestRun<'a> {
+    /// Its health `(t, health)` at every epoch on which it ran, in time order.
+    pub trace: &'a [(f64, Health)],
+    /// Its alarm-log entries `(t, severity)` as the session core wrote them (the server's
+    /// rule, with its warnings while converging and standing alarms at convergence).
+    pub entries: &'a [(f64, Severity)],
+    /// Starts of the runs laid end to end in `trace` (empty: one run).
+    pub run_starts: &'a [f64],
+}
 
+/// Scores one test's run against the fault windows that concern it: rates and delays
+/// from its health trace, alarms and warnings per fault-free hour from its log entries.
+pub fn score_test(
+    detector: &str,
+    policy: &str,
+    run: TestRun<'_>,
+    faults: &[FaultWindow],
+    time_per_epoch_s: Option<f64>,
+) -> Scorecard {
+    let trace = run.trace;
+    let faults = faults_in(trace, faults);
+    let recovery = recoveries(trace, &faults, run.run_starts);
+    let clear = |t: f64| {
+        !faults.iter().any(|f| f.contains(t)) && !recovery.tails.iter().any(|f| f.contains(t))
+    };
     let (mut fault_epochs, mut fault_alarms, mut clear_epochs, mut clear_alarms) = (0, 0, 0, 0);
-    let (mut clear_s, mut entries_isolated, mut entries_suspect) = (0.0, 0, 0);
-    let mut previous = Health::Healthy;
+    let mut clear_s = 0.0;
     for (i, &(t, h)) in trace.iter().enumerate() {
         if faults.iter().any(|f| f.contains(t)) {
             fault_epochs += 1;
             fault_alarms += usize::from(alarms(h));
-        } else if !tails.iter().any(|f| f.contains(t)) {
+        } else if clear(t) {
             clear_epochs += 1;
             clear_alarms += usize::from(alarms(h));
             if let Some(&(next, _)) = trace.get(i + 1) {
                 clear_s += next - t;
             }
-            if h != previous {
-                entries_isolated += usize::from(h == Health::Isolated);
-                entries_suspect += usize::from(h == Health::Suspect);
-            }
         }
-        previous = h;
     }
+    let logged = |severity| {
+        run.entries
+            .iter()
+            .filter(|&&(t, s)| s == severity && clear(t))
+            .count()
+    };
     let ratio = |a: usize, n: usize| (n > 0).then(|| a as f64 / n as f64);
     let true_positive_rate = ratio(fault_alarms, fault_epochs);
+    let delays = &recovery.delays;
     Scorecard {
         detector: detector.to_owned(),
         policy: policy.to_owned(),
@@ -237,14 +230,84 @@ pub fn score_runs(
         mean_delay_s: (!delays.is_empty())
             .then(|| delays.iter().sum::<f64>() / delays.len() as f64),
         max_delay_s: delays.iter().copied().reduce(f64::max),
-        recovery_s,
-        recoveries_censored,
+        recovery_s: recovery.recovery_s,
+        recoveries_censored: recovery.censored,
         time_per_epoch_s,
         clear_hours: clear_s / 3600.0,
-        clear_alarms: entries_isolated,
-        clear_warnings: entries_suspect,
+        clear_alarms: logged(Severity::Alarm),
+        clear_warnings: logged(Severity::Warning),
         p_fa: None,
     }
+}
+
+/// An epoch *alarms* when its health is not healthy.
+fn alarms(h: Health) -> bool {
+    h != Health::Healthy
+}
+
+/// The fault windows that intersect the trace, in time order.
+fn faults_in(trace: &[(f64, Health)], faults: &[FaultWindow]) -> Vec<FaultWindow> {
+    let mut faults: Vec<FaultWindow> = faults.iter().copied().filter(|f| f.end > f.start).collect();
+    faults.sort_by(|a, b| a.start.total_cmp(&b.start));
+    let (t_first, t_last) = match (trace.first(), trace.last()) {
+        (Some(a), Some(b)) => (a.0, b.0),
+        _ => (f64::NAN, f64::NAN),
+    };
+    faults.retain(|f| f.start <= t_last && f.end > t_first);
+    faults
+}
+
+/// Detection delays, recovery times and recovery tails of the faults of a trace.
+struct Recoveries {
+    delays: Vec<f64>,
+    recovery_s: Vec<Option<f64>>,
+    censored: usize,
+    /// From each fault's end to the first healthy epoch after it (or the next start).
+    tails: Vec<FaultWindow>,
+}
+
+fn recoveries(trace: &[(f64, Health)], faults: &[FaultWindow], run_starts: &[f64]) -> Recoveries {
+    let t_last = trace.last().map_or(f64::NAN, |x| x.0);
+    let mut r = Recoveries {
+        delays: Vec::new(),
+        recovery_s: Vec::new(),
+        censored: 0,
+        tails: Vec::new(),
+    };
+    for (i, f) in faults.iter().enumerate() {
+        if let Some(&(t, _)) = trace.iter().find(|(t, h)| f.contains(*t) && alarms(*h)) {
+            r.delays.push(t - f.start);
+        }
+        if f.end > t_last {
+            continue;
+        }
+        let next_fault = faults.get(i + 1).map_or(f64::INFINITY, |n| n.start);
+        let next_run = run_starts
+            .iter()
+            .copied()
+            .filter(|&s| s > f.end)
+            .fold(f64::INFINITY, f64::min);
+        let next_start = next_fault.min(next_run);
+        let back = trace
+            .iter()
+            .find(|(t, h)| *t >= f.end && *t < next_start && !alarms(*h));
+        let end = match back {
+            Some(&(t, _)) => {
+                r.recovery_s.push(Some(t - f.end));
+                t
+            }
+            None if next_start <= t_last => {
+                r.censored += 1;
+                next_start
+            }
+            None => {
+                r.recovery_s.push(None);
+                next_start
+            }
+        };
+        r.tails.push(FaultWindow { start: f.end, end });
+    }
+    r
 }
 
 fn pct(v: Option<f64>) -> String {

@@ -314,13 +314,8 @@ pub fn run_on(
                 .keys()
                 .map(|test| {
                     let faults: &[FaultWindow] = if test == "gnss" { &gnss_faults } else { &[] };
-                    scorecard::score(
-                        test,
-                        &label,
-                        &case.run.health_trace(test),
-                        faults,
-                        Some(case.run.time_per_epoch_s),
-                    )
+                    let per_epoch = Some(case.run.time_per_epoch_s);
+                    case.run.scorecard(test, &label, faults, per_epoch)
                 })
                 .collect();
             cases.push(case);
