@@ -37,6 +37,12 @@ pub async fn events(
     if let Some(cluster) = state.cluster.clone() {
         // A cluster node: the session's events come over NATS from whichever node owns
         // it, now or after a failover, so the socket outlives a change of owner.
+        if cluster.draining() {
+            return Err(ApiError::Unavailable(
+                "this node is draining: reconnect (the load balancer sends you to another node)"
+                    .into(),
+            ));
+        }
         if state.registry.get(&id).is_none() && state.store.session(&id).await?.is_none() {
             return Err(ApiError::NotFound(format!("no session '{id}'")));
         }
@@ -95,7 +101,9 @@ async fn first_stats(state: &AppState, cluster: &Cluster, id: &str) -> Option<St
 
 /// An observer on a cluster node: the session's events and statistics from NATS. A gap
 /// in the events' sequence closes the socket with 1008, as a local subscriber too slow for
-/// its queue is closed: the client re-reads `/api/v1/alarms?after=ID`.
+/// its queue is closed: the client re-reads `/api/v1/alarms?after=ID`. When the node starts
+/// draining the socket closes with 1001 while the load balancer still relays it (see
+/// `own::drain`); the client reconnects to another node.
 async fn run_cluster(mut socket: WebSocket, state: AppState, cluster: Arc<Cluster>, id: String) {
     let nats = cluster.nats();
     let (Ok(mut events), Ok(mut stats)) = (
@@ -116,6 +124,7 @@ async fn run_cluster(mut socket: WebSocket, state: AppState, cluster: Arc<Cluste
         return;
     }
     let mut shutdown = state.shutdown.clone();
+    let mut drain = cluster.drain_signal();
     let mut ticker = tokio::time::interval(STATS_INTERVAL);
     ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let mut latest_stats: Option<bytes::Bytes> = None;
@@ -123,11 +132,21 @@ async fn run_cluster(mut socket: WebSocket, state: AppState, cluster: Arc<Cluste
     // Made once, not per pass (see `ingest::run`).
     let shutting_down = shutdown.changed();
     tokio::pin!(shutting_down);
+    // The answer (a read guard of the flag) is dropped at once: it must not be held
+    // across the close below.
+    let draining = async move {
+        let _ = drain.wait_for(|d| *d).await;
+    };
+    tokio::pin!(draining);
     loop {
         tokio::select! {
             biased;
             _ = &mut shutting_down => {
                 close_socket(&mut socket, 1001, "server shutting down").await;
+                break;
+            }
+            _ = &mut draining => {
+                close_socket(&mut socket, 1001, "node draining; reconnect").await;
                 break;
             }
             event = events.next() => {
