@@ -8,7 +8,8 @@
 //! the session reaches the live session; draining a node moves its sessions without an
 //! alarm lost, and its clients, connected through the load balancer, are told `moved` and
 //! closed cleanly before the load balancer marks the node down. A client's Close is
-//! answered through the load balancer on both sockets.
+//! answered through the load balancer on both sockets; after NATS is restarted by hand,
+//! `deploy/cluster.sh status` reports it and `stop` stops it.
 //!
 //! Needs Debian's `postgresql`, `nats-server` and `haproxy`: without them the test says
 //! how to run it and passes, unless `NAVGUARD_CLUSTER_TEST=1` (set by `.ci/run`), which
@@ -69,7 +70,8 @@ struct Cluster {
 }
 
 impl Cluster {
-    fn script(&self, args: &[&str]) -> String {
+    /// Runs `deploy/cluster.sh` on this cluster: its exit status and output.
+    fn run_script(&self, args: &[&str]) -> (Option<i32>, String) {
         let out = Command::new(repo().join("deploy/cluster.sh"))
             .args(args)
             .args(["--dir", self.dir.path().to_str().unwrap()])
@@ -80,7 +82,13 @@ impl Cluster {
             String::from_utf8_lossy(&out.stdout),
             String::from_utf8_lossy(&out.stderr)
         );
-        assert!(out.status.success(), "cluster.sh {args:?} failed:\n{text}");
+        (out.status.code(), text)
+    }
+
+    /// Runs `deploy/cluster.sh` on this cluster, which must succeed: its output.
+    fn script(&self, args: &[&str]) -> String {
+        let (code, text) = self.run_script(args);
+        assert_eq!(code, Some(0), "cluster.sh {args:?} failed:\n{text}");
         text
     }
 
@@ -425,6 +433,28 @@ async fn open_events(lb_ws: &str, id: &str) -> (Socket, String) {
         other => panic!("{id}: no first stats on the events socket: {other:?}"),
     }
     (socket, node)
+}
+
+/// A nats-server this test started; killed (by its pid) on drop if still running.
+struct HandStarted(std::process::Child);
+
+impl Drop for HandStarted {
+    fn drop(&mut self) {
+        if self.0.try_wait().ok().flatten().is_none() {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+}
+
+/// The port of a `scheme://host:port` URL.
+fn port_of(url: &str) -> u16 {
+    url.rsplit(':')
+        .next()
+        .unwrap()
+        .trim_end_matches('/')
+        .parse()
+        .unwrap()
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -797,4 +827,70 @@ async fn a_cluster_survives_a_killed_node_and_a_drain_without_losing_or_repeatin
         (Some(1000), true),
         "the events socket closed by its client"
     );
+
+    // NATS restarted by hand: `status` reports the new process and `stop` stops it.
+    let pid_file = cluster.dir.path().join("run/nats.pid");
+    let old_pid = std::fs::read_to_string(&pid_file)
+        .unwrap()
+        .trim()
+        .to_owned();
+    let killed = Command::new("kill").arg(&old_pid).status().unwrap();
+    assert!(killed.success(), "kill {old_pid}");
+    let nats_port = port_of(&cluster.url("NATS_URL"));
+    let monitor = cluster.url("NATS_MONITOR_URL");
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while tokio::net::TcpStream::connect(("127.0.0.1", nats_port))
+        .await
+        .is_ok()
+    {
+        assert!(
+            Instant::now() < deadline,
+            "NATS (pid {old_pid}) still listens 10 s after SIGTERM"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let log = std::fs::File::create(cluster.dir.path().join("nats-by-hand.log")).unwrap();
+    let mut nats = HandStarted(
+        Command::new("nats-server")
+            .args(["-a", "127.0.0.1", "-p", &nats_port.to_string()])
+            .args(["-m", &port_of(&monitor).to_string(), "-n", "navguard-nats"])
+            .stdout(log.try_clone().unwrap())
+            .stderr(log)
+            .spawn()
+            .expect("nats-server starts"),
+    );
+    let new_pid = nats.0.id();
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while http_status(&format!("{monitor}/healthz")).await != Some(200) {
+        assert!(
+            Instant::now() < deadline,
+            "the restarted NATS is not up within 10 s"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let (_, status) = cluster.run_script(&["status"]);
+    let line = status
+        .lines()
+        .find(|l| l.starts_with("nats "))
+        .unwrap_or_else(|| panic!("no nats line in:\n{status}"));
+    let words: Vec<&str> = line.split_whitespace().collect();
+    assert_eq!(
+        words[..4],
+        ["nats", "up", "pid", new_pid.to_string().as_str()],
+        "status after NATS was restarted by hand:\n{status}"
+    );
+    let out = tokio::task::block_in_place(|| cluster.script(&["stop"]));
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while nats.0.try_wait().unwrap().is_none() {
+        assert!(
+            Instant::now() < deadline,
+            "stop left the NATS restarted by hand (pid {new_pid}) running:\n{out}"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+/// The status of a GET, or `None` when nothing answers.
+async fn http_status(url: &str) -> Option<u16> {
+    reqwest::get(url).await.ok().map(|r| r.status().as_u16())
 }
