@@ -38,6 +38,8 @@ Commands:
   status [--dir DIR]
             One line per component: up/down, pid, URL (nodes: /healthz status
             and HAProxy's view). Exit status 0 if everything is up, 3 if not.
+            NATS is the nats-server listening on its port, so one restarted
+            by hand is reported (and stopped by stop) too.
   kill K [--dir DIR]
             kill -9 node K (the crash test).
   drain K [--dir DIR]
@@ -368,6 +370,35 @@ stop_postgres() {
 
 nats_ready() { [ "$(http_code "$NATS_MONITOR_URL/healthz")" = 200 ]; }
 
+# The pid of the process listening on TCP port PORT (any address), from /proc (Linux);
+# empty when there is none or its sockets cannot be read.
+listener_pid() {
+  local hex inode fd
+  printf -v hex ':%04X' "$1"
+  # /proc/net/tcp{,6}: local address in field 2 (hex ADDR:PORT), state in 4 (0A: LISTEN),
+  # the socket's inode in 10.
+  inode=$(awk -v p="$hex" '$4 == "0A" && substr($2, length($2) - 4) == p { print $10; exit }' \
+    /proc/net/tcp /proc/net/tcp6 2>/dev/null || true)
+  [ -n "$inode" ] && [ "$inode" != 0 ] || return 0
+  fd=$(find /proc/[0-9]*/fd -maxdepth 1 -lname "socket:\[$inode\]" -print -quit 2>/dev/null || true)
+  [ -n "$fd" ] || return 0
+  fd=${fd#/proc/}
+  echo "${fd%%/*}"
+}
+
+# The cluster's nats-server: the one listening on its client port, so a NATS restarted by
+# hand (whose pid is not the pid file's) is found too; else the pid file's while it lives.
+nats_pid() {
+  local pid
+  pid=$(listener_pid "$NATS_PORT")
+  if [ -n "$pid" ] && [ "$(cat "/proc/$pid/comm" 2>/dev/null)" = nats-server ]; then
+    echo "$pid"
+    return
+  fi
+  pid=$(pid_of nats)
+  if alive "$pid"; then echo "$pid"; fi
+}
+
 start_nats() {
   local t0
   t0=$(now_ms)
@@ -598,7 +629,7 @@ stop_all() {
     signal_wait "$pid" TERM 10 || signal_wait "$pid" KILL 5 || true
     echo "stopped"
   fi
-  pid=$(pid_of nats)
+  pid=$(nats_pid)
   if alive "$pid"; then
     printf 'nats       stopping ... '
     signal_wait "$pid" TERM 10 || signal_wait "$pid" KILL 5 || true
@@ -635,7 +666,7 @@ cmd_status() {
       all_up=3
     fi
   fi
-  pid=$(pid_of nats)
+  pid=$(nats_pid)
   if alive "$pid" && nats_ready; then line nats up "pid $pid" "$NATS_URL (monitoring $NATS_MONITOR_URL)"; else
     line nats down - "$NATS_URL (monitoring $NATS_MONITOR_URL)"
     all_up=3

@@ -135,7 +135,7 @@ struct ServeArgs {
     #[arg(long, env = "NAVGUARD_CHECKPOINT_MS", default_value_t = 1000,
           value_parser = clap::value_parser!(u64).range(10..=600_000))]
     checkpoint_ms: u64,
-    /// On SIGTERM, milliseconds /healthz answers 503 before the sessions are handed over.
+    /// On SIGTERM, milliseconds /healthz answers 503 after the sessions are handed over, before the node exits.
     #[arg(long, env = "NAVGUARD_DRAIN_WAIT_MS", default_value_t = 2000,
           value_parser = clap::value_parser!(u64).range(0..=600_000))]
     drain_wait_ms: u64,

@@ -239,6 +239,8 @@ export class Live {
     this.pollTimer = null;
     this.loaded = false;
     this.paused = false; // true while the page waits for a token
+    /** Sessions whose history was asked for before the list named them (a URL opened directly). */
+    this.historyWanted = new Set();
     /** Time spent handling socket messages, ms (the browser test reads it). */
     this.handleMs = [];
   }
@@ -297,6 +299,7 @@ export class Live {
       if (!s) { s = new SessionLive(info.id); this.sessions.set(info.id, s); }
       s.info = info;
       if (!s.ws && !s.retryTimer) this.connect(s);
+      if (this.historyWanted.delete(info.id)) this.loadHistory(info.id);
     }
     for (const [id, s] of this.sessions) {
       if (!seen.has(id)) { s.removed = true; this.closeSocket(s); this.sessions.delete(id); }
@@ -307,14 +310,22 @@ export class Live {
 
   /**
    * Draws the past: the session's 1 Hz statistics history (GET …/history) goes before
-   * the live samples, once per session (a view opened mid-run starts with it).
+   * the live samples, once per session (a view opened mid-run starts with it). Asked for
+   * before the session list has named the session (the page opened on its URL), it is
+   * loaded as soon as the list does.
    */
   async loadHistory(id) {
     const s = this.sessions.get(id);
-    if (!s || s.historyLoaded) return;
+    if (!s) { this.historyWanted.add(id); return; }
+    if (s.historyLoaded) return;
     s.historyLoaded = true;
     let h;
-    try { h = await get("api/v1/sessions/" + encodeURIComponent(id) + "/history"); } catch (_) { s.historyLoaded = false; return; }
+    try { h = await get("api/v1/sessions/" + encodeURIComponent(id) + "/history"); } catch (_) {
+      // Asked again after the next poll of the list (a token prompt or an outage passes).
+      s.historyLoaded = false;
+      this.historyWanted.add(id);
+      return;
+    }
     const tests = new Map(), integrity = new Map(), tracks = new Map();
     for (const sample of (h && h.samples) || []) {
       for (const [m, mv] of Object.entries(sample.monitors || {})) {

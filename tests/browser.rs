@@ -3,7 +3,8 @@
 //! shortened ship scenario with a GNSS position step is streamed into the
 //! ingest socket at 20× real time while the page is open; the test checks that
 //! the session appears, the alarm row appears, the charts (the federated
-//! monitor's track plot included) have been drawn with data, and that a threshold change made through the page's controls is what
+//! monitor's track plot included) have been drawn with data, that the session's
+//! URL opened directly in a new tab draws the run's history, and that a threshold change made through the page's controls is what
 //! the REST API then reports. It also feeds 10 monitors at 20 stats messages a
 //! second and prints the page's own frame-time figures (never asserted: no
 //! test asserts wall-clock time), and saves screenshots under `target/`.
@@ -450,6 +451,35 @@ async fn the_dashboard_shows_a_faulty_replay_and_applies_a_threshold_change() {
     )
     .await;
     println!("gnss chart from the history: {past} points");
+
+    // The link an operator bookmarks: a new tab opened straight on the session's URL. Its
+    // view opens before the session list has arrived, and still draws the history: the
+    // strip charts and the track plot hold the run's 1 Hz samples, not only the last
+    // snapshot the events socket sends.
+    let first_tab = client.window().await.unwrap();
+    let tab = client.new_window(true).await.unwrap();
+    client.switch_to_window(tab.handle).await.unwrap();
+    client
+        .goto(&format!("{http}/#/session/ship"))
+        .await
+        .unwrap();
+    let bookmarked = wait_js(
+        &client,
+        r#"(() => { const c = document.querySelector('canvas[data-monitor="federated"][data-test="gnss"]'); return c && Number(c.dataset.points) >= 100 && Number(c.dataset.points); })()"#,
+        "the gnss chart of a session URL opened directly to draw the history",
+    )
+    .await;
+    let bookmarked_track = wait_js(
+        &client,
+        r#"(() => { const c = document.querySelector('canvas.track-chart[data-monitor="federated"]'); return c && Number(c.dataset.points) >= 100 && Number(c.dataset.points); })()"#,
+        "the track plot of a session URL opened directly to draw the history",
+    )
+    .await;
+    println!(
+        "session URL opened directly: gnss chart {bookmarked} points, track {bookmarked_track} points"
+    );
+    client.close_window().await.unwrap();
+    client.switch_to_window(first_tab).await.unwrap();
 
     // 4. Change the threshold through the controls; REST reports it.
     client

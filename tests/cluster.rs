@@ -6,7 +6,10 @@
 //! monitor raises over the same epochs, each once; an events socket on one node sees the
 //! alarms of sessions the others own; a threshold `PUT` sent to a node that does not own
 //! the session reaches the live session; draining a node moves its sessions without an
-//! alarm lost.
+//! alarm lost, and its clients, connected through the load balancer, are told `moved` and
+//! closed cleanly before the load balancer marks the node down. A client's Close is
+//! answered through the load balancer on both sockets; after NATS is restarted by hand,
+//! `deploy/cluster.sh status` reports it and `stop` stops it.
 //!
 //! Needs Debian's `postgresql`, `nats-server` and `haproxy`: without them the test says
 //! how to run it and passes, unless `NAVGUARD_CLUSTER_TEST=1` (set by `.ci/run`), which
@@ -27,6 +30,8 @@ use navguard::monitor::{MonitorConfig, MonitorKind, MonitorSpec, NoModels};
 use serde_json::{Value, json};
 use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+use tokio_tungstenite::tungstenite::protocol::CloseFrame;
+use tokio_tungstenite::tungstenite::protocol::frame::coding::CloseCode;
 
 const SESSIONS: usize = 30;
 const LEASE_MS: u64 = 3000;
@@ -65,7 +70,8 @@ struct Cluster {
 }
 
 impl Cluster {
-    fn script(&self, args: &[&str]) -> String {
+    /// Runs `deploy/cluster.sh` on this cluster: its exit status and output.
+    fn run_script(&self, args: &[&str]) -> (Option<i32>, String) {
         let out = Command::new(repo().join("deploy/cluster.sh"))
             .args(args)
             .args(["--dir", self.dir.path().to_str().unwrap()])
@@ -76,7 +82,13 @@ impl Cluster {
             String::from_utf8_lossy(&out.stdout),
             String::from_utf8_lossy(&out.stderr)
         );
-        assert!(out.status.success(), "cluster.sh {args:?} failed:\n{text}");
+        (out.status.code(), text)
+    }
+
+    /// Runs `deploy/cluster.sh` on this cluster, which must succeed: its output.
+    fn script(&self, args: &[&str]) -> String {
+        let (code, text) = self.run_script(args);
+        assert_eq!(code, Some(0), "cluster.sh {args:?} failed:\n{text}");
         text
     }
 
@@ -348,6 +360,103 @@ async fn alarms_seen(sockets: &mut [Socket], quiet: Duration) -> Vec<i64> {
     ids
 }
 
+/// How a socket ended: the text messages it received, the server's Close frame (code and
+/// reason; `None` when the connection ended without one, which a client reports as 1006)
+/// and whether the connection then ended cleanly rather than with an error.
+#[derive(Debug)]
+struct Ending {
+    texts: Vec<Value>,
+    close: Option<(u16, String)>,
+    clean: bool,
+}
+
+/// Reads `socket` until the connection ends (at most 30 s).
+async fn until_closed(mut socket: Socket) -> Ending {
+    let mut ending = Ending {
+        texts: Vec::new(),
+        close: None,
+        clean: false,
+    };
+    let read = async {
+        loop {
+            match socket.next().await {
+                Some(Ok(Message::Text(t))) => ending.texts.push(serde_json::from_str(&t).unwrap()),
+                Some(Ok(Message::Close(frame))) => {
+                    ending.close = frame.map(|f| (u16::from(f.code), f.reason.to_string()));
+                }
+                Some(Ok(_)) => {}
+                Some(Err(_)) => return,
+                None => {
+                    ending.clean = true;
+                    return;
+                }
+            }
+        }
+    };
+    let ended = tokio::time::timeout(Duration::from_secs(30), read).await;
+    assert!(
+        ended.is_ok(),
+        "the socket did not end within 30 s: {ending:?}"
+    );
+    ending
+}
+
+/// Closes `socket` with 1000 as a client does when it is done, and reads how it ends.
+async fn close_as_client(mut socket: Socket) -> Ending {
+    let frame = CloseFrame {
+        code: CloseCode::Normal,
+        reason: "done".into(),
+    };
+    socket
+        .close(Some(frame))
+        .await
+        .expect("the Close frame is sent");
+    until_closed(socket).await
+}
+
+/// An events socket through the load balancer, after its first `stats`; and the node
+/// that took it (HAProxy's `X-Navguard-Node`).
+async fn open_events(lb_ws: &str, id: &str) -> (Socket, String) {
+    let (mut socket, response) =
+        tokio_tungstenite::connect_async(format!("{lb_ws}/api/v1/sessions/{id}/events"))
+            .await
+            .unwrap();
+    let node = response.headers()["x-navguard-node"]
+        .to_str()
+        .unwrap()
+        .to_owned();
+    match tokio::time::timeout(Duration::from_secs(10), socket.next()).await {
+        Ok(Some(Ok(Message::Text(t)))) => {
+            let v: Value = serde_json::from_str(&t).unwrap();
+            assert_eq!(v["type"], "stats", "{v}");
+        }
+        other => panic!("{id}: no first stats on the events socket: {other:?}"),
+    }
+    (socket, node)
+}
+
+/// A nats-server this test started; killed (by its pid) on drop if still running.
+struct HandStarted(std::process::Child);
+
+impl Drop for HandStarted {
+    fn drop(&mut self) {
+        if self.0.try_wait().ok().flatten().is_none() {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+}
+
+/// The port of a `scheme://host:port` URL.
+fn port_of(url: &str) -> u16 {
+    url.rsplit(':')
+        .next()
+        .unwrap()
+        .trim_end_matches('/')
+        .parse()
+        .unwrap()
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_cluster_survives_a_killed_node_and_a_drain_without_losing_or_repeating_an_alarm() {
     let missing = engines_missing();
@@ -522,11 +631,57 @@ async fn a_cluster_survives_a_killed_node_and_a_drain_without_losing_or_repeatin
         .filter(|c| c.node == drained)
         .map(|c| c.id.clone())
         .collect();
-    let out = cluster.script(&["drain", drained.trim_start_matches("node")]);
+    // Every client of the drained node is connected through the load balancer, and is read
+    // while the node drains: the node hands its session over while the load balancer still
+    // relays the socket, so the client is told `moved`, with the last epoch the session
+    // took, and the socket closes cleanly with 1000. An events socket the load balancer
+    // sent to the drained node is closed cleanly with 1001.
+    let readers: Vec<_> = clients
+        .iter_mut()
+        .filter(|c| c.node == drained)
+        .map(|c| {
+            let socket = c.socket.take().expect("connected before the drain");
+            let (id, last_t) = (c.id.clone(), c.done as f64 - 1.0);
+            tokio::spawn(async move { (id, last_t, until_closed(socket).await) })
+        })
+        .collect();
+    let (observer, observed_on) = open_events(&lb_ws, &moving[0]).await;
+    assert_eq!(
+        observed_on, drained,
+        "{} hashes to the drained node",
+        moving[0]
+    );
+    let observer = tokio::spawn(until_closed(observer));
+    let out = tokio::task::block_in_place(|| {
+        cluster.script(&["drain", drained.trim_start_matches("node")])
+    });
     eprintln!(
         "drain of {drained} ({} sessions): {}",
         moving.len(),
         out.trim()
+    );
+    for reader in readers {
+        let (id, last_t, ending) = reader.await.unwrap();
+        let moved = ending.texts.iter().find(|v| v["type"] == "moved");
+        let moved = moved.unwrap_or_else(|| {
+            panic!(
+                "{id}: no `moved` through the load balancer: {ending:?}\n{}",
+                cluster.logs()
+            )
+        });
+        assert_eq!(moved["session"], id.as_str(), "{moved}");
+        assert_eq!(moved["resume"]["t"].as_f64(), Some(last_t), "{id}: {moved}");
+        assert_eq!(
+            (ending.close.clone(), ending.clean),
+            (Some((1000, "stream detached".to_owned())), true),
+            "{id}: how the drained node's ingest socket ended: {ending:?}"
+        );
+    }
+    let ending = observer.await.unwrap();
+    assert_eq!(
+        (ending.close.as_ref().map(|c| c.0), ending.clean),
+        (Some(1001), true),
+        "the events socket on the drained node: {ending:?}"
     );
     let reconnects = stream_all(&lb_ws, &mut clients, 3 * PHASE).await;
     assert_eq!(
@@ -654,4 +809,88 @@ async fn a_cluster_survives_a_killed_node_and_a_drain_without_losing_or_repeatin
     .await
     .expect("the observer of a deleted session is closed within 5 s");
     assert_eq!(closed, Some(1008));
+
+    // A client that closes with 1000 through the load balancer gets its Close answered
+    // with 1000 and a clean end, on the ingest socket and on the events socket.
+    let client = clients.iter_mut().find(|c| c.id != watched[0]).unwrap();
+    let ending = close_as_client(client.socket.take().expect("still connected")).await;
+    assert_eq!(
+        (ending.close.map(|c| c.0), ending.clean),
+        (Some(1000), true),
+        "{}: the ingest socket closed by its client",
+        client.id
+    );
+    let (events, _) = open_events(&lb_ws, &client.id).await;
+    let ending = close_as_client(events).await;
+    assert_eq!(
+        (ending.close.map(|c| c.0), ending.clean),
+        (Some(1000), true),
+        "the events socket closed by its client"
+    );
+
+    // NATS restarted by hand: `status` reports the new process and `stop` stops it.
+    let pid_file = cluster.dir.path().join("run/nats.pid");
+    let old_pid = std::fs::read_to_string(&pid_file)
+        .unwrap()
+        .trim()
+        .to_owned();
+    let killed = Command::new("kill").arg(&old_pid).status().unwrap();
+    assert!(killed.success(), "kill {old_pid}");
+    let nats_port = port_of(&cluster.url("NATS_URL"));
+    let monitor = cluster.url("NATS_MONITOR_URL");
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while tokio::net::TcpStream::connect(("127.0.0.1", nats_port))
+        .await
+        .is_ok()
+    {
+        assert!(
+            Instant::now() < deadline,
+            "NATS (pid {old_pid}) still listens 10 s after SIGTERM"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let log = std::fs::File::create(cluster.dir.path().join("nats-by-hand.log")).unwrap();
+    let mut nats = HandStarted(
+        Command::new("nats-server")
+            .args(["-a", "127.0.0.1", "-p", &nats_port.to_string()])
+            .args(["-m", &port_of(&monitor).to_string(), "-n", "navguard-nats"])
+            .stdout(log.try_clone().unwrap())
+            .stderr(log)
+            .spawn()
+            .expect("nats-server starts"),
+    );
+    let new_pid = nats.0.id();
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while http_status(&format!("{monitor}/healthz")).await != Some(200) {
+        assert!(
+            Instant::now() < deadline,
+            "the restarted NATS is not up within 10 s"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let (_, status) = cluster.run_script(&["status"]);
+    let line = status
+        .lines()
+        .find(|l| l.starts_with("nats "))
+        .unwrap_or_else(|| panic!("no nats line in:\n{status}"));
+    let words: Vec<&str> = line.split_whitespace().collect();
+    assert_eq!(
+        words[..4],
+        ["nats", "up", "pid", new_pid.to_string().as_str()],
+        "status after NATS was restarted by hand:\n{status}"
+    );
+    let out = tokio::task::block_in_place(|| cluster.script(&["stop"]));
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while nats.0.try_wait().unwrap().is_none() {
+        assert!(
+            Instant::now() < deadline,
+            "stop left the NATS restarted by hand (pid {new_pid}) running:\n{out}"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+/// The status of a GET, or `None` when nothing answers.
+async fn http_status(url: &str) -> Option<u16> {
+    reqwest::get(url).await.ok().map(|r| r.status().as_u16())
 }

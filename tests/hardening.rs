@@ -1,6 +1,7 @@
-//! The service edge under hostile-but-fair clients (issue 13 items 4–6): slow
-//! and silent connections, the connection limit, stalled bodies, tokens in
-//! query strings and logs, blank tokens, and messages over the socket cap.
+//! The service edge under hostile-but-fair clients: slow and silent
+//! connections, the connection limit, stalled bodies, tokens in query strings
+//! and logs, blank tokens, messages over the socket cap, and the closing
+//! handshake of both sockets.
 //! Real server on port 0, raw TCP where a well-behaved client library would
 //! not misbehave on purpose.
 
@@ -17,6 +18,7 @@ use serde_json::{Value, json};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
 use tokio_tungstenite::tungstenite::Message;
+use tokio_tungstenite::tungstenite::protocol::CloseFrame;
 use tokio_tungstenite::tungstenite::protocol::frame::coding::CloseCode;
 
 /// How long any one wait in these tests may last before it counts as "never".
@@ -259,6 +261,71 @@ async fn close_code(socket: &mut Socket) -> Option<CloseCode> {
             Some(Err(_)) | None => return None,
         }
     }
+}
+
+/// Closes with `code` as a client does when it is done, then reads until the connection
+/// ends: the code of the server's answering Close frame (`None`: the connection ended
+/// without one, what a client reports as 1006), and whether the connection then ended
+/// cleanly rather than with an error.
+async fn close_and_read_answer(socket: &mut Socket, code: CloseCode) -> (Option<CloseCode>, bool) {
+    let frame = CloseFrame {
+        code,
+        reason: "done".into(),
+    };
+    socket
+        .close(Some(frame))
+        .await
+        .expect("the client's Close frame is sent");
+    let mut answer = None;
+    loop {
+        match tokio::time::timeout(PATIENCE, socket.next())
+            .await
+            .expect("the server ends the connection")
+        {
+            Some(Ok(Message::Close(frame))) => answer = frame.map(|f| f.code),
+            Some(Ok(_)) => continue,
+            Some(Err(_)) => return (answer, false),
+            None => return (answer, true),
+        }
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_client_close_is_answered_with_its_code_on_both_sockets() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = start(&dir.path().join("c.db"), None, Limits::default()).await;
+    create_session(
+        &reqwest::Client::new(),
+        &server,
+        &cv_session("done", &MODEL, json!({"kind": "classic"}), json!({}), true),
+    )
+    .await;
+    let mut events = connect(&format!("{}/api/v1/sessions/done/events", ws(&server))).await;
+    assert_eq!(recv(&mut events).await["type"], "stats");
+    let mut socket = ingest(&server, "done").await;
+    send(&mut socket, &json!({"t": 0.0, "z": [0.5]})).await;
+    let (result, _) = recv_until(&mut socket, |v| v["type"] == "result").await;
+    assert_eq!(result["t"], 0.0);
+    // RFC 6455 §5.5.1: the endpoint that receives a Close answers with a Close, usually
+    // echoing the code, and then the connection ends.
+    assert_eq!(
+        close_and_read_answer(&mut socket, CloseCode::Normal).await,
+        (Some(CloseCode::Normal), true),
+        "ingest socket"
+    );
+    assert_eq!(
+        close_and_read_answer(&mut events, CloseCode::Normal).await,
+        (Some(CloseCode::Normal), true),
+        "events socket"
+    );
+    // Another code is echoed as it came, and the stream's slot is free again.
+    let mut socket = reingest(&server, "done").await;
+    assert_eq!(
+        close_and_read_answer(&mut socket, CloseCode::Away).await,
+        (Some(CloseCode::Away), true)
+    );
+    let _ = reingest(&server, "done").await;
+    server.shutdown().await;
 }
 
 // ------------------------------------------------------------ tokens

@@ -6,7 +6,7 @@ use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 use axum::extract::ws::rejection::WebSocketUpgradeRejection;
-use axum::extract::ws::{CloseFrame, Message, Utf8Bytes, WebSocket, WebSocketUpgrade};
+use axum::extract::ws::{Message, Utf8Bytes, WebSocket, WebSocketUpgrade};
 use axum::extract::{Path, State};
 use axum::response::Response;
 
@@ -17,7 +17,7 @@ use futures_util::StreamExt;
 use super::app::AppState;
 use super::cluster::{Cluster, bus, rpc};
 use super::error::ApiError;
-use super::ingest::{SUBPROTOCOL, close_if_too_big, upgrade_rejection};
+use super::ingest::{SUBPROTOCOL, answer_close, close_if_too_big, close_socket, upgrade_rejection};
 use super::session::SessionHandle;
 use super::wire;
 
@@ -37,6 +37,12 @@ pub async fn events(
     if let Some(cluster) = state.cluster.clone() {
         // A cluster node: the session's events come over NATS from whichever node owns
         // it, now or after a failover, so the socket outlives a change of owner.
+        if cluster.draining() {
+            return Err(ApiError::Unavailable(
+                "this node is draining: reconnect (the load balancer sends you to another node)"
+                    .into(),
+            ));
+        }
         if state.registry.get(&id).is_none() && state.store.session(&id).await?.is_none() {
             return Err(ApiError::NotFound(format!("no session '{id}'")));
         }
@@ -93,24 +99,18 @@ async fn first_stats(state: &AppState, cluster: &Cluster, id: &str) -> Option<St
     (answer.status == 200).then(|| wire::tagged("stats", &stats))
 }
 
-async fn close(socket: &mut WebSocket, code: u16, reason: &'static str) {
-    let frame = CloseFrame {
-        code,
-        reason: Utf8Bytes::from_static(reason),
-    };
-    let _ = socket.send(Message::Close(Some(frame))).await;
-}
-
 /// An observer on a cluster node: the session's events and statistics from NATS. A gap
 /// in the events' sequence closes the socket with 1008, as a local subscriber too slow for
-/// its queue is closed: the client re-reads `/api/v1/alarms?after=ID`.
+/// its queue is closed: the client re-reads `/api/v1/alarms?after=ID`. When the node starts
+/// draining the socket closes with 1001 while the load balancer still relays it (see
+/// `own::drain`); the client reconnects to another node.
 async fn run_cluster(mut socket: WebSocket, state: AppState, cluster: Arc<Cluster>, id: String) {
     let nats = cluster.nats();
     let (Ok(mut events), Ok(mut stats)) = (
         nats.subscribe(bus::events_subject(&id)).await,
         nats.subscribe(bus::stats_subject(&id)).await,
     ) else {
-        close(
+        close_socket(
             &mut socket,
             1011,
             "cannot subscribe to the session's events",
@@ -124,6 +124,7 @@ async fn run_cluster(mut socket: WebSocket, state: AppState, cluster: Arc<Cluste
         return;
     }
     let mut shutdown = state.shutdown.clone();
+    let mut drain = cluster.drain_signal();
     let mut ticker = tokio::time::interval(STATS_INTERVAL);
     ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let mut latest_stats: Option<bytes::Bytes> = None;
@@ -131,27 +132,37 @@ async fn run_cluster(mut socket: WebSocket, state: AppState, cluster: Arc<Cluste
     // Made once, not per pass (see `ingest::run`).
     let shutting_down = shutdown.changed();
     tokio::pin!(shutting_down);
+    // The answer (a read guard of the flag) is dropped at once: it must not be held
+    // across the close below.
+    let draining = async move {
+        let _ = drain.wait_for(|d| *d).await;
+    };
+    tokio::pin!(draining);
     loop {
         tokio::select! {
             biased;
             _ = &mut shutting_down => {
-                close(&mut socket, 1001, "server shutting down").await;
+                close_socket(&mut socket, 1001, "server shutting down").await;
+                break;
+            }
+            _ = &mut draining => {
+                close_socket(&mut socket, 1001, "node draining; reconnect").await;
                 break;
             }
             event = events.next() => {
                 let Some(message) = event else {
-                    close(&mut socket, 1011, "the event bus closed; reconnect").await;
+                    close_socket(&mut socket, 1011, "the event bus closed; reconnect").await;
                     break;
                 };
                 if bus::is_end(message.headers.as_ref()) {
-                    close(&mut socket, 1008, "subscriber too slow or session gone; reconnect and re-read /api/v1/alarms").await;
+                    close_socket(&mut socket, 1008, "subscriber too slow or session gone; reconnect and re-read /api/v1/alarms").await;
                     break;
                 }
                 if let Some((epoch, seq)) = bus::position(message.headers.as_ref())
                     && !order.accept(epoch, seq)
                 {
                     cluster.counters.event_gaps.fetch_add(1, Ordering::Relaxed);
-                    close(&mut socket, 1008, "missed events; reconnect and re-read /api/v1/alarms").await;
+                    close_socket(&mut socket, 1008, "missed events; reconnect and re-read /api/v1/alarms").await;
                     break;
                 }
                 let Ok(text) = std::str::from_utf8(&message.payload) else { continue };
@@ -173,7 +184,11 @@ async fn run_cluster(mut socket: WebSocket, state: AppState, cluster: Arc<Cluste
                 }
             }
             incoming = socket.recv() => match incoming {
-                Some(Ok(Message::Close(_))) | None => break,
+                Some(Ok(Message::Close(_))) => {
+                    answer_close(&mut socket).await;
+                    break;
+                }
+                None => break,
                 Some(Err(e)) => {
                     close_if_too_big(&mut socket, e).await;
                     break;
@@ -199,7 +214,7 @@ async fn run(mut socket: WebSocket, state: AppState, handle: SessionHandle) {
         tokio::select! {
             biased;
             _ = &mut shutting_down => {
-                let _ = socket.send(Message::Close(Some(CloseFrame { code: 1001, reason: Utf8Bytes::from_static("server shutting down") }))).await;
+                close_socket(&mut socket, 1001, "server shutting down").await;
                 break;
             }
             event = events.recv() => match event {
@@ -210,7 +225,7 @@ async fn run(mut socket: WebSocket, state: AppState, handle: SessionHandle) {
                 }
                 None => {
                     // Dropped by the session: too far behind, or the session was deleted.
-                    let _ = socket.send(Message::Close(Some(CloseFrame { code: 1008, reason: Utf8Bytes::from_static("subscriber too slow or session gone; reconnect and re-read /api/v1/alarms") }))).await;
+                    close_socket(&mut socket, 1008, "subscriber too slow or session gone; reconnect and re-read /api/v1/alarms").await;
                     break;
                 }
             },
@@ -224,7 +239,11 @@ async fn run(mut socket: WebSocket, state: AppState, handle: SessionHandle) {
                 }
             }
             incoming = socket.recv() => match incoming {
-                Some(Ok(Message::Close(_))) | None => break,
+                Some(Ok(Message::Close(_))) => {
+                    answer_close(&mut socket).await;
+                    break;
+                }
+                None => break,
                 Some(Err(e)) => {
                     close_if_too_big(&mut socket, e).await;
                     break;

@@ -3,7 +3,7 @@
 //! back what the actor sends (results, state changes, alarms, errors).
 
 use std::sync::atomic::Ordering;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use axum::extract::ws::rejection::WebSocketUpgradeRejection;
 use axum::extract::ws::{CloseFrame, Message, Utf8Bytes, WebSocket, WebSocketUpgrade};
@@ -37,6 +37,10 @@ const READ_BUFFER_BYTES: usize = 8 << 10;
 
 /// Messages for the client written before one flush (one system call).
 const FLUSH_EVERY: usize = 256;
+
+/// How long a closing socket waits for its Close frame to be written and, when the server
+/// closes, for the client's answering Close, before the connection is dropped anyway.
+const CLOSE_WAIT: Duration = Duration::from_secs(2);
 
 /// `resume=true` (or `1`): carry on from the session's state instead of starting afresh
 /// (docs/deployment.md, Failover); `false`, `0` or absent: a fresh stream. Other
@@ -155,7 +159,7 @@ async fn run(mut socket: WebSocket, state: AppState, handle: SessionHandle, link
         tokio::select! {
             biased;
             _ = &mut shutting_down => {
-                let _ = socket.send(Message::Close(Some(CloseFrame { code: 1001, reason: Utf8Bytes::from_static("server shutting down") }))).await;
+                close_socket(&mut socket, 1001, "server shutting down").await;
                 break;
             }
             message = outgoing.recv() => match message {
@@ -168,7 +172,7 @@ async fn run(mut socket: WebSocket, state: AppState, handle: SessionHandle, link
                 }
                 // The actor replaced or dropped this stream.
                 None => {
-                    let _ = socket.send(Message::Close(Some(CloseFrame { code: 1000, reason: Utf8Bytes::from_static("stream detached") }))).await;
+                    close_socket(&mut socket, 1000, "stream detached").await;
                     break;
                 }
             },
@@ -191,7 +195,11 @@ async fn run(mut socket: WebSocket, state: AppState, handle: SessionHandle, link
                             continue;
                         }
                     },
-                    Some(Ok(Message::Close(_))) | None => break,
+                    Some(Ok(Message::Close(_))) => {
+                        answer_close(&mut socket).await;
+                        break;
+                    }
+                    None => break,
                     Some(Ok(_)) => continue, // ping/pong are answered by the protocol layer
                     Some(Err(e)) => {
                         if !close_if_too_big(&mut socket, e).await {
@@ -217,6 +225,35 @@ async fn run(mut socket: WebSocket, state: AppState, handle: SessionHandle, link
         }
     }
     handle.detach(stream).await;
+}
+
+/// The client sent a Close frame: writes the answering Close the protocol layer queued
+/// when it read it (RFC 6455 §5.5.1: the client's code echoed, or none when it gave none),
+/// after which the connection ends. The layer writes it only on a later read or flush,
+/// and the task ends right after this, so without the flush the connection dropped
+/// without a Close frame, which the client reports as 1006 (abnormal closure).
+pub(crate) async fn answer_close(socket: &mut WebSocket) {
+    // The flush ends with the protocol layer's "connection closed": the expected outcome.
+    let _ = tokio::time::timeout(CLOSE_WAIT, socket.flush()).await;
+}
+
+/// Closes from the server's side (RFC 6455 §7.1.2): sends a Close frame with `code` and
+/// `reason`, then reads and drops whatever the client still sends until its answering
+/// Close ends the connection (at most [`CLOSE_WAIT`]). Dropping the connection with the
+/// client's frames still unread would reset it, and a reset can discard the Close frame
+/// (and a `moved` before it) before the client, or a proxy between, has read them.
+pub(crate) async fn close_socket(socket: &mut WebSocket, code: u16, reason: &'static str) {
+    let frame = CloseFrame {
+        code,
+        reason: Utf8Bytes::from_static(reason),
+    };
+    if socket.send(Message::Close(Some(frame))).await.is_err() {
+        return;
+    }
+    let _ = tokio::time::timeout(CLOSE_WAIT, async {
+        while let Some(Ok(_)) = socket.recv().await {}
+    })
+    .await;
 }
 
 /// On a socket error: when it is a message over the size cap, sends close 1009

@@ -11,15 +11,15 @@ use crate::service::error::ApiError;
 use crate::service::metrics::SessionGauges;
 
 /// `GET /healthz`: liveness, with the version and session count (and, on a cluster
-/// node, its id); 503 `draining` while the node drains, so the load balancer stops
-/// sending it clients.
+/// node, its id); 503 `draining` once a draining node has handed its sessions over, so
+/// the load balancer marks it down (and cuts what it still relays) only then.
 pub async fn healthz(State(state): State<AppState>) -> (StatusCode, Json<Value>) {
     let mut body = json!({"status": "ok", "version": env!("CARGO_PKG_VERSION"), "sessions": state.registry.len()});
     let Some(cluster) = &state.cluster else {
         return (StatusCode::OK, Json(body));
     };
     body["node"] = json!(cluster.node_id());
-    if cluster.draining() {
+    if cluster.leaving() {
         body["status"] = json!("draining");
         return (StatusCode::SERVICE_UNAVAILABLE, Json(body));
     }

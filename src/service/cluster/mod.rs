@@ -14,9 +14,11 @@
 //! - **Events** ([`bus`]). Every node publishes its sessions' `state`, `alarm`,
 //!   `availability` (per-session subject, in order, with a sequence number) and decimated
 //!   `stats`; an events socket on any node subscribes to them.
-//! - **Drain.** On SIGTERM a node answers `/healthz` 503 for `--drain-wait-ms` (the load
-//!   balancer stops sending it clients), then hands every session over with a final
-//!   checkpoint and releases its lease, so the next node resumes exactly where it stopped.
+//! - **Drain.** On SIGTERM a node refuses new streams and leases, closes its events
+//!   sockets and hands every session over (its stream told `moved`, a final checkpoint, the
+//!   lease released, so the next node resumes exactly where it stopped) while `/healthz`
+//!   still answers 200; then `/healthz` answers 503 for `--drain-wait-ms`, so the load
+//!   balancer marks the node down only once its sockets have closed.
 
 pub mod bus;
 pub mod own;
@@ -27,7 +29,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use tokio::sync::mpsc;
+use tokio::sync::{mpsc, watch};
 
 /// Everything a node needs to join a cluster.
 #[derive(Debug, Clone)]
@@ -42,8 +44,9 @@ pub struct ClusterConfig {
     pub lease: Duration,
     /// How often an owner checkpoints a session whose state changed (default 1 s).
     pub checkpoint_interval: Duration,
-    /// On SIGTERM, how long `/healthz` answers 503 before sessions are handed over
-    /// (default 2 s: two of the load balancer's health checks).
+    /// On SIGTERM, once the sessions are handed over, how long `/healthz` answers 503
+    /// before the node exits (default 2 s: time for the load balancer's two failed health
+    /// checks).
     pub drain_wait: Duration,
 }
 
@@ -110,7 +113,11 @@ pub struct Cluster {
     pub config: ClusterConfig,
     nats: async_nats::Client,
     outgoing: mpsc::Sender<bus::Outgoing>,
-    draining: AtomicBool,
+    /// True once the node drains: new streams, sessions and leases are refused, and events
+    /// sockets close (they wait on it).
+    draining: watch::Sender<bool>,
+    /// True once the drained node has handed its sessions over: `/healthz` answers 503.
+    leaving: AtomicBool,
     locks: Mutex<HashMap<String, Arc<tokio::sync::Mutex<()>>>>,
     /// Counters for `/metrics`.
     pub counters: ClusterCounters,
@@ -144,7 +151,8 @@ impl Cluster {
             config,
             nats,
             outgoing,
-            draining: AtomicBool::new(false),
+            draining: watch::Sender::new(false),
+            leaving: AtomicBool::new(false),
             locks: Mutex::default(),
             counters: ClusterCounters::default(),
         });
@@ -162,14 +170,29 @@ impl Cluster {
         &self.nats
     }
 
-    /// True once the node drains (`/healthz` answers 503, new sessions are refused).
+    /// True once the node drains (new streams, sessions and leases are refused).
     pub fn draining(&self) -> bool {
-        self.draining.load(Ordering::Relaxed)
+        *self.draining.borrow()
     }
 
     /// Starts draining.
     pub fn start_draining(&self) {
-        self.draining.store(true, Ordering::Relaxed);
+        self.draining.send_replace(true);
+    }
+
+    /// Turns true when the node starts draining (for the sockets that close then).
+    pub fn drain_signal(&self) -> watch::Receiver<bool> {
+        self.draining.subscribe()
+    }
+
+    /// True once the draining node has handed its sessions over (`/healthz` answers 503).
+    pub fn leaving(&self) -> bool {
+        self.leaving.load(Ordering::Relaxed)
+    }
+
+    /// Marks the sessions handed over: `/healthz` answers 503 from now on.
+    pub fn start_leaving(&self) {
+        self.leaving.store(true, Ordering::Relaxed);
     }
 
     /// The lock that serialises lease changes of `session` on this node.

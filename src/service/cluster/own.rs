@@ -84,13 +84,19 @@ async fn take_over(state: &AppState, id: &str, gone: bool) -> Result<Owner, ApiE
     take(state, cluster, stored, true).await
 }
 
-/// Takes the lease (under the session's lock) and starts the actor from the checkpoint.
+/// Takes the lease (under the session's lock) and starts the actor from the checkpoint;
+/// refused while the node drains (it would run the session only to hand it over again).
 async fn take(
     state: &AppState,
     cluster: &Cluster,
     stored: StoredSession,
     force: bool,
 ) -> Result<Owner, ApiError> {
+    if cluster.draining() {
+        return Err(ApiError::Unavailable(
+            "this node is draining: retry (the load balancer sends you to another node)".into(),
+        ));
+    }
     let id = stored.id.clone();
     let now = now_ms();
     let epoch = match state
@@ -326,25 +332,32 @@ pub async fn renew(state: AppState, cluster: Arc<Cluster>) {
     }
 }
 
-/// Drains this node: `/healthz` answers 503 for `--drain-wait-ms` so the load balancer
-/// stops sending clients here, then every session is handed over (its ingest socket
-/// told `moved` and closed, a final checkpoint written, the lease released).
+/// Drains this node (docs/deployment.md, Drain a node). First, while `/healthz` still
+/// answers 200 and the load balancer still relays this node's WebSockets: new streams,
+/// sessions and leases are refused (503), events sockets close (1001), and every session
+/// is handed over (its ingest socket told `moved` and closed with 1000, a final
+/// checkpoint written, the lease released). Then `/healthz` answers 503 for
+/// `--drain-wait-ms`, so the load balancer marks the node down before it exits. In the
+/// other order the load balancer would mark the node down first and cut its sockets
+/// (`on-marked-down shutdown-sessions`) before they were told `moved`.
 pub async fn drain(state: &AppState, cluster: &Cluster) {
     cluster.start_draining();
-    tracing::info!(
-        wait_ms = cluster.config.drain_wait.as_millis() as u64,
-        "draining"
-    );
-    tokio::time::sleep(cluster.config.drain_wait).await;
     let sessions = state.registry.list();
     let n = sessions.len();
+    tracing::info!(sessions = n, "draining: handing the sessions over");
     for handle in sessions {
         if let Err(e) = handle.release(true).await {
             tracing::warn!(session = %handle.id(), error = %e, "handover failed; the lease will expire");
         }
         state.registry.remove_if_same(&handle);
     }
-    tracing::info!(sessions = n, "drained");
+    cluster.start_leaving();
+    tracing::info!(
+        sessions = n,
+        wait_ms = cluster.config.drain_wait.as_millis() as u64,
+        "sessions handed over; /healthz answers 503 until the node exits"
+    );
+    tokio::time::sleep(cluster.config.drain_wait).await;
 }
 
 #[cfg(test)]
