@@ -1,9 +1,10 @@
-//! Issue 12 through the real server (docs/methods.md §M23, §M24): a federated session
+//! Integrity and alarms through the real server (docs/methods.md §M23, §M24): a federated session
 //! opens `converging` with its protection level above the alert limit and raises no alarm;
 //! a GNSS fault present from the start is a warning while the filter converges and an
 //! alarm the moment it has converged; the drift and stuck tests raise their own alarms
 //! (`gnss.drift` on a slow GNSS drift, `residual.stuck` on a frozen measurement), stored
-//! in the alarm log with their test names.
+//! in the alarm log with their test names; and the experiments, scoring the same
+//! scenario through the session core, log the same entries as the server.
 //!
 //! The ship runs at a 1 Hz INS rate (as in tests/federated.rs) so a debug build streams
 //! a few hundred seconds quickly.
@@ -11,7 +12,8 @@
 mod common;
 
 use common::{Socket, client, create_session, get_text, http, ingest, recv, send, ship_1hz, start};
-use navguard::service::wire::epoch_to_wire;
+use navguard::service::session::spec::monitor_spec;
+use navguard::service::wire::{MonitorSpecWire, epoch_to_wire};
 use navguard::service::{Limits, Server};
 use navguard::sim::{Channel, Fault, FaultKind, Scenario};
 use serde_json::{Value, json};
@@ -72,6 +74,18 @@ async fn alarm_log(server: &Server, session: &str) -> Vec<Value> {
     let mut log = page["alarms"].as_array().unwrap().clone();
     log.sort_by_key(|a| a["id"].as_i64().unwrap());
     log
+}
+
+/// A 100 m step on the GNSS north position over `[start_s, end_s)`.
+fn gnss_step(start_s: f64, end_s: f64) -> Fault {
+    Fault {
+        aid: navguard::epoch::Aid::Gnss,
+        channel: Channel::Position,
+        component: 0,
+        kind: FaultKind::Step { value: 100.0 },
+        start_s,
+        end_s: Some(end_s),
+    }
 }
 
 fn of_type<'a>(events: &'a [Value], kind: &str) -> Vec<&'a Value> {
@@ -374,14 +388,6 @@ async fn queued_frames_are_stepped_ahead_with_the_messages_of_one_frame_at_a_tim
     // A GNSS offset from the start, standing when the monitor converges (30 s cap), whose
     // alarm is raised then; and a GNSS jump well after
     // convergence: warnings, an alarm, the return to healthy.
-    let gnss_step = |start_s, end_s| Fault {
-        aid: navguard::epoch::Aid::Gnss,
-        channel: Channel::Position,
-        component: 0,
-        kind: FaultKind::Step { value: 100.0 },
-        start_s,
-        end_s: Some(end_s),
-    };
     let scenario = ship_1hz(
         13,
         vec![gnss_step(0.0, 60.0), gnss_step(300.0, 360.0)],
@@ -465,4 +471,73 @@ async fn queued_frames_are_stepped_ahead_with_the_messages_of_one_frame_at_a_tim
             .collect::<Vec<_>>()
     );
     server.shutdown().await;
+}
+
+/// The experiments score the server's own rule: a scenario streamed through the server,
+/// and the same scenario run by the experiment code (`run_monitor`, through the session
+/// core), log the same entries — test, state, epoch time and severity — in the same
+/// order: warnings while converging, the standing alarm raised at convergence, the later
+/// fault's warnings and alarms.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_experiments_log_the_alarms_and_warnings_the_server_logs() {
+    let scenario = ship_1hz(
+        13,
+        vec![gnss_step(0.0, 60.0), gnss_step(300.0, 360.0)],
+        700.0,
+    );
+    let session = federated_session("agree", &scenario, json!({"converge_max_s": 30.0}));
+    let dir = tempfile::tempdir().unwrap();
+    let server = start(&dir.path().join("a.db"), None, Limits::default()).await;
+    create_session(&client(), &server, &session).await;
+    let mut socket = ingest(&server, "agree").await;
+    stream_all(&mut socket, &frames(&scenario)).await;
+    let served: Vec<(String, String, f64, String)> = alarm_log(&server, "agree")
+        .await
+        .iter()
+        .map(|a| {
+            let text = |k: &str| a[k].as_str().unwrap().to_owned();
+            (
+                text("test"),
+                text("state"),
+                a["t"].as_f64().unwrap(),
+                text("severity"),
+            )
+        })
+        .collect();
+    server.shutdown().await;
+
+    let wire: MonitorSpecWire = serde_json::from_value(session["monitors"][0].clone()).unwrap();
+    let spec = monitor_spec(&wire).unwrap();
+    let run = navguard::sim::experiment::run_monitor(&scenario, &spec).unwrap();
+    let scored: Vec<(String, String, f64, String)> = run
+        .entries
+        .iter()
+        .map(|e| {
+            let state = serde_json::to_value(e.state)
+                .unwrap()
+                .as_str()
+                .unwrap()
+                .to_owned();
+            (e.test.clone(), state, e.t, e.severity.as_str().to_owned())
+        })
+        .collect();
+    assert_eq!(served, scored);
+    // Not trivially equal: warnings while converging, the standing alarm at convergence
+    // (a warning for the same test before it), and the later jump's alarm.
+    let count = |severity: &str| served.iter().filter(|e| e.3 == severity).count();
+    assert!(count("warning") >= 2 && count("alarm") >= 2, "{served:?}");
+    let standing = served
+        .iter()
+        .position(|e| e.0 == "gnss" && e.1 == "isolated" && e.3 == "alarm")
+        .unwrap();
+    assert!(
+        served[..standing]
+            .iter()
+            .any(|e| e.0 == "gnss" && e.1 == "isolated" && e.3 == "warning")
+    );
+    assert!(
+        served
+            .iter()
+            .any(|e| e.3 == "alarm" && e.2 >= 300.0 && e.2 < 360.0)
+    );
 }
