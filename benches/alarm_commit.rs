@@ -66,9 +66,7 @@ fn bench(c: &mut Criterion) {
                         .map(|s| {
                             let store = store.clone();
                             let (alarm, key) = entry(s, epoch);
-                            tokio::spawn(
-                                async move { store.insert_alarm_keyed(alarm, key, None).await },
-                            )
+                            tokio::spawn(async move { store.insert_alarm(alarm, key, None).await })
                         })
                         .collect();
                     for t in tasks {

@@ -87,10 +87,10 @@ async fn sessions_alarms_and_models_round_trip_and_survive_reopening() {
             record: None,
             ..s1.clone()
         };
-        store.put_session(&s1).await.unwrap();
-        store.put_session(&s0).await.unwrap();
+        store.put_session(&s1, None).await.unwrap();
+        store.put_session(&s0, None).await.unwrap();
         s1.echo = false;
-        store.put_session(&s1).await.unwrap();
+        store.put_session(&s1, None).await.unwrap();
         assert_eq!(
             store.sessions().await.unwrap(),
             vec![s0.clone(), s1.clone()],
@@ -105,7 +105,13 @@ async fn sessions_alarms_and_models_round_trip_and_survive_reopening() {
             if k == 5 {
                 a.severity = Severity::Warning;
             }
-            ids.push(store.insert_alarm(a).await.unwrap().id);
+            ids.push(
+                store
+                    .insert_alarm(a, AlarmKey::default(), None)
+                    .await
+                    .unwrap()
+                    .id,
+            );
         }
         assert!(ids.windows(2).all(|w| w[0] < w[1]), "{backend}: {ids:?}");
         let got = store.alarms(&all(100)).await.unwrap();
@@ -163,11 +169,11 @@ async fn sessions_alarms_and_models_round_trip_and_survive_reopening() {
             .unwrap();
         assert_eq!(timed.iter().map(|a| a.t).collect::<Vec<_>>(), [2.0, 1.0]);
         store
-            .clear_alarms("a", "m", "residual", Some(9.5))
+            .clear_alarms("a", "m", "residual", Some(9.5), None)
             .await
             .unwrap();
         store
-            .clear_alarms("b", "m", "residual", None)
+            .clear_alarms("b", "m", "residual", None, None)
             .await
             .unwrap();
         let cleared: Vec<_> = store
@@ -189,8 +195,11 @@ async fn sessions_alarms_and_models_round_trip_and_survive_reopening() {
             ],
             "{backend}"
         );
-        let late = store.insert_alarm(alarm("a", 7.0, 30.0)).await.unwrap();
-        store.clear_session_alarms("a").await.unwrap();
+        let late = store
+            .insert_alarm(alarm("a", 7.0, 30.0), AlarmKey::default(), None)
+            .await
+            .unwrap();
+        store.clear_session_alarms("a", None).await.unwrap();
 
         // Models: insert, finish, fail, delete.
         let model = |id: &str, created_ms| StoredModel {
@@ -220,8 +229,8 @@ async fn sessions_alarms_and_models_round_trip_and_survive_reopening() {
         assert!(!store.finish_model_failed("m-a", "late", 9).await.unwrap());
         assert!(store.delete_model("m-d").await.unwrap());
         assert!(!store.delete_model("m-d").await.unwrap());
-        assert!(store.delete_session("s0").await.unwrap());
-        assert!(!store.delete_session("s0").await.unwrap());
+        assert!(store.delete_session("s0", None).await.unwrap());
+        assert!(!store.delete_session("s0", None).await.unwrap());
         store.close().await;
 
         // Reopened (the migrations again, applied once): everything is there.
@@ -253,7 +262,10 @@ async fn sessions_alarms_and_models_round_trip_and_survive_reopening() {
         assert_eq!(models[0].model.as_deref(), Some("MODEL"));
         assert_eq!(models[0].name.as_deref(), Some("label ünïcode"));
         // A new alarm after reopening still gets a larger id.
-        let newest = store.insert_alarm(alarm("c", 8.0, 1.0)).await.unwrap();
+        let newest = store
+            .insert_alarm(alarm("c", 8.0, 1.0), AlarmKey::default(), None)
+            .await
+            .unwrap();
         assert!(newest.id > late.id, "{backend}");
         store.close().await;
     }
@@ -285,9 +297,9 @@ async fn recordings_page_summarise_and_evict_oldest_first() {
         };
         let store = Store::open_with(&db, retention).await.unwrap();
         for k in 0..4 {
-            store.record_frame(frame("a", 100, 2 * k, 200)).await;
+            store.record_frame(frame("a", 100, 2 * k, 200), None).await;
         }
-        store.record_frame(frame("a", 200, 0, 200)).await;
+        store.record_frame(frame("a", 200, 0, 200), None).await;
         store.flush_recordings().await;
         let page = store.recording_page("a", 100, 0, 3).await.unwrap();
         assert_eq!(
@@ -319,7 +331,7 @@ async fn recordings_page_summarise_and_evict_oldest_first() {
 
         // Over the session limit: the oldest frames of that session go first.
         for k in 0..30 {
-            store.record_frame(frame("b", 300, k, 200)).await;
+            store.record_frame(frame("b", 300, k, 200), None).await;
         }
         store.flush_recordings().await;
         let b = store.recording_streams("b").await.unwrap();
@@ -336,7 +348,7 @@ async fn recordings_page_summarise_and_evict_oldest_first() {
         );
         // Over the total limit: the oldest frames of all (session a's) go.
         for k in 0..20 {
-            store.record_frame(frame("c", 400, k, 200)).await;
+            store.record_frame(frame("c", 400, k, 200), None).await;
         }
         store.flush_recordings().await;
         let mut sum = 0;
@@ -357,7 +369,7 @@ async fn recordings_page_summarise_and_evict_oldest_first() {
         store.close().await;
         // The writer starts from the stored sizes after reopening.
         let store = Store::open_with(&db, retention).await.unwrap();
-        store.record_frame(frame("c", 400, 99, 200)).await;
+        store.record_frame(frame("c", 400, 99, 200), None).await;
         store.flush_recordings().await;
         let c = store.recording_page("c", 400, 0, 100).await.unwrap();
         assert_eq!(c.last().unwrap().1.first_epoch, 99, "{backend}");
@@ -442,7 +454,7 @@ async fn leases_fence_every_write_of_a_node_that_lost_its_session() {
     let dir = tempfile::tempdir().unwrap();
     for (backend, db) in backends(&dir, "lease").await {
         let store = Store::open(&db).await.unwrap();
-        store.put_session(&session("s")).await.unwrap();
+        store.put_session(&session("s"), None).await.unwrap();
         assert!(
             store
                 .create_lease("s", "a", "http://a", 10_000)
@@ -489,23 +501,19 @@ async fn leases_fence_every_write_of_a_node_that_lost_its_session() {
         // a is fenced on every kind of write; b is not.
         let fenced = |r: Result<(), StoreError>| matches!(r, Err(StoreError::Fenced(_)));
         assert!(
-            fenced(store.put_session_fenced(&session("s"), Some(&a)).await),
+            fenced(store.put_session(&session("s"), Some(&a)).await),
             "{backend}"
         );
         assert!(fenced(
-            store
-                .clear_alarms_fenced("s", "m", "t", None, Some(&a))
-                .await
+            store.clear_alarms("s", "m", "t", None, Some(&a)).await
         ));
-        assert!(fenced(
-            store.clear_session_alarms_fenced("s", Some(&a)).await
-        ));
+        assert!(fenced(store.clear_session_alarms("s", Some(&a)).await));
         assert!(fenced(
             store.put_checkpoint(&a, &checkpoint("s", 1, 1)).await
         ));
         assert!(matches!(
             store
-                .insert_alarm_keyed(
+                .insert_alarm(
                     alarm("s", 1.0, 30.0),
                     AlarmKey {
                         stream: 7,
@@ -517,17 +525,14 @@ async fn leases_fence_every_write_of_a_node_that_lost_its_session() {
             Err(StoreError::Fenced(_))
         ));
         assert!(matches!(
-            store.delete_session_fenced("s", Some(&a)).await,
+            store.delete_session("s", Some(&a)).await,
             Err(StoreError::Fenced(_))
         ));
         assert!(
             !store.release_lease(&a).await.unwrap(),
             "{backend}: only the holder releases"
         );
-        store
-            .put_session_fenced(&session("s"), Some(&b))
-            .await
-            .unwrap();
+        store.put_session(&session("s"), Some(&b)).await.unwrap();
         store
             .put_checkpoint(&b, &checkpoint("s", 2, 1))
             .await
@@ -566,7 +571,7 @@ async fn leases_fence_every_write_of_a_node_that_lost_its_session() {
             owner: "d".into(),
             epoch: 4,
         };
-        assert!(store.delete_session_fenced("s", Some(&d)).await.unwrap());
+        assert!(store.delete_session("s", Some(&d)).await.unwrap());
         assert!(store.lease("s").await.unwrap().is_none());
         assert!(store.checkpoint("s").await.unwrap().is_none());
         store.close().await;
@@ -580,7 +585,7 @@ async fn checkpoints_only_move_forward() {
     let dir = tempfile::tempdir().unwrap();
     for (backend, db) in backends(&dir, "ckpt").await {
         let store = Store::open(&db).await.unwrap();
-        store.put_session(&session("s")).await.unwrap();
+        store.put_session(&session("s"), None).await.unwrap();
         assert!(store.create_lease("s", "a", "", i64::MAX).await.unwrap());
         let a = Fence {
             session: "s".into(),
@@ -657,11 +662,11 @@ async fn a_replayed_alarm_is_one_log_entry() {
             epoch_index: 42,
         };
         let first = store
-            .insert_alarm_keyed(alarm("s", 4.2, 30.0), key, None)
+            .insert_alarm(alarm("s", 4.2, 30.0), key, None)
             .await
             .unwrap();
         let again = store
-            .insert_alarm_keyed(alarm("s", 4.2, 30.0), key, None)
+            .insert_alarm(alarm("s", 4.2, 30.0), key, None)
             .await
             .unwrap();
         assert_eq!(first.id, again.id, "{backend}");
@@ -678,22 +683,26 @@ async fn a_replayed_alarm_is_one_log_entry() {
         warning.severity = Severity::Warning;
         let ids = [
             store
-                .insert_alarm_keyed(alarm("s", 4.3, 30.0), other_epoch, None)
+                .insert_alarm(alarm("s", 4.3, 30.0), other_epoch, None)
+                .await
+                .unwrap()
+                .id,
+            store.insert_alarm(warning, key, None).await.unwrap().id,
+            store
+                .insert_alarm(alarm("s", 4.2, 30.0), other_stream, None)
                 .await
                 .unwrap()
                 .id,
             store
-                .insert_alarm_keyed(warning, key, None)
+                .insert_alarm(alarm("s", 4.2, 30.0), AlarmKey::default(), None)
                 .await
                 .unwrap()
                 .id,
             store
-                .insert_alarm_keyed(alarm("s", 4.2, 30.0), other_stream, None)
+                .insert_alarm(alarm("s", 4.2, 30.0), AlarmKey::default(), None)
                 .await
                 .unwrap()
                 .id,
-            store.insert_alarm(alarm("s", 4.2, 30.0)).await.unwrap().id,
-            store.insert_alarm(alarm("s", 4.2, 30.0)).await.unwrap().id,
         ];
         let mut distinct = ids.to_vec();
         distinct.push(first.id);
@@ -741,9 +750,9 @@ async fn each_entry_of_a_burst_gets_its_own_id() {
                 .map(|k| {
                     let store = store.clone();
                     let (a, key) = entry(k);
-                    tokio::spawn(async move {
-                        (k, store.insert_alarm_keyed(a, key, None).await.unwrap())
-                    })
+                    tokio::spawn(
+                        async move { (k, store.insert_alarm(a, key, None).await.unwrap()) },
+                    )
                 })
                 .collect();
             async move {
@@ -807,7 +816,11 @@ async fn sqlite_copies_its_wal_into_the_file_from_a_task_of_its_own() {
     let before = file_len();
     for k in 0..200 {
         let stored = store
-            .insert_alarm(alarm(&format!("s{}", k % 50), k as f64, 30.0))
+            .insert_alarm(
+                alarm(&format!("s{}", k % 50), k as f64, 30.0),
+                AlarmKey::default(),
+                None,
+            )
             .await
             .unwrap();
         assert!(stored.id > 0);

@@ -287,13 +287,10 @@ impl Store {
         }
     }
 
-    /// Inserts or replaces a session's spec.
-    pub async fn put_session(&self, session: &StoredSession) -> Result<(), StoreError> {
-        self.put_session_fenced(session, None).await
-    }
-
-    /// [`Store::put_session`] by the holder of `fence` only.
-    pub async fn put_session_fenced(
+    /// Inserts or replaces a session's spec. Every write of the store takes a `fence`: on
+    /// a cluster node, the lease it holds (a write under a lost lease is refused as
+    /// [`StoreError::Fenced`]); on a single node, `None`.
+    pub async fn put_session(
         &self,
         session: &StoredSession,
         fence: Option<&Fence>,
@@ -313,14 +310,9 @@ impl Store {
         Ok(())
     }
 
-    /// Deletes a session's spec (its alarms stay in the log).
-    pub async fn delete_session(&self, id: &str) -> Result<bool, StoreError> {
-        self.delete_session_fenced(id, None).await
-    }
-
-    /// [`Store::delete_session`] by the holder of `fence` only; the session's lease and
+    /// Deletes a session's spec (its alarms stay in the log); the session's lease and
     /// checkpoint go with it.
-    pub async fn delete_session_fenced(
+    pub async fn delete_session(
         &self,
         id: &str,
         fence: Option<&Fence>,
@@ -423,16 +415,10 @@ impl Store {
         specs.iter().map(|spec| StoredSpec::decode(spec)).collect()
     }
 
-    /// Commits an alarm and returns it with its id. Alarms raised at the same
-    /// moment share one transaction (group commit); this returns after the commit.
-    pub async fn insert_alarm(&self, alarm: AlarmRecord) -> Result<AlarmRecord, StoreError> {
-        self.insert_alarm_keyed(alarm, AlarmKey::default(), None)
-            .await
-    }
-
-    /// [`Store::insert_alarm`] under `key` (an entry with the same key is not stored
-    /// twice: its id is returned) by the holder of `fence` only.
-    pub async fn insert_alarm_keyed(
+    /// Commits an alarm under `key` and returns it with its id (an entry with the same key
+    /// is not stored twice: its id is returned). Alarms raised at the same moment share
+    /// one transaction (group commit); this returns after the commit.
+    pub async fn insert_alarm(
         &self,
         mut alarm: AlarmRecord,
         key: AlarmKey,
@@ -445,13 +431,9 @@ impl Store {
         Ok(alarm)
     }
 
-    /// Queues a frame for the recording (committed by the writer, not awaited).
-    pub async fn record_frame(&self, frame: RecordedFrame) {
-        self.recordings.record(frame, None).await;
-    }
-
-    /// [`Store::record_frame`] by the holder of `fence` only (a fenced frame is dropped).
-    pub async fn record_frame_fenced(&self, frame: RecordedFrame, fence: Option<&Fence>) {
+    /// Queues a frame for the recording (committed by the writer, not awaited; a fenced
+    /// frame is dropped).
+    pub async fn record_frame(&self, frame: RecordedFrame, fence: Option<&Fence>) {
         self.recordings.record(frame, fence.cloned()).await;
     }
 
@@ -477,21 +459,9 @@ impl Store {
         recordings::streams(&self.pool, session).await
     }
 
-    /// Marks a test's open alarms as cleared at epoch time `t` (each alarm's
-    /// own `t` when unknown).
+    /// Marks a test's open alarms as cleared at epoch time `t` (each alarm's own `t` when
+    /// unknown).
     pub async fn clear_alarms(
-        &self,
-        session: &str,
-        monitor: &str,
-        test: &str,
-        t: Option<f64>,
-    ) -> Result<(), StoreError> {
-        self.clear_alarms_fenced(session, monitor, test, t, None)
-            .await
-    }
-
-    /// [`Store::clear_alarms`] by the holder of `fence` only.
-    pub async fn clear_alarms_fenced(
         &self,
         session: &str,
         monitor: &str,
@@ -504,14 +474,9 @@ impl Store {
             .await
     }
 
-    /// Closes every open alarm of a session whose stream restarted from scratch
-    /// (its filters were reset); `cleared_t` is set to the alarm's own `t`.
-    pub async fn clear_session_alarms(&self, session: &str) -> Result<(), StoreError> {
-        self.clear_session_alarms_fenced(session, None).await
-    }
-
-    /// [`Store::clear_session_alarms`] by the holder of `fence` only.
-    pub async fn clear_session_alarms_fenced(
+    /// Closes every open alarm of a session whose stream restarted from scratch (its
+    /// filters were reset); `cleared_t` is set to the alarm's own `t`.
+    pub async fn clear_session_alarms(
         &self,
         session: &str,
         fence: Option<&Fence>,
@@ -724,7 +689,11 @@ mod tests {
                     let mut ids = Vec::new();
                     for k in 0..5 {
                         let a = store
-                            .insert_alarm(alarm(&format!("s{s}"), k as f64))
+                            .insert_alarm(
+                                alarm(&format!("s{s}"), k as f64),
+                                AlarmKey::default(),
+                                None,
+                            )
                             .await
                             .unwrap();
                         ids.push(a.id);
@@ -764,14 +733,20 @@ mod tests {
                 let store = store.clone();
                 tokio::spawn(async move {
                     let session = format!("s{s}");
-                    store.insert_alarm(alarm(&session, 1.0)).await.unwrap();
                     store
-                        .clear_alarms(&session, "m", "residual", Some(2.0))
+                        .insert_alarm(alarm(&session, 1.0), AlarmKey::default(), None)
                         .await
                         .unwrap();
-                    store.insert_alarm(alarm(&session, 3.0)).await.unwrap();
+                    store
+                        .clear_alarms(&session, "m", "residual", Some(2.0), None)
+                        .await
+                        .unwrap();
+                    store
+                        .insert_alarm(alarm(&session, 3.0), AlarmKey::default(), None)
+                        .await
+                        .unwrap();
                     if s % 2 == 0 {
-                        store.clear_session_alarms(&session).await.unwrap();
+                        store.clear_session_alarms(&session, None).await.unwrap();
                     }
                 })
             })
@@ -804,7 +779,10 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let store = Store::open(&dir.path().join("t.db")).await.unwrap();
         for (s, t) in [("a", 1.0), ("b", 2.0), ("a", 3.0)] {
-            store.insert_alarm(alarm(s, t)).await.unwrap();
+            store
+                .insert_alarm(alarm(s, t), AlarmKey::default(), None)
+                .await
+                .unwrap();
         }
         let all = store
             .alarms(&AlarmQuery {
@@ -836,7 +814,7 @@ mod tests {
             .unwrap();
         assert_eq!(page[0].t, 2.0);
         store
-            .clear_alarms("a", "m", "residual", Some(9.0))
+            .clear_alarms("a", "m", "residual", Some(9.0), None)
             .await
             .unwrap();
         let newer = store
@@ -860,8 +838,11 @@ mod tests {
             .await
             .unwrap();
         assert!(a.iter().all(|x| x.cleared_t == Some(9.0)));
-        store.insert_alarm(alarm("b", 4.0)).await.unwrap();
-        store.clear_session_alarms("b").await.unwrap();
+        store
+            .insert_alarm(alarm("b", 4.0), AlarmKey::default(), None)
+            .await
+            .unwrap();
+        store.clear_session_alarms("b", None).await.unwrap();
         let b = store
             .alarms(&AlarmQuery {
                 session: Some("b".into()),
@@ -907,7 +888,10 @@ mod tests {
         let store = Store::open(&path).await.unwrap();
         let mut warning = alarm("s", 2.0);
         warning.severity = Severity::Warning;
-        store.insert_alarm(warning).await.unwrap();
+        store
+            .insert_alarm(warning, AlarmKey::default(), None)
+            .await
+            .unwrap();
         let all = store
             .alarms(&AlarmQuery {
                 limit: 10,
@@ -968,12 +952,12 @@ mod tests {
         };
         {
             let store = Store::open(&path).await.unwrap();
-            store.put_session(&s).await.unwrap();
+            store.put_session(&s, None).await.unwrap();
             store.close().await;
         }
         let store = Store::open(&path).await.unwrap();
         assert_eq!(store.sessions().await.unwrap(), vec![s]);
-        assert!(store.delete_session("x").await.unwrap());
+        assert!(store.delete_session("x", None).await.unwrap());
         assert!(store.sessions().await.unwrap().is_empty());
     }
 
@@ -998,7 +982,7 @@ mod tests {
             serde_json::json!([[0.1]])
         );
         // Written back, it carries the current format and reads the same.
-        store.put_session(&loaded[0]).await.unwrap();
+        store.put_session(&loaded[0], None).await.unwrap();
         let row: String = with_pool!(&store.pool, p => sqlx::query_scalar("SELECT spec FROM sessions WHERE id = 'old'")
             .fetch_one(p)
             .await

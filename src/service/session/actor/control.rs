@@ -43,7 +43,7 @@ impl Actor {
             if let Err(e) = self
                 .deps
                 .store
-                .clear_alarms_fenced(
+                .clear_alarms(
                     &self.id,
                     &returned.monitor,
                     &returned.test,
@@ -70,7 +70,7 @@ impl Actor {
         if let Err(e) = self
             .deps
             .store
-            .clear_session_alarms_fenced(&self.id, fence.as_ref())
+            .clear_session_alarms(&self.id, fence.as_ref())
             .await
         {
             tracing::error!(session = %self.id, error = %e, "could not mark alarms cleared");
@@ -137,12 +137,7 @@ impl Actor {
         let stored = self.store_threshold(index, &update);
         self.publish(true);
         let fence = self.fence();
-        if let Err(e) = self
-            .deps
-            .store
-            .put_session_fenced(&stored, fence.as_ref())
-            .await
-        {
+        if let Err(e) = self.deps.store.put_session(&stored, fence.as_ref()).await {
             self.core.undo_threshold(undo);
             *self.shared.stored.lock().unwrap_or_else(|p| p.into_inner()) = before;
             return Err(self.store_error(e));
@@ -183,7 +178,7 @@ impl Actor {
         let fence = self.fence();
         self.deps
             .store
-            .put_session_fenced(&stored, fence.as_ref())
+            .put_session(&stored, fence.as_ref())
             .await
             .map_err(|e| self.store_error(e))
     }
@@ -196,7 +191,7 @@ impl Actor {
         match self
             .deps
             .store
-            .delete_session_fenced(&self.id, fence.as_ref())
+            .delete_session(&self.id, fence.as_ref())
             .await
         {
             Ok(_) => {

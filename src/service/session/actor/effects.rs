@@ -95,7 +95,7 @@ impl Actor {
             let cleared = self
                 .deps
                 .store
-                .clear_alarms_fenced(
+                .clear_alarms(
                     &self.id,
                     &change.monitor,
                     &change.test,
@@ -145,7 +145,7 @@ impl Actor {
         let stored = self
             .deps
             .store
-            .insert_alarm_keyed(entry.clone(), key, fence.as_ref())
+            .insert_alarm(entry.clone(), key, fence.as_ref())
             .await;
         self.deps.metrics.observe_alarm_commit(handed.elapsed());
         match stored {

@@ -26,7 +26,7 @@ impl Actor {
         let fence = self.fence();
         self.deps
             .store
-            .record_frame_fenced(
+            .record_frame(
                 RecordedFrame {
                     session: self.id.to_string(),
                     stream,
