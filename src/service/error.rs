@@ -113,7 +113,10 @@ impl From<SessionError> for ApiError {
                 message: reason,
             },
             SessionError::TooLarge(m) => ApiError::TooLarge(m),
-            e @ SessionError::AlreadyAttached(_) => ApiError::Conflict(e.to_string()),
+            e @ (SessionError::AlreadyAttached(_) | SessionError::Exists(_)) => {
+                ApiError::Conflict(e.to_string())
+            }
+            SessionError::Unavailable(m) => ApiError::Unavailable(m),
             e @ (SessionError::NoMonitor { .. } | SessionError::Stopped(_)) => {
                 ApiError::NotFound(e.to_string())
             }

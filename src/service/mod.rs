@@ -119,19 +119,19 @@ pub async fn start(config: ServiceConfig) -> Result<Server, StartError> {
     };
     for stored in stored_sessions {
         let id = stored.id.clone();
-        let handle = match session::actor::spawn(stored, state.actor_deps()) {
-            Ok(handle) => handle,
+        let started = session::lifecycle::restart(state.actor_deps(), &state.registry, stored);
+        match started.await {
+            Ok(_) => {}
             // A model deleted while a live session used it: that session kept its
             // copy until now, but cannot be rebuilt. Skip it (its row stays) rather
             // than refuse to start.
             Err(e) if e.is_missing_model() => {
                 tracing::warn!(session = %id, error = %e, "stored session names a deleted model; not restarted");
-                continue;
+            }
+            Err(session::SessionError::Exists(_)) => {
+                return Err(StartError::StoredSession(id, "duplicate id".into()));
             }
             Err(e) => return Err(StartError::StoredSession(id, e.to_string())),
-        };
-        if state.registry.try_insert(handle, usize::MAX).is_err() {
-            return Err(StartError::StoredSession(id, "duplicate id".into()));
         }
     }
     let listener = TcpListener::bind(state.config.bind)

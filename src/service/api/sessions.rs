@@ -12,9 +12,9 @@ use crate::service::app::AppState;
 use crate::service::error::ApiError;
 use crate::service::extract::{JsonBody, from_value, integral_numbers, refuse_nulls};
 use crate::service::now_ms;
-use crate::service::session::actor;
+use crate::service::session::lifecycle;
 use crate::service::session::{SessionHandle, validate_session};
-use crate::service::store::{Fence, StoredSession};
+use crate::service::store::StoredSession;
 use crate::service::wire::{CreateSession, MonitorSpecWire};
 use crate::session::SessionStats;
 
@@ -179,78 +179,8 @@ pub async fn create(
         record: req.record,
         alarm_level: req.alarm_level,
     };
-    // Building the actor validates every monitor (422 naming the field).
-    let handle = match &state.cluster {
-        None => actor::spawn(stored.clone(), state.actor_deps())?,
-        Some(cluster) => {
-            if cluster.draining() {
-                return Err(ApiError::Unavailable(
-                    "this node is draining: create the session on another node".into(),
-                ));
-            }
-            let fence = Fence {
-                session: stored.id.clone(),
-                owner: cluster.node_id().to_owned(),
-                epoch: 1,
-            };
-            let handle = actor::spawn_owned(stored.clone(), state.actor_deps(), fence, None)?;
-            // The id is unique in the whole cluster: its lease row is the claim on it.
-            let created = state
-                .store
-                .create_lease(
-                    &stored.id,
-                    cluster.node_id(),
-                    &cluster.config.advertise,
-                    cluster.expiry(),
-                )
-                .await;
-            match created {
-                Ok(true) => {
-                    cluster
-                        .counters
-                        .leases_acquired
-                        .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                    handle
-                }
-                Ok(false) => {
-                    handle.shutdown().await;
-                    return Err(ApiError::Conflict(format!(
-                        "session '{}' already exists",
-                        stored.id
-                    )));
-                }
-                Err(e) => {
-                    handle.shutdown().await;
-                    return Err(e.into());
-                }
-            }
-        }
-    };
-    if let Err((handle, duplicate)) = state
-        .registry
-        .try_insert(handle, state.config.limits.max_sessions)
-    {
-        handle.shutdown().await;
-        return Err(if duplicate {
-            ApiError::Conflict(format!("session '{}' already exists", stored.id))
-        } else {
-            ApiError::TooLarge(format!(
-                "the server holds its limit of {} sessions",
-                state.config.limits.max_sessions
-            ))
-        });
-    }
-    let handle = state
-        .registry
-        .get(&stored.id)
-        .ok_or_else(|| ApiError::NotFound(format!("no session '{}'", stored.id)))?;
-    // The actor stores the spec, in its own order with any change that reached it first.
-    if let Err(e) = handle.persist().await {
-        if let Some(h) = state.registry.remove(&stored.id) {
-            h.shutdown().await;
-        }
-        return Err(e.into());
-    }
+    let limit = state.config.limits.max_sessions;
+    let handle = lifecycle::create(state.actor_deps(), &state.registry, limit, stored).await?;
     Ok((
         StatusCode::CREATED,
         Json(view(&handle, state.config.record_default)),

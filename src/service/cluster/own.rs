@@ -16,7 +16,7 @@ use super::rpc::{self, Call, CallError, ReleaseAnswer};
 use crate::service::app::AppState;
 use crate::service::error::ApiError;
 use crate::service::now_ms;
-use crate::service::session::{SessionHandle, actor};
+use crate::service::session::{SessionHandle, lifecycle};
 use crate::service::store::{Acquire, Fence, Lease, StoredSession};
 
 /// Where a session runs.
@@ -124,23 +124,18 @@ async fn take(
         epoch,
     };
     let checkpoint = state.store.checkpoint(&id).await?;
-    let handle = actor::spawn_owned(stored, state.actor_deps(), fence, checkpoint)?;
-    if let Err((handle, _)) = state
-        .registry
-        .try_insert(handle, state.config.limits.max_sessions)
-    {
-        handle.shutdown().await;
-        return Err(ApiError::Unavailable(format!(
-            "the node holds its limit of {} sessions",
-            state.config.limits.max_sessions
-        )));
-    }
+    let limit = state.config.limits.max_sessions;
+    let handle = lifecycle::take(
+        state.actor_deps(),
+        &state.registry,
+        limit,
+        stored,
+        fence,
+        checkpoint,
+    )
+    .await?;
     tracing::info!(session = %id, epoch, "session lease taken");
-    state
-        .registry
-        .get(&id)
-        .map(Owner::Local)
-        .ok_or_else(|| ApiError::NotFound(format!("no session '{id}'")))
+    Ok(Owner::Local(handle))
 }
 
 /// The session for an ingest stream on this node: running here, or taken over (its lease

@@ -29,6 +29,13 @@ pub enum SessionError {
     /// The request is over a configured limit.
     #[error("{0}")]
     TooLarge(String),
+    /// A session of that id exists already.
+    #[error("session '{0}' already exists")]
+    Exists(String),
+    /// This node cannot run the session now (it drains, or holds its limit); retry, the
+    /// load balancer sends the request to another node.
+    #[error("{0}")]
+    Unavailable(String),
     /// The session already has an ingest stream attached.
     #[error("session '{0}' already has an ingest stream attached")]
     AlreadyAttached(String),
