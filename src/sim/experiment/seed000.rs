@@ -29,7 +29,6 @@ use std::time::Instant;
 use serde_json::json;
 
 use super::ExperimentError;
-use super::plot::{Chart, Series};
 use super::scorecard::{self, FaultWindow, Scorecard};
 use crate::detect::{Health, PolicyConfig, ThresholdSpec, chi2};
 use crate::epoch::Epoch;
@@ -41,6 +40,7 @@ use crate::monitor::channel::{
 use crate::monitor::{self, MonitorKind, MonitorSpec, Outputs};
 use crate::sim::ads_gnss::{self, AdsGnssParams, FAULT_END_S, FAULT_START_S};
 use crate::sim::faults::FaultKind;
+use crate::sim::plot::{Chart, Series};
 
 /// Seed 000 Table 2: missed-detection rates at p_fa = 0.002, improved then plain, for
 /// the 90 m step, 100 m step, 1 m/s ramp and 2 m/s ramp.

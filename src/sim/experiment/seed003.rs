@@ -34,8 +34,8 @@ use std::time::Instant;
 use serde_json::json;
 
 use super::ExperimentError;
-use super::plot::{Chart, Series};
 use super::scorecard::{self, FaultWindow, Scorecard};
+use crate::sim::plot::{Chart, Series};
 
 /// The one-class model's ν (the paper's choice): the share of training windows left
 /// outside the boundary, so the nominal rate of flagged clean windows.
