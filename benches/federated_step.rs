@@ -152,22 +152,36 @@ fn count_steps(spec: &str) {
     }
 }
 
+/// Every benchmark of this file, in the order they run (the ids are what
+/// docs/performance.md quotes: `federated_monitor/…`, `federated_filter/…`).
 fn bench(c: &mut Criterion) {
     let start = start();
     let config = all_aids();
-    let mut monitor = monitor_on(&config);
+    bench_monitor_all_aids(c, &start, &config);
+    bench_filter_all_aids(c, &start, &config);
+    bench_monitor_ship(c);
+}
+
+/// `federated_monitor/step_ins_gnss_dvl_cns`: the monitor on synthetic epochs that
+/// carry every aid.
+fn bench_monitor_all_aids(c: &mut Criterion, start: &Lla, config: &FederatedConfig) {
+    let mut monitor = monitor_on(config);
     let mut k = 0;
     let mut group = c.benchmark_group("federated_monitor");
     group.throughput(Throughput::Elements(1));
     group.bench_function("step_ins_gnss_dvl_cns", |b| {
         b.iter(|| {
             k += 1;
-            let e = epoch(&start, k);
+            let e = epoch(start, k);
             black_box(monitor.step(black_box(&e)).expect("step"))
         })
     });
     group.finish();
+}
 
+/// `federated_filter/step_ins_gnss_dvl_cns`: the federated filter alone on the same
+/// epochs, every aid healthy (the monitor's cost without its tests).
+fn bench_filter_all_aids(c: &mut Criterion, start: &Lla, config: &FederatedConfig) {
     let mut filter =
         FederatedFilter::new(&equal_betas(3), config.initial_estimate()).expect("filter");
     let imu = ImuErrors::default();
@@ -183,7 +197,7 @@ fn bench(c: &mut Criterion) {
     group.bench_function("step_ins_gnss_dvl_cns", |b| {
         b.iter(|| {
             k += 1;
-            let e = epoch(&start, k);
+            let e = epoch(start, k);
             let (Some(ins), Some(g), Some(d), Some(cns)) = (&e.ins, &e.gnss, e.dvl_vel_b, &e.cns)
             else {
                 unreachable!("every bench epoch carries all blocks")
@@ -206,7 +220,11 @@ fn bench(c: &mut Criterion) {
         })
     });
     group.finish();
+}
 
+/// `federated_monitor/step_ship_seed004`: the monitor on seed 004's ship stream,
+/// restarted at the end of the stream.
+fn bench_monitor_ship(c: &mut Criterion) {
     let mut group = c.benchmark_group("federated_monitor");
     group.throughput(Throughput::Elements(1));
     let (ship, ship_config) = ship_stream();

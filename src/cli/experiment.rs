@@ -85,8 +85,10 @@ pub(crate) struct AlarmsArgs {
     /// Ship seeds (comma-separated).
     #[arg(long, value_delimiter = ',', default_value = "1,2,3,4,5")]
     pub seeds: Vec<u64>,
-    /// The real track (1 Hz RTK fixes, the `simulate --track` format); `none` to skip it.
-    #[arg(long, default_value = "../shared/data/kf-gins-gnss-rtk.txt")]
+    /// The real track (1 Hz RTK fixes, the `simulate --track` format), e.g.
+    /// `../shared/data/kf-gins-gnss-rtk.txt`; `none` to run the ship seeds only.
+    /// Required: the track is not part of the repository, so there is no default.
+    #[arg(long, value_name = "FILE|none")]
     pub track: PathBuf,
     /// Seed of the track run.
     #[arg(long, default_value_t = 1)]

@@ -658,9 +658,9 @@ fn ln_chernoff_bound(x: f64, d: f64, lambda: f64) -> f64 {
     0.5 * (x_over_s - x) + 0.5 * d * (x.ln() - x_over_s.ln()) + 0.5 * lambda * (s - 1.0)
 }
 
-/// `F(x)` (`Lower`) or `1 − F(x)` (`Upper`) of `χ²(dof, λ)`, inputs validated.
-// Over 80 lines: one series evaluation whose start term, scale and two sweeps share a
-// dozen coupled locals; split, each piece would take them all as parameters.
+/// `F(x)` (`Lower`) or `1 − F(x)` (`Upper`) of `χ²(dof, λ)`, inputs validated: the
+/// cases with a closed answer here, otherwise the Poisson mixture of central tails
+/// summed by [`PoissonMixture`].
 fn noncentral_tail(x: f64, dof: u32, lambda: f64, tail: Tail) -> f64 {
     let lower = tail == Tail::Lower;
     if x == 0.0 {
@@ -684,88 +684,136 @@ fn noncentral_tail(x: f64, dof: u32, lambda: f64, tail: Tail) -> f64 {
         return if (x < d + lambda) == lower { 0.0 } else { 1.0 };
     }
 
-    // Start at (about) the largest term, so that the terms relative to it
-    // neither overflow nor underflow. w_j d_{a+j-1}(y) peaks where
-    // (j+1)(j+a) = μy; P(a+j, y) decreases and Q(a+j, y) increases in j, so
-    // the P-series peaks at or below min(that, Poisson mode) and the Q-series
-    // near or above max(that, Poisson mode). Any start gives the same sum.
-    let k_peak = (0.5 * ((a - 1.0).hypot(2.0 * mu.sqrt() * y.sqrt()) - (a + 1.0))).max(0.0);
-    let k_mode = mu.floor();
-    let start = if lower {
-        k_peak.min(k_mode)
-    } else {
-        k_peak.max(k_mode)
-    }
-    .floor();
-    let s = start as u64;
-
-    // All quantities are carried relative to the start term's Poisson weight
-    // and central probability G_s = P or Q(a+s, y); `scale` is their ln.
-    let g_start = inc_gamma(a + start, y);
-    let ln_g_start = if lower { g_start.ln_p } else { g_start.ln_q };
-    let scale = ln_poisson_term(start, mu) + ln_g_start;
-    let d_start = (g_start.ln_d - ln_g_start).exp();
-    // G(b+1) = G(b) + sign·d_b
-    let sign = if lower { -1.0 } else { 1.0 };
-    // G at b = a + j, and d_b, computed directly (relative to G_s).
-    let direct = |j: u64| {
-        let g = inc_gamma(a + j as f64, y);
-        let ln_g = if lower { g.ln_p } else { g.ln_q };
-        ((ln_g - ln_g_start).exp(), (g.ln_d - ln_g_start).exp())
-    };
+    let mixture = PoissonMixture::new(a, y, mu, lower);
     let mut sum = 1.0;
-
-    // Forward sweep j = s+1, s+2, … The recurrence is stable for Q (sum of
-    // positive terms); for P it subtracts, so whenever P has fallen by 8×
-    // since it was last computed directly it is recomputed: every value then
-    // carries at most ~8n ulp of error.
-    let (mut w, mut g, mut dj, mut prev, mut anchor) = (1.0, 1.0, d_start, 1.0, 1.0);
-    let mut j = s;
-    while j - s < MAX_TERMS {
-        let b = a + j as f64;
-        g += sign * dj;
-        dj *= y / (b + 1.0);
-        j += 1;
-        w *= mu / j as f64;
-        if lower && g < 0.125 * anchor {
-            (g, dj) = direct(j);
-            anchor = g;
-        }
-        let t = w * g;
-        sum += t;
-        if remainder_negligible(t, prev, sum) {
-            break;
-        }
-        prev = t;
-    }
-
-    // Backward sweep j = s−1, …, 0: stable for P, re-anchored for Q.
-    let (mut w, mut g, mut dj, mut prev, mut anchor) = (1.0, 1.0, d_start, 1.0, 1.0);
-    let mut j = s;
-    while j > 0 && s - j < MAX_TERMS {
-        j -= 1;
-        let b = a + j as f64;
-        dj *= (b + 1.0) / y;
-        g -= sign * dj;
-        w *= (j + 1) as f64 / mu;
-        if !lower && g < 0.125 * anchor {
-            (g, dj) = direct(j);
-            anchor = g;
-        }
-        let t = w * g;
-        sum += t;
-        if remainder_negligible(t, prev, sum) {
-            break;
-        }
-        prev = t;
-    }
-
-    let value = (scale + sum.ln()).exp();
+    mixture.sweep_forward(&mut sum);
+    mixture.sweep_backward(&mut sum);
+    let value = (mixture.scale + sum.ln()).exp();
     if value.is_nan() {
         // Unreachable for validated inputs; never hand NaN to callers.
         return if (x < d + lambda) == lower { 0.0 } else { 1.0 };
     }
     value.clamp(0.0, 1.0)
+}
+
+/// The series `Σ_j w_j G(a+j, y)` of [`noncentral_tail`]: Poisson weights
+/// `w_j = e^{-μ} μ^j / j!` times central tails `G = P` (`lower`) or `Q`. Every term
+/// is carried relative to the start term's, so that none overflows or underflows;
+/// the start term itself counts 1 in the sum the sweeps add to.
+struct PoissonMixture {
+    /// Half the degrees of freedom.
+    a: f64,
+    /// Half the argument `x`.
+    y: f64,
+    /// Half the non-centrality `λ`.
+    mu: f64,
+    /// Summing `P` (the CDF) rather than `Q` (the SF).
+    lower: bool,
+    /// Index of the start term.
+    s: u64,
+    /// `ln` of the start term `w_s G_s`: the scale of every relative quantity.
+    scale: f64,
+    /// `ln G_s`.
+    ln_g_start: f64,
+    /// `d_{a+s}(y)` relative to `G_s`.
+    d_start: f64,
+    /// `G(b+1) = G(b) + sign·d_b`.
+    sign: f64,
+}
+
+impl PoissonMixture {
+    fn new(a: f64, y: f64, mu: f64, lower: bool) -> Self {
+        // Start at (about) the largest term, so that the terms relative to it
+        // neither overflow nor underflow. w_j d_{a+j-1}(y) peaks where
+        // (j+1)(j+a) = μy; P(a+j, y) decreases and Q(a+j, y) increases in j, so
+        // the P-series peaks at or below min(that, Poisson mode) and the Q-series
+        // near or above max(that, Poisson mode). Any start gives the same sum.
+        let k_peak = (0.5 * ((a - 1.0).hypot(2.0 * mu.sqrt() * y.sqrt()) - (a + 1.0))).max(0.0);
+        let k_mode = mu.floor();
+        let start = if lower {
+            k_peak.min(k_mode)
+        } else {
+            k_peak.max(k_mode)
+        }
+        .floor();
+
+        // All quantities are carried relative to the start term's Poisson weight
+        // and central probability G_s = P or Q(a+s, y); `scale` is their ln.
+        let g_start = inc_gamma(a + start, y);
+        let ln_g_start = if lower { g_start.ln_p } else { g_start.ln_q };
+        Self {
+            a,
+            y,
+            mu,
+            lower,
+            s: start as u64,
+            scale: ln_poisson_term(start, mu) + ln_g_start,
+            ln_g_start,
+            d_start: (g_start.ln_d - ln_g_start).exp(),
+            sign: if lower { -1.0 } else { 1.0 },
+        }
+    }
+
+    /// G at b = a + j, and d_b, computed directly (relative to G_s).
+    fn direct(&self, j: u64) -> (f64, f64) {
+        let g = inc_gamma(self.a + j as f64, self.y);
+        let ln_g = if self.lower { g.ln_p } else { g.ln_q };
+        (
+            (ln_g - self.ln_g_start).exp(),
+            (g.ln_d - self.ln_g_start).exp(),
+        )
+    }
+
+    /// Forward sweep j = s+1, s+2, … The recurrence is stable for Q (sum of
+    /// positive terms); for P it subtracts, so whenever P has fallen by 8×
+    /// since it was last computed directly it is recomputed: every value then
+    /// carries at most ~8n ulp of error.
+    fn sweep_forward(&self, sum: &mut f64) {
+        let (a, y, mu, s) = (self.a, self.y, self.mu, self.s);
+        let (mut w, mut g, mut dj, mut prev, mut anchor) = (1.0, 1.0, self.d_start, 1.0, 1.0);
+        let mut j = s;
+        while j - s < MAX_TERMS {
+            let b = a + j as f64;
+            g += self.sign * dj;
+            dj *= y / (b + 1.0);
+            j += 1;
+            w *= mu / j as f64;
+            if self.lower && g < 0.125 * anchor {
+                (g, dj) = self.direct(j);
+                anchor = g;
+            }
+            let t = w * g;
+            *sum += t;
+            if remainder_negligible(t, prev, *sum) {
+                break;
+            }
+            prev = t;
+        }
+    }
+
+    /// Backward sweep j = s−1, …, 0: stable for P, re-anchored for Q.
+    fn sweep_backward(&self, sum: &mut f64) {
+        let (a, y, mu, s) = (self.a, self.y, self.mu, self.s);
+        let (mut w, mut g, mut dj, mut prev, mut anchor) = (1.0, 1.0, self.d_start, 1.0, 1.0);
+        let mut j = s;
+        while j > 0 && s - j < MAX_TERMS {
+            j -= 1;
+            let b = a + j as f64;
+            dj *= (b + 1.0) / y;
+            g -= self.sign * dj;
+            w *= (j + 1) as f64 / mu;
+            if !self.lower && g < 0.125 * anchor {
+                (g, dj) = self.direct(j);
+                anchor = g;
+            }
+            let t = w * g;
+            *sum += t;
+            if remainder_negligible(t, prev, *sum) {
+                break;
+            }
+            prev = t;
+        }
+    }
 }
 
 /// Stopping rule of a sweep, given the newest term `t`, the one before it and

@@ -499,6 +499,83 @@ mod tests {
         Matrix2::new(a[0][0], a[0][1], a[1][0], a[1][1])
     }
 
+    /// One step of the reference filter, and what it computed on the way.
+    struct Reference {
+        x: [f64; 2],
+        p: M2,
+        k: M2,
+        res: [f64; 2],
+        s: M2,
+        si_r: [f64; 2],
+        lambda: f64,
+    }
+
+    /// The reference: textbook form, explicit 2×2 inverse, P = (I − KH) P⁻.
+    fn reference_step(
+        (f, q): (M2, M2),
+        (h, r): (M2, M2),
+        (x, p): ([f64; 2], M2),
+        z: [f64; 2],
+    ) -> Reference {
+        let xm = mv2(f, x);
+        let pm = add2(mul2(mul2(f, p), tr2(f)), q, 1.0);
+        let hx = mv2(h, xm);
+        let res = [z[0] - hx[0], z[1] - hx[1]];
+        let s = add2(mul2(mul2(h, pm), tr2(h)), r, 1.0);
+        let s_inv = inv2(s);
+        let k = mul2(mul2(pm, tr2(h)), s_inv);
+        let kr = mv2(k, res);
+        let si_r = mv2(s_inv, res);
+        Reference {
+            x: [xm[0] + kr[0], xm[1] + kr[1]],
+            p: mul2(add2([[1.0, 0.0], [0.0, 1.0]], mul2(k, h), -1.0), pm),
+            k,
+            res,
+            s,
+            si_r,
+            lambda: res[0] * si_r[0] + res[1] * si_r[1],
+        }
+    }
+
+    impl Reference {
+        /// The fixed-size filter's step agrees with this one.
+        fn assert_matches(
+            &self,
+            post: &StateEstimate<U2>,
+            innov: &Innovation<U2>,
+            k: &Gain<U2, U2>,
+        ) {
+            let tol = 1e-10;
+            assert_relative_eq!(
+                post.x,
+                Vector2::from(self.x),
+                epsilon = tol,
+                max_relative = tol
+            );
+            assert_relative_eq!(post.p, to_m2(self.p), epsilon = tol, max_relative = tol);
+            assert_relative_eq!(*k, to_m2(self.k), epsilon = tol, max_relative = tol);
+            assert_relative_eq!(innov.r, Vector2::from(self.res), epsilon = tol);
+            assert_relative_eq!(
+                innov.s,
+                to_m2(self.s),
+                epsilon = 1e-12,
+                max_relative = 1e-12
+            );
+            assert_relative_eq!(
+                innov.s_inv_r(),
+                Vector2::from(self.si_r),
+                epsilon = tol,
+                max_relative = tol
+            );
+            assert_relative_eq!(
+                innov.statistic,
+                self.lambda,
+                epsilon = tol,
+                max_relative = tol
+            );
+        }
+    }
+
     #[test]
     fn constant_velocity_fixed_and_dynamic_paths_agree_with_a_hand_written_reference() {
         let dt = 0.1;
@@ -563,42 +640,9 @@ mod tests {
             }
             assert_relative_eq!(s_innov.statistic, d_innov.statistic, epsilon = 1e-12);
 
-            // Reference: textbook form, explicit 2×2 inverse, P = (I − KH) P⁻.
-            let xm = mv2(f, x);
-            let pm = add2(mul2(mul2(f, p), tr2(f)), q, 1.0);
-            let hx = mv2(h, xm);
-            let res = [z[0] - hx[0], z[1] - hx[1]];
-            let s = add2(mul2(mul2(h, pm), tr2(h)), r, 1.0);
-            let s_inv = inv2(s);
-            let k = mul2(mul2(pm, tr2(h)), s_inv);
-            let kr = mv2(k, res);
-            x = [xm[0] + kr[0], xm[1] + kr[1]];
-            p = mul2(add2([[1.0, 0.0], [0.0, 1.0]], mul2(k, h), -1.0), pm);
-            let si_r = mv2(s_inv, res);
-            let lambda = res[0] * si_r[0] + res[1] * si_r[1];
-
-            assert_relative_eq!(
-                s_post.x,
-                Vector2::from(x),
-                epsilon = 1e-10,
-                max_relative = 1e-10
-            );
-            assert_relative_eq!(s_post.p, to_m2(p), epsilon = 1e-10, max_relative = 1e-10);
-            assert_relative_eq!(s_k, to_m2(k), epsilon = 1e-10, max_relative = 1e-10);
-            assert_relative_eq!(s_innov.r, Vector2::from(res), epsilon = 1e-10);
-            assert_relative_eq!(s_innov.s, to_m2(s), epsilon = 1e-12, max_relative = 1e-12);
-            assert_relative_eq!(
-                s_innov.s_inv_r(),
-                Vector2::from(si_r),
-                epsilon = 1e-10,
-                max_relative = 1e-10
-            );
-            assert_relative_eq!(
-                s_innov.statistic,
-                lambda,
-                epsilon = 1e-10,
-                max_relative = 1e-10
-            );
+            let reference = reference_step((f, q), (h, r), (x, p), z);
+            reference.assert_matches(&s_post, &s_innov, &s_k);
+            (x, p) = (reference.x, reference.p);
             assert_eq!((s_innov.dof(), d_innov.dof()), (2, 2));
 
             s_est = s_post;

@@ -315,6 +315,17 @@ struct Pending {
     observed: Option<(Vec<f64>, Health)>,
 }
 
+/// The predictor's part of one epoch ([`ChannelState::residual_statistics`]).
+#[derive(Default)]
+struct ResidualStatistics {
+    /// The residual kept for the commit (once the channel is ready).
+    residual: Option<Vec<f64>>,
+    /// The main test's statistic (`None`: it does not run this epoch).
+    main: Option<f64>,
+    /// The drift test's statistic (`None`: no drift test, or it does not run).
+    drift: Option<f64>,
+}
+
 /// What one epoch reports besides the channels' pending changes: the tests that ran and
 /// the `prediction` and `residual` outputs, by channel name.
 #[derive(Default)]
@@ -377,44 +388,13 @@ impl ChannelState {
             }));
         }
         let x = self.input();
-        let yhat = x.as_deref().and_then(|x| self.predict(x));
+        let ResidualStatistics {
+            residual,
+            main: main_value,
+            drift: drift_value,
+        } = self.residual_statistics(x.as_deref(), y, report)?;
+        let stuck_value = self.stuck_statistic(y)?;
         let mut policies = Vec::new();
-        let mut residual = None;
-        let (mut main_value, mut drift_value) = (None, None);
-        if let Some(yhat) = yhat {
-            if yhat.iter().any(|v| !v.is_finite()) {
-                return Err(StepError::Filter(FilterError::NonFinite(
-                    "channel prediction",
-                )));
-            }
-            let r: Vec<f64> = y.iter().zip(&yhat).map(|(a, b)| a - b).collect();
-            if self.ready() {
-                main_value = self.main.evaluate(&r)?;
-                if let Some(d) = &self.drift {
-                    drift_value = match d.evaluate(&r) {
-                        Ok(v) => v.map(|v| v.value),
-                        Err(WindowError::Singular) => None,
-                        Err(_) => {
-                            return Err(StepError::Filter(FilterError::NonFinite(
-                                "channel residual",
-                            )));
-                        }
-                    };
-                }
-                residual = Some(r.clone());
-            }
-            report.prediction.insert(self.config.name.clone(), yhat);
-            report.residual.insert(self.config.name.clone(), r);
-        }
-        let stuck_value = match &self.stuck {
-            Some(s) => match s.evaluate(y) {
-                Ok(v) => v.map(|v| v.value),
-                Err(StuckError::NonFinite | StuckError::Dimension { .. }) => {
-                    return Err(StepError::Filter(FilterError::NonFinite("channel value")));
-                }
-            },
-            None => None,
-        };
         let t = self.tests;
         let main_health =
             Self::run_test(t.main, main_value, dim as u32, bank, report, &mut policies)?;
@@ -453,6 +433,64 @@ impl ChannelState {
             policies,
             observed,
         })
+    }
+
+    /// The predictor's part of an epoch with value `y`: ŷ_k from the history's input
+    /// `x` (none before the history is long enough), then, once the channel is ready,
+    /// `r_k = y_k − ŷ_k` and the main and drift tests' statistics of it. The
+    /// `prediction` and `residual` outputs go to `report`.
+    fn residual_statistics(
+        &self,
+        x: Option<&[f64]>,
+        y: &[f64],
+        report: &mut StepReport,
+    ) -> Result<ResidualStatistics, StepError> {
+        let Some(yhat) = x.and_then(|x| self.predict(x)) else {
+            return Ok(ResidualStatistics::default());
+        };
+        if yhat.iter().any(|v| !v.is_finite()) {
+            return Err(StepError::Filter(FilterError::NonFinite(
+                "channel prediction",
+            )));
+        }
+        let r: Vec<f64> = y.iter().zip(&yhat).map(|(a, b)| a - b).collect();
+        let (mut residual, mut main_value, mut drift_value) = (None, None, None);
+        if self.ready() {
+            main_value = self.main.evaluate(&r)?;
+            if let Some(d) = &self.drift {
+                drift_value = match d.evaluate(&r) {
+                    Ok(v) => v.map(|v| v.value),
+                    Err(WindowError::Singular) => None,
+                    Err(_) => {
+                        return Err(StepError::Filter(FilterError::NonFinite(
+                            "channel residual",
+                        )));
+                    }
+                };
+            }
+            residual = Some(r.clone());
+        }
+        report.prediction.insert(self.config.name.clone(), yhat);
+        report.residual.insert(self.config.name.clone(), r);
+        Ok(ResidualStatistics {
+            residual,
+            main: main_value,
+            drift: drift_value,
+        })
+    }
+
+    /// The stuck test's statistic of the value `y` itself (`None`: no stuck test, or
+    /// none yet).
+    fn stuck_statistic(&self, y: &[f64]) -> Result<Option<f64>, StepError> {
+        match &self.stuck {
+            Some(s) => match s.evaluate(y) {
+                Ok(v) => Ok(v.map(|v| v.value)),
+                Err(StuckError::NonFinite | StuckError::Dimension { .. }) => {
+                    Err(StepError::Filter(FilterError::NonFinite("channel value")))
+                }
+            },
+            None => Ok(None),
+        }
     }
 
     /// What enters the history (module doc): the measurement, through the outlier filter

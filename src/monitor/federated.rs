@@ -50,7 +50,11 @@ mod config;
 mod integrity;
 mod saved;
 
-pub use config::*;
+pub use config::{
+    BetaSection, CNS_DRIFT_DEFAULT_ON, CnsNoise, DEFAULT_CONVERGE_MAX_S, DEFAULT_HAL_M,
+    DVL_DRIFT_DEFAULT_ON, DvlNoise, FederatedConfig, FederatedConfigWire, GNSS_DRIFT_DEFAULT_ON,
+    GnssNoise, ImuSection, InitSigma, MAX_GAP_S, STUCK_DEFAULT_ON,
+};
 
 use nalgebra::{Matrix2, Vector3};
 use serde::{Deserialize, Serialize};

@@ -134,87 +134,13 @@ impl Metrics {
         self.alarm_commit.observe(elapsed);
     }
 
-    /// Renders the Prometheus text exposition.
-    // Over 80 lines: the exposition's metrics one after another (HELP, TYPE, value),
-    // in the order Prometheus shows them; no branch worth a function of its own.
+    /// Renders the Prometheus text exposition: the counters, the sessions' gauges,
+    /// the socket gauges, the latency histograms, then the process's own metrics.
     pub fn render(&self, sessions: usize, gauges: &SessionGauges) -> String {
         let mut out = String::with_capacity(2048);
-        let counter = |out: &mut String, name: &str, help: &str, v: u64| {
-            let _ = writeln!(
-                out,
-                "# HELP {name} {help}\n# TYPE {name} counter\n{name} {v}"
-            );
-        };
-        let gauge = |out: &mut String, name: &str, help: &str, v: f64| {
-            let _ = writeln!(out, "# HELP {name} {help}\n# TYPE {name} gauge\n{name} {v}");
-        };
+        self.render_counters(&mut out);
+        render_session_gauges(&mut out, gauges);
         let get = |a: &AtomicU64| a.load(Ordering::Relaxed);
-        counter(
-            &mut out,
-            "navguard_frames_total",
-            "Ingest frames accepted.",
-            get(&self.frames),
-        );
-        counter(
-            &mut out,
-            "navguard_epochs_total",
-            "Epochs processed.",
-            get(&self.epochs),
-        );
-        counter(
-            &mut out,
-            "navguard_frame_errors_total",
-            "Ingest frames refused with an error event.",
-            get(&self.frame_errors),
-        );
-        counter(
-            &mut out,
-            "navguard_frames_prestepped_total",
-            "Ingest frames stepped while the frame before was committed.",
-            get(&self.frames_prestepped),
-        );
-        counter(
-            &mut out,
-            "navguard_alarms_total",
-            "Alarms raised.",
-            get(&self.alarms),
-        );
-        counter(
-            &mut out,
-            "navguard_warnings_total",
-            "Warnings raised (stored, announced as state events only).",
-            get(&self.warnings),
-        );
-        labelled(
-            &mut out,
-            "navguard_tests_by_consistency",
-            "Tests by the consistency flag of their normalised innovation.",
-            "flag",
-            &[
-                "ok",
-                "overconfident",
-                "underconfident",
-                "correlated",
-                "pending",
-            ],
-            &gauges.consistency,
-        );
-        labelled(
-            &mut out,
-            "navguard_tests_by_state",
-            "Tests by health state.",
-            "state",
-            &["healthy", "suspect", "isolated"],
-            &gauges.states,
-        );
-        labelled(
-            &mut out,
-            "navguard_monitors_by_availability",
-            "Monitors with a protection level, by integrity availability.",
-            "availability",
-            &["converging", "available", "unavailable"],
-            &gauges.availability,
-        );
         gauge(
             &mut out,
             "navguard_sessions",
@@ -243,22 +169,116 @@ impl Metrics {
             "navguard_alarm_commit_seconds",
             "Log entry handed to the store to its commit (queue and shared transaction).",
         );
-        if let Some(rss) = resident_memory_bytes() {
-            gauge(
-                &mut out,
-                "process_resident_memory_bytes",
-                "Resident set size.",
-                rss as f64,
-            );
-        }
-        if let Some(cpu) = process_cpu_seconds() {
-            let name = "process_cpu_seconds_total";
-            let _ = writeln!(
-                out,
-                "# HELP {name} User and system CPU time of the process.\n# TYPE {name} counter\n{name} {cpu}"
-            );
-        }
+        render_process(&mut out);
         out
+    }
+
+    /// The counters of frames, epochs, refusals, alarms and warnings.
+    fn render_counters(&self, out: &mut String) {
+        let get = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        counter(
+            out,
+            "navguard_frames_total",
+            "Ingest frames accepted.",
+            get(&self.frames),
+        );
+        counter(
+            out,
+            "navguard_epochs_total",
+            "Epochs processed.",
+            get(&self.epochs),
+        );
+        counter(
+            out,
+            "navguard_frame_errors_total",
+            "Ingest frames refused with an error event.",
+            get(&self.frame_errors),
+        );
+        counter(
+            out,
+            "navguard_frames_prestepped_total",
+            "Ingest frames stepped while the frame before was committed.",
+            get(&self.frames_prestepped),
+        );
+        counter(
+            out,
+            "navguard_alarms_total",
+            "Alarms raised.",
+            get(&self.alarms),
+        );
+        counter(
+            out,
+            "navguard_warnings_total",
+            "Warnings raised (stored, announced as state events only).",
+            get(&self.warnings),
+        );
+    }
+}
+
+/// A counter: HELP, TYPE and its value.
+fn counter(out: &mut String, name: &str, help: &str, v: u64) {
+    let _ = writeln!(
+        out,
+        "# HELP {name} {help}\n# TYPE {name} counter\n{name} {v}"
+    );
+}
+
+/// A gauge: HELP, TYPE and its value.
+fn gauge(out: &mut String, name: &str, help: &str, v: f64) {
+    let _ = writeln!(out, "# HELP {name} {help}\n# TYPE {name} gauge\n{name} {v}");
+}
+
+/// The sessions' tests by consistency flag and by state, and their monitors by
+/// availability.
+fn render_session_gauges(out: &mut String, gauges: &SessionGauges) {
+    labelled(
+        out,
+        "navguard_tests_by_consistency",
+        "Tests by the consistency flag of their normalised innovation.",
+        "flag",
+        &[
+            "ok",
+            "overconfident",
+            "underconfident",
+            "correlated",
+            "pending",
+        ],
+        &gauges.consistency,
+    );
+    labelled(
+        out,
+        "navguard_tests_by_state",
+        "Tests by health state.",
+        "state",
+        &["healthy", "suspect", "isolated"],
+        &gauges.states,
+    );
+    labelled(
+        out,
+        "navguard_monitors_by_availability",
+        "Monitors with a protection level, by integrity availability.",
+        "availability",
+        &["converging", "available", "unavailable"],
+        &gauges.availability,
+    );
+}
+
+/// The process's resident memory and CPU time, where the platform tells them.
+fn render_process(out: &mut String) {
+    if let Some(rss) = resident_memory_bytes() {
+        gauge(
+            out,
+            "process_resident_memory_bytes",
+            "Resident set size.",
+            rss as f64,
+        );
+    }
+    if let Some(cpu) = process_cpu_seconds() {
+        let name = "process_cpu_seconds_total";
+        let _ = writeln!(
+            out,
+            "# HELP {name} User and system CPU time of the process.\n# TYPE {name} counter\n{name} {cpu}"
+        );
     }
 }
 

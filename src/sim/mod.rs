@@ -8,7 +8,9 @@
 //! sensors ([`sensors`]), injects faults ([`faults`]) and hands the resulting
 //! domain [`crate::epoch::Epoch`]s, each with its truth, to the monitors, the
 //! CLI (`navguard simulate`, which writes them as ingest frames) and the
-//! experiments ([`experiment`]).
+//! experiments ([`experiment`]). [`plot`] draws SVG line charts, for the
+//! experiments' figures and the CLI's load-ramp curve; the layers before `sim`
+//! never plot.
 //!
 //! Reproducibility: every random draw comes from [`rng::stream`], a `StdRng`
 //! seeded from the scenario seed and a fixed stream number, so a scenario is
@@ -20,6 +22,7 @@ pub mod experiment;
 pub mod faults;
 pub mod imu_channel;
 pub mod ins_truth;
+pub mod plot;
 pub mod rimu;
 pub mod rng;
 pub mod scenario;

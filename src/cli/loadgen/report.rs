@@ -183,8 +183,13 @@ pub(super) fn mib(bytes: Option<u64>) -> String {
     bytes.map_or("-".into(), |b| format!("{:.1} MiB", b as f64 / 1048576.0))
 }
 
-/// The report as a text table.
-// Over 80 lines: one table, a straight run of rows in the order it prints them.
+/// One row of the table: the label padded to a column, then the value.
+fn row(out: &mut String, k: &str, v: String) {
+    let _ = writeln!(out, "  {k:<28} {v}");
+}
+
+/// The report as a text table: the run, its throughput, its latencies, what came
+/// back, what the server used, then any failures.
 pub(super) fn render(r: &Report) -> String {
     let mut out = String::new();
     let rate = rate_label(r.rate_hz);
@@ -193,46 +198,69 @@ pub(super) fn render(r: &Report) -> String {
         "loadgen → {}: {} × {} session(s), rate {rate}, batch {}",
         r.url, r.monitor, r.sessions, r.batch
     );
-    let row = |out: &mut String, k: &str, v: String| {
-        let _ = writeln!(out, "  {k:<28} {v}");
-    };
-    row(&mut out, "wall time", format!("{:.2} s", r.wall_s));
+    render_throughput(&mut out, r);
+    render_latency(&mut out, r);
+    render_answers(&mut out, r);
+    render_resources(&mut out, r);
+    for f in &r.failures {
+        row(&mut out, "failure", f.clone());
+    }
+    out
+}
+
+/// Wall time, epochs and frames sent and answered, and their rates.
+fn render_throughput(out: &mut String, r: &Report) {
+    row(out, "wall time", format!("{:.2} s", r.wall_s));
     row(
-        &mut out,
+        out,
         "epochs sent / results",
         format!("{} / {}", thousands(r.epochs_sent), thousands(r.results)),
     );
-    row(&mut out, "frames sent", thousands(r.frames_sent));
+    row(out, "frames sent", thousands(r.frames_sent));
     row(
-        &mut out,
+        out,
         "epochs/s (results)",
         thousands(r.epochs_per_s.round() as u64),
     );
     row(
-        &mut out,
+        out,
         "frames/s (answered)",
         thousands(r.frames_per_s.round() as u64),
     );
-    let pct = |p: &Percentiles| {
-        if p.count == 0 {
-            "-".to_owned()
-        } else {
-            format!(
-                "p50 {}  p99 {}  p99.9 {}  max {} ms  (n = {})",
-                ms(p.p50_us),
-                ms(p.p99_us),
-                ms(p.p999_us),
-                ms(p.max_us),
-                thousands(p.count)
-            )
-        }
-    };
-    row(&mut out, "frame → result latency", pct(&r.frame_latency));
-    row(&mut out, "alarm → event latency", pct(&r.alarm_latency));
+}
+
+/// `p50 …  p99 …  p99.9 …  max … ms  (n = …)`, or `-` with no observation.
+fn percentiles_text(p: &Percentiles) -> String {
+    if p.count == 0 {
+        "-".to_owned()
+    } else {
+        format!(
+            "p50 {}  p99 {}  p99.9 {}  max {} ms  (n = {})",
+            ms(p.p50_us),
+            ms(p.p99_us),
+            ms(p.p999_us),
+            ms(p.max_us),
+            thousands(p.count)
+        )
+    }
+}
+
+/// Frame and alarm latencies, and the server's commit share of the alarm's.
+fn render_latency(out: &mut String, r: &Report) {
+    row(
+        out,
+        "frame → result latency",
+        percentiles_text(&r.frame_latency),
+    );
+    row(
+        out,
+        "alarm → event latency",
+        percentiles_text(&r.alarm_latency),
+    );
     if let Some(c) = r.alarm_commit.filter(|c| c.count > 0) {
         let le = |v: Option<f64>| v.map_or("over the last bucket".into(), |v| format!("≤ {v}"));
         row(
-            &mut out,
+            out,
             "  of which server commit",
             format!(
                 "p50 {}  p99 {} ms  (n = {})",
@@ -242,8 +270,12 @@ pub(super) fn render(r: &Report) -> String {
             ),
         );
     }
+}
+
+/// Alarms and state changes, errors by code, ordering and unanswered frames, sockets.
+fn render_answers(out: &mut String, r: &Report) {
     row(
-        &mut out,
+        out,
         "alarms / state changes",
         format!("{} / {}", r.alarms, r.state_changes),
     );
@@ -256,15 +288,19 @@ pub(super) fn render(r: &Report) -> String {
             .collect::<Vec<_>>()
             .join(", ")
     };
-    row(&mut out, "errors", errors);
+    row(out, "errors", errors);
     row(
-        &mut out,
+        out,
         "out of order / unanswered",
         format!("{} / {}", r.out_of_order, r.unanswered_frames),
     );
-    row(&mut out, "sockets (passes)", thousands(r.passes));
+    row(out, "sockets (passes)", thousands(r.passes));
+}
+
+/// The server's memory (total and per session) and the CPU of both processes.
+fn render_resources(out: &mut String, r: &Report) {
     row(
-        &mut out,
+        out,
         "server RSS base/idle/loaded",
         format!(
             "{} / {} / {}",
@@ -275,7 +311,7 @@ pub(super) fn render(r: &Report) -> String {
     );
     let kib = |b: Option<f64>| b.map_or("-".into(), |b| format!("{:.1} KiB", b / 1024.0));
     row(
-        &mut out,
+        out,
         "memory per session idle/loaded",
         format!(
             "{} / {}",
@@ -285,7 +321,7 @@ pub(super) fn render(r: &Report) -> String {
     );
     let cores = |c: Option<f64>| c.map_or("-".into(), |c| format!("{c:.2}"));
     row(
-        &mut out,
+        out,
         "CPU cores server/loadgen",
         format!(
             "{} / {}{}",
@@ -297,8 +333,4 @@ pub(super) fn render(r: &Report) -> String {
             ))
         ),
     );
-    for f in &r.failures {
-        row(&mut out, "failure", f.clone());
-    }
-    out
 }

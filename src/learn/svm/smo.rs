@@ -86,6 +86,61 @@ struct Smo {
 }
 
 impl Smo {
+    /// The solver at `problem`'s starting point: every variable active, statuses and
+    /// gradients from α.
+    fn new(problem: &Problem<'_>, options: &Options) -> Self {
+        let l = problem.y.len();
+        let mut s = Smo {
+            q: QMatrix::new(
+                problem.x,
+                problem.dim,
+                &problem.y,
+                problem.kernel,
+                options.cache_mb,
+            ),
+            y: problem.y.clone(),
+            p: problem.p.clone(),
+            alpha: problem.alpha.clone(),
+            status: vec![Bound::Free; l],
+            g: Vec::new(),
+            g_bar: Vec::new(),
+            active_set: (0..l).collect(),
+            active_size: l,
+            c_pos: problem.c_pos,
+            c_neg: problem.c_neg,
+            tol: options.tol,
+            unshrink: false,
+        };
+        for i in 0..l {
+            s.update_status(i);
+        }
+        s.init_gradient();
+        s
+    }
+
+    /// The solution after `iterations`, in the caller's sample order.
+    fn solution(&self, iterations: usize) -> Solution {
+        let l = self.l();
+        let rho = self.rho();
+        let objective = (0..l)
+            .map(|i| self.alpha[i] * (self.g[i] + self.p[i]))
+            .sum::<f64>()
+            / 2.0;
+        let mut alpha = vec![0.0; l];
+        let mut gradient = vec![0.0; l];
+        for k in 0..l {
+            alpha[self.active_set[k]] = self.alpha[k];
+            gradient[self.active_set[k]] = self.g[k];
+        }
+        Solution {
+            alpha,
+            rho,
+            objective,
+            iterations,
+            gradient,
+        }
+    }
+
     fn l(&self) -> usize {
         self.y.len()
     }
@@ -304,9 +359,8 @@ impl Smo {
         }
     }
 
-    /// Analytic solution of the two-variable subproblem, clipped to the box.
-    // Over 80 lines: the two-variable analytic step with its box clipping for equal and
-    // opposite labels, written out as in LIBSVM's solver so it can be checked against it.
+    /// Analytic solution of the two-variable subproblem, clipped to the box (libsvm
+    /// `Solver::Solve`'s update of α_i, α_j), then G and Ḡ brought up to date.
     fn update_pair(&mut self, i: usize, j: usize) {
         let active = self.active_size;
         self.q.ensure(i, active);
@@ -315,58 +369,17 @@ impl Smo {
         let (old_i, old_j) = (self.alpha[i], self.alpha[j]);
         let qij = self.q.row(i)[j] as f64;
         let (qdi, qdj) = (self.q.diag[i], self.q.diag[j]);
-        let (mut ai, mut aj) = (old_i, old_j);
-        if self.y[i] != self.y[j] {
+        let (ai, aj) = if self.y[i] != self.y[j] {
             let quad = qdi + qdj + 2.0 * qij;
             let quad = if quad > 0.0 { quad } else { TAU };
             let delta = (-self.g[i] - self.g[j]) / quad;
-            let diff = ai - aj;
-            ai += delta;
-            aj += delta;
-            if diff > 0.0 {
-                if aj < 0.0 {
-                    aj = 0.0;
-                    ai = diff;
-                }
-            } else if ai < 0.0 {
-                ai = 0.0;
-                aj = -diff;
-            }
-            if diff > ci - cj {
-                if ai > ci {
-                    ai = ci;
-                    aj = ci - diff;
-                }
-            } else if aj > cj {
-                aj = cj;
-                ai = cj + diff;
-            }
+            clip_opposite_labels(old_i, old_j, delta, ci, cj)
         } else {
             let quad = qdi + qdj - 2.0 * qij;
             let quad = if quad > 0.0 { quad } else { TAU };
             let delta = (self.g[i] - self.g[j]) / quad;
-            let sum = ai + aj;
-            ai -= delta;
-            aj += delta;
-            if sum > ci {
-                if ai > ci {
-                    ai = ci;
-                    aj = sum - ci;
-                }
-            } else if aj < 0.0 {
-                aj = 0.0;
-                ai = sum;
-            }
-            if sum > cj {
-                if aj > cj {
-                    aj = cj;
-                    ai = sum - cj;
-                }
-            } else if ai < 0.0 {
-                ai = 0.0;
-                aj = sum;
-            }
-        }
+            clip_equal_labels(old_i, old_j, delta, ci, cj)
+        };
         self.alpha[i] = ai;
         self.alpha[j] = aj;
         let (dai, daj) = (ai - old_i, aj - old_j);
@@ -376,18 +389,22 @@ impl Smo {
                 *g += a as f64 * dai + b as f64 * daj;
             }
         }
-        // Keep Ḡ in step when a variable enters or leaves its upper bound.
         for (k, ck) in [(i, ci), (j, cj)] {
-            let was_upper = self.upper(k);
-            self.update_status(k);
-            if was_upper != self.upper(k) {
-                let l = self.l();
-                self.q.ensure(k, l);
-                let sign = if was_upper { -ck } else { ck };
-                let qk = self.q.row(k);
-                for (gb, &v) in self.g_bar.iter_mut().zip(qk) {
-                    *gb += sign * v as f64;
-                }
+            self.update_status_and_g_bar(k, ck);
+        }
+    }
+
+    /// Keeps Ḡ in step when variable `k` (bound `ck`) enters or leaves its upper bound.
+    fn update_status_and_g_bar(&mut self, k: usize, ck: f64) {
+        let was_upper = self.upper(k);
+        self.update_status(k);
+        if was_upper != self.upper(k) {
+            let l = self.l();
+            self.q.ensure(k, l);
+            let sign = if was_upper { -ck } else { ck };
+            let qk = self.q.row(k);
+            for (gb, &v) in self.g_bar.iter_mut().zip(qk) {
+                *gb += sign * v as f64;
             }
         }
     }
@@ -419,42 +436,72 @@ impl Smo {
     }
 }
 
+/// `y_i ≠ y_j`: α_i and α_j both move by `delta` (keeping `α_i − α_j`), then are
+/// clipped back into `[0, C_i] × [0, C_j]` along that line (libsvm's clipping).
+fn clip_opposite_labels(ai: f64, aj: f64, delta: f64, ci: f64, cj: f64) -> (f64, f64) {
+    let (mut ai, mut aj) = (ai, aj);
+    let diff = ai - aj;
+    ai += delta;
+    aj += delta;
+    if diff > 0.0 {
+        if aj < 0.0 {
+            aj = 0.0;
+            ai = diff;
+        }
+    } else if ai < 0.0 {
+        ai = 0.0;
+        aj = -diff;
+    }
+    if diff > ci - cj {
+        if ai > ci {
+            ai = ci;
+            aj = ci - diff;
+        }
+    } else if aj > cj {
+        aj = cj;
+        ai = cj + diff;
+    }
+    (ai, aj)
+}
+
+/// `y_i = y_j`: α_i falls and α_j rises by `delta` (keeping `α_i + α_j`), then both
+/// are clipped back into `[0, C_i] × [0, C_j]` along that line (libsvm's clipping).
+fn clip_equal_labels(ai: f64, aj: f64, delta: f64, ci: f64, cj: f64) -> (f64, f64) {
+    let (mut ai, mut aj) = (ai, aj);
+    let sum = ai + aj;
+    ai -= delta;
+    aj += delta;
+    if sum > ci {
+        if ai > ci {
+            ai = ci;
+            aj = sum - ci;
+        }
+    } else if aj < 0.0 {
+        aj = 0.0;
+        ai = sum;
+    }
+    if sum > cj {
+        if aj > cj {
+            aj = cj;
+            ai = sum - cj;
+        }
+    } else if ai < 0.0 {
+        ai = 0.0;
+        aj = sum;
+    }
+    (ai, aj)
+}
+
 /// Solves `problem`, reporting progress as stage `"smo"` and stopping with
-/// [`LearnError::Cancelled`] when asked.
-// Over 80 lines: LIBSVM's main loop (shrinking, cancellation, the optimality re-check on
-// the full set, progress) kept in one piece so it can be read against the reference.
+/// [`LearnError::Cancelled`] when asked: libsvm's main loop (shrinking, cancellation,
+/// the optimality re-check on the full set), then the solution unpermuted.
 pub fn solve(
     problem: &Problem<'_>,
     options: &Options,
     progress: &dyn Progress,
 ) -> Result<Solution, LearnError> {
     let l = problem.y.len();
-    let mut s = Smo {
-        q: QMatrix::new(
-            problem.x,
-            problem.dim,
-            &problem.y,
-            problem.kernel,
-            options.cache_mb,
-        ),
-        y: problem.y.clone(),
-        p: problem.p.clone(),
-        alpha: problem.alpha.clone(),
-        status: vec![Bound::Free; l],
-        g: Vec::new(),
-        g_bar: Vec::new(),
-        active_set: (0..l).collect(),
-        active_size: l,
-        c_pos: problem.c_pos,
-        c_neg: problem.c_neg,
-        tol: options.tol,
-        unshrink: false,
-    };
-    for i in 0..l {
-        s.update_status(i);
-    }
-    s.init_gradient();
-
+    let mut s = Smo::new(problem, options);
     let mut iter = 0usize;
     let mut counter = l.min(1000) + 1;
     let mut first_gap = None;
@@ -504,20 +551,5 @@ pub fn solve(
         }
         s.update_pair(i, j);
     }
-
-    let rho = s.rho();
-    let objective = (0..l).map(|i| s.alpha[i] * (s.g[i] + s.p[i])).sum::<f64>() / 2.0;
-    let mut alpha = vec![0.0; l];
-    let mut gradient = vec![0.0; l];
-    for k in 0..l {
-        alpha[s.active_set[k]] = s.alpha[k];
-        gradient[s.active_set[k]] = s.g[k];
-    }
-    Ok(Solution {
-        alpha,
-        rho,
-        objective,
-        iterations: iter,
-        gradient,
-    })
+    Ok(s.solution(iter))
 }

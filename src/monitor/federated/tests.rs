@@ -452,15 +452,8 @@ fn fault_free_ship_is_consistent_quiet_and_inside_its_protection_level() {
                 "epoch {k}"
             );
         }
-        // The corrected position against the truth, horizontally.
-        let fixed = Lla {
-            lat: sol.lat.to_radians(),
-            lon: sol.lon.to_radians(),
-            h: sol.h,
-        };
-        let err = geo::local_offset(&fixed, &ship.truth);
         if k >= 10 {
-            worst_ratio = worst_ratio.max(err.xy().norm() / hpl);
+            worst_ratio = worst_ratio.max(horizontal_error_m(&sol, &ship.truth) / hpl);
             max_hpl = max_hpl.max(hpl);
         }
     }
@@ -484,8 +477,22 @@ fn fault_free_ship_is_consistent_quiet_and_inside_its_protection_level() {
         "horizontal error reached {worst_ratio} × HPL"
     );
     assert!(max_hpl < DEFAULT_HAL_M, "HPL {max_hpl} m");
-    // Every aid's χ² test fed its consistency diagnostics with ν (‖ν‖² = λ): healthy epochs
-    // only, the NIS mean a little below the dof (the local priors carry P_g/β).
+    assert_consistency_fed_with_nu(&m);
+}
+
+/// The corrected position's horizontal distance from the truth, m.
+fn horizontal_error_m(sol: &FederatedSolution, truth: &Lla) -> f64 {
+    let fixed = Lla {
+        lat: sol.lat.to_radians(),
+        lon: sol.lon.to_radians(),
+        h: sol.h,
+    };
+    geo::local_offset(&fixed, truth).xy().norm()
+}
+
+/// Every aid's χ² test fed its consistency diagnostics with ν (‖ν‖² = λ): healthy epochs
+/// only, the NIS mean a little below the dof (the local priors carry P_g/β).
+fn assert_consistency_fed_with_nu(m: &FederatedMonitor) {
     for (i, dof) in [6.0, 3.0, 2.0].into_iter().enumerate() {
         let mut c = m.tests().slots()[i].consistency.clone();
         let summary = c.summary().unwrap();

@@ -774,6 +774,20 @@ mod tests {
         }
     }
 
+    /// Up to ten of the entries `query` selects, newest first.
+    async fn first_ten(store: &Store, query: AlarmQuery) -> Vec<AlarmRecord> {
+        let query = AlarmQuery { limit: 10, ..query };
+        store.alarms(&query).await.unwrap()
+    }
+
+    /// `AlarmQuery` for one session's entries.
+    fn of_session(session: &str) -> AlarmQuery {
+        AlarmQuery {
+            session: Some(session.into()),
+            ..Default::default()
+        }
+    }
+
     #[tokio::test]
     async fn alarms_round_trip_newest_first_with_filters_and_clearing() {
         let dir = tempfile::tempdir().unwrap();
@@ -784,26 +798,12 @@ mod tests {
                 .await
                 .unwrap();
         }
-        let all = store
-            .alarms(&AlarmQuery {
-                limit: 10,
-                ..Default::default()
-            })
-            .await
-            .unwrap();
+        let all = first_ten(&store, AlarmQuery::default()).await;
         assert_eq!(
             all.iter().map(|a| a.t).collect::<Vec<_>>(),
             vec![3.0, 2.0, 1.0]
         );
-        let a = store
-            .alarms(&AlarmQuery {
-                session: Some("a".into()),
-                limit: 10,
-                ..Default::default()
-            })
-            .await
-            .unwrap();
-        assert_eq!(a.len(), 2);
+        assert_eq!(first_ten(&store, of_session("a")).await.len(), 2);
         let page = store
             .alarms(&AlarmQuery {
                 before_id: Some(all[0].id),
@@ -817,40 +817,23 @@ mod tests {
             .clear_alarms("a", "m", "residual", Some(9.0), None)
             .await
             .unwrap();
-        let newer = store
-            .alarms(&AlarmQuery {
-                after_id: Some(all[2].id),
-                limit: 10,
-                ..Default::default()
-            })
-            .await
-            .unwrap();
+        let after = AlarmQuery {
+            after_id: Some(all[2].id),
+            ..Default::default()
+        };
+        let newer = first_ten(&store, after).await;
         assert_eq!(
             newer.iter().map(|a| a.t).collect::<Vec<_>>(),
             vec![3.0, 2.0]
         );
-        let a = store
-            .alarms(&AlarmQuery {
-                session: Some("a".into()),
-                limit: 10,
-                ..Default::default()
-            })
-            .await
-            .unwrap();
+        let a = first_ten(&store, of_session("a")).await;
         assert!(a.iter().all(|x| x.cleared_t == Some(9.0)));
         store
             .insert_alarm(alarm("b", 4.0), AlarmKey::default(), None)
             .await
             .unwrap();
         store.clear_session_alarms("b", None).await.unwrap();
-        let b = store
-            .alarms(&AlarmQuery {
-                session: Some("b".into()),
-                limit: 10,
-                ..Default::default()
-            })
-            .await
-            .unwrap();
+        let b = first_ten(&store, of_session("b")).await;
         assert_eq!(
             b.iter().map(|a| a.cleared_t).collect::<Vec<_>>(),
             vec![Some(4.0), Some(2.0)]

@@ -21,12 +21,12 @@
 //! - [`guards`]: frozen GNSS fixes and small DVL biases, with and without the aids' drift
 //!   and stuck tests.
 //! - [`scorecard`]: the per-detector figures every experiment ends with.
-//! - [`plot`]: the SVG line charts.
+//!
+//! The figures are drawn by [`crate::sim::plot`].
 
 pub mod alarms;
 pub mod coloured;
 pub mod guards;
-pub mod plot;
 pub mod ramp;
 pub mod scorecard;
 pub mod seed000;

@@ -467,9 +467,19 @@ fn pair(v: Option<(f64, f64)>, digits: usize) -> String {
     )
 }
 
-/// The text table.
+/// The text table: each drift case against the matched-filter floor, then, when
+/// they ran, the fault-free runs' rates of non-healthy epochs, alarms and warnings.
 pub fn render(r: &RampResult) -> String {
     let mut s = String::new();
+    render_drifts(&mut s, r);
+    if !r.fault_free.is_empty() {
+        render_fault_free(&mut s, r);
+    }
+    s
+}
+
+/// The drift table: its legend, then one row per rate and case.
+fn render_drifts(s: &mut String, r: &RampResult) {
     let p = &r.params;
     let _ = writeln!(
         s,
@@ -521,42 +531,44 @@ pub fn render(r: &RampResult) -> String {
             versus
         );
     }
-    if !r.fault_free.is_empty() {
+}
+
+/// The fault-free table: its legend, then one row per case.
+fn render_fault_free(s: &mut String, r: &RampResult) {
+    let p = &r.params;
+    let _ = writeln!(
+        s,
+        "\nfault-free ship, same seeds, {:.0} s each: GNSS epochs not healthy (χ² test alone; the aid, any GNSS test) as a share and\n\
+         as a multiple of the nominal p_fa per test; alarms = entries into isolated, warnings = into suspect, per fault-free hour;\n\
+         events ÷ nominal = (alarms + warnings) per hour over p_fa × GNSS epochs per hour × GNSS tests under the monitor's spec",
+        p.fault_free_s
+    );
+    let _ = writeln!(
+        s,
+        "{:<34} {:>9} {:>8} {:>16} {:>16} {:>9} {:>9} {:>16}",
+        "case",
+        "p_fa",
+        "epochs",
+        "χ² not healthy",
+        "aid not healthy",
+        "alarms/h",
+        "warn/h",
+        "events ÷ nominal"
+    );
+    for f in &r.fault_free {
         let _ = writeln!(
             s,
-            "\nfault-free ship, same seeds, {:.0} s each: GNSS epochs not healthy (χ² test alone; the aid, any GNSS test) as a share and\n\
-             as a multiple of the nominal p_fa per test; alarms = entries into isolated, warnings = into suspect, per fault-free hour;\n\
-             events ÷ nominal = (alarms + warnings) per hour over p_fa × GNSS epochs per hour × GNSS tests under the monitor's spec",
-            p.fault_free_s
+            "{:<34} {:>9.2e} {:>8} {:>16} {:>16} {:>9.2} {:>9.2} {:>15.2}×",
+            f.case.label(),
+            f.p_fa,
+            f.epochs,
+            format!("{:.3} % {:.1}×", 100.0 * f.chi2_far, f.chi2_far / f.p_fa),
+            format!("{:.3} % {:.1}×", 100.0 * f.aid_far, f.aid_far / f.p_fa),
+            f.alarms_per_hour,
+            f.warnings_per_hour,
+            f.events_over_nominal()
         );
-        let _ = writeln!(
-            s,
-            "{:<34} {:>9} {:>8} {:>16} {:>16} {:>9} {:>9} {:>16}",
-            "case",
-            "p_fa",
-            "epochs",
-            "χ² not healthy",
-            "aid not healthy",
-            "alarms/h",
-            "warn/h",
-            "events ÷ nominal"
-        );
-        for f in &r.fault_free {
-            let _ = writeln!(
-                s,
-                "{:<34} {:>9.2e} {:>8} {:>16} {:>16} {:>9.2} {:>9.2} {:>15.2}×",
-                f.case.label(),
-                f.p_fa,
-                f.epochs,
-                format!("{:.3} % {:.1}×", 100.0 * f.chi2_far, f.chi2_far / f.p_fa),
-                format!("{:.3} % {:.1}×", 100.0 * f.aid_far, f.aid_far / f.p_fa),
-                f.alarms_per_hour,
-                f.warnings_per_hour,
-                f.events_over_nominal()
-            );
-        }
     }
-    s
 }
 
 #[cfg(test)]

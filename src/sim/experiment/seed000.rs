@@ -29,7 +29,6 @@ use std::time::Instant;
 use serde_json::json;
 
 use super::ExperimentError;
-use super::plot::{Chart, Series};
 use super::scorecard::{self, FaultWindow, Scorecard};
 use crate::detect::{Health, PolicyConfig, ThresholdSpec, chi2};
 use crate::epoch::Epoch;
@@ -41,6 +40,7 @@ use crate::monitor::channel::{
 use crate::monitor::{self, MonitorKind, MonitorSpec, Outputs};
 use crate::sim::ads_gnss::{self, AdsGnssParams, FAULT_END_S, FAULT_START_S};
 use crate::sim::faults::FaultKind;
+use crate::sim::plot::{Chart, Series};
 
 /// Seed 000 Table 2: missed-detection rates at p_fa = 0.002, improved then plain, for
 /// the 90 m step, 100 m step, 1 m/s ramp and 2 m/s ramp.
@@ -411,10 +411,51 @@ pub struct Seed000Result {
     pub threshold: f64,
 }
 
+/// Every run's traces: per run, per fault of Table 2, per ([`METHODS`] × [`VARIANCES`])
+/// column; the runs split over `p.threads` (at most 8) worker threads.
+type RunTraces = Vec<Vec<Vec<ChannelTrace>>>;
+
 /// Runs the Monte Carlo part only.
 pub fn monte_carlo(
     p: &Seed000Params,
 ) -> Result<(Vec<CaseResult>, Option<Vec<ChannelTrace>>), ExperimentError> {
+    let runs = run_all(p)?;
+    let mut cases = Vec::new();
+    for (f, (label, _)) in ads_gnss::table2_faults().iter().enumerate() {
+        for (m, method) in METHODS.iter().enumerate() {
+            for (v, (variance, _)) in VARIANCES.iter().enumerate() {
+                let pooled = Pooled::over(&runs, f, m * VARIANCES.len() + v);
+                let card = scorecard::score(
+                    ads_gnss::CHANNEL,
+                    &format!("{} {variance}", if m == 0 { "LW" } else { "plain" }),
+                    &pooled.trace,
+                    &pooled.windows,
+                    Some(pooled.busy_s / pooled.epochs.max(1) as f64),
+                )
+                .with_p_fa(p.p_fa);
+                let paper = PAPER_TABLE2[f];
+                cases.push(CaseResult {
+                    fault: label,
+                    method,
+                    variance,
+                    residual_rms: (pooled.sq / pooled.count.max(1) as f64).sqrt(),
+                    paper_mdr: if m == 0 { paper.0 } else { paper.1 },
+                    card,
+                    runs: runs.len(),
+                });
+            }
+        }
+    }
+    let example = runs
+        .into_iter()
+        .next()
+        .and_then(|mut r| (r.len() > 2).then(|| r.swap_remove(2)));
+    Ok((cases, example))
+}
+
+/// [`one_run`] for every run, on scoped worker threads; the first failure (or a
+/// panicked worker) fails the whole.
+fn run_all(p: &Seed000Params) -> Result<RunTraces, ExperimentError> {
     let threads = p.threads.clamp(1, 8);
     type Run = Result<Vec<Vec<ChannelTrace>>, ExperimentError>;
     let mut per_run: Vec<Option<Run>> = (0..p.runs).map(|_| None).collect();
@@ -435,63 +476,61 @@ pub fn monte_carlo(
             let _ = h.join();
         }
     });
-    let runs: Vec<Vec<Vec<ChannelTrace>>> = per_run
+    per_run
         .into_iter()
         .map(|r| r.unwrap_or_else(|| Err(LearnError::Numerical("worker panicked".into()).into())))
-        .collect::<Result<_, _>>()?;
-    let span = 1000.0; // s between runs laid end to end (flights are 800 s).
-    let mut cases = Vec::new();
-    for (f, (label, _)) in ads_gnss::table2_faults().iter().enumerate() {
-        for (m, method) in METHODS.iter().enumerate() {
-            for (v, (variance, _)) in VARIANCES.iter().enumerate() {
-                let col = m * VARIANCES.len() + v;
-                let mut trace = Vec::new();
-                let mut windows = Vec::new();
-                let (mut busy, mut epochs) = (0.0, 0usize);
-                let (mut sq, mut count) = (0.0, 0usize);
-                for (r, run) in runs.iter().enumerate() {
-                    let off = r as f64 * span;
-                    let tr = &run[f][col];
-                    trace.extend(tr.channel.iter().map(|&(t, h)| (t + off, h)));
-                    windows.push(FaultWindow {
-                        start: FAULT_START_S + off,
-                        end: FAULT_END_S + off,
-                    });
-                    for (&(t, _, h), &res) in tr.samples.iter().zip(&tr.residuals) {
-                        if t < FAULT_START_S && h == Health::Healthy && res.is_finite() {
-                            sq += res * res;
-                            count += 1;
-                        }
-                    }
-                    busy += tr.busy_s;
-                    epochs += tr.epochs;
+        .collect::<Result<_, _>>()
+}
+
+/// One case (fault `f`, column `col`) pooled over the runs, laid end to end.
+struct Pooled {
+    /// The channel's `(t, health)`, each run shifted by its place in the line.
+    trace: Vec<(f64, Health)>,
+    /// Each run's fault window, shifted alike.
+    windows: Vec<FaultWindow>,
+    /// Wall time of the monitor's steps, s.
+    busy_s: f64,
+    /// Epochs stepped.
+    epochs: usize,
+    /// Sum of squared residuals over the healthy epochs before the fault.
+    sq: f64,
+    /// Those epochs.
+    count: usize,
+}
+
+impl Pooled {
+    fn over(runs: &RunTraces, f: usize, col: usize) -> Self {
+        let span = 1000.0; // s between runs laid end to end (flights are 800 s).
+        let mut trace = Vec::new();
+        let mut windows = Vec::new();
+        let (mut busy_s, mut epochs) = (0.0, 0usize);
+        let (mut sq, mut count) = (0.0, 0usize);
+        for (r, run) in runs.iter().enumerate() {
+            let off = r as f64 * span;
+            let tr = &run[f][col];
+            trace.extend(tr.channel.iter().map(|&(t, h)| (t + off, h)));
+            windows.push(FaultWindow {
+                start: FAULT_START_S + off,
+                end: FAULT_END_S + off,
+            });
+            for (&(t, _, h), &res) in tr.samples.iter().zip(&tr.residuals) {
+                if t < FAULT_START_S && h == Health::Healthy && res.is_finite() {
+                    sq += res * res;
+                    count += 1;
                 }
-                let card = scorecard::score(
-                    ads_gnss::CHANNEL,
-                    &format!("{} {variance}", if m == 0 { "LW" } else { "plain" }),
-                    &trace,
-                    &windows,
-                    Some(busy / epochs.max(1) as f64),
-                )
-                .with_p_fa(p.p_fa);
-                let paper = PAPER_TABLE2[f];
-                cases.push(CaseResult {
-                    fault: label,
-                    method,
-                    variance,
-                    residual_rms: (sq / count.max(1) as f64).sqrt(),
-                    paper_mdr: if m == 0 { paper.0 } else { paper.1 },
-                    card,
-                    runs: runs.len(),
-                });
             }
+            busy_s += tr.busy_s;
+            epochs += tr.epochs;
+        }
+        Self {
+            trace,
+            windows,
+            busy_s,
+            epochs,
+            sq,
+            count,
         }
     }
-    let example = runs
-        .into_iter()
-        .next()
-        .and_then(|mut r| (r.len() > 2).then(|| r.swap_remove(2)));
-    Ok((cases, example))
 }
 
 /// Runs both parts.
@@ -605,7 +644,6 @@ fn render_analytic(s: &mut String, r: &Seed000Result) {
 }
 
 /// The text report: part (a), Table 2 beside the paper, delays and tails, scorecard.
-// Over 80 lines: a straight run of table rows, in the order the report prints them.
 pub fn render(r: &Seed000Result) -> String {
     let p = &r.params;
     let mut s = String::new();
@@ -614,6 +652,19 @@ pub fn render(r: &Seed000Result) -> String {
         "Seed 000 — ads-gnss, embedding {}, γ = {}, σ² = {} (standardised), LW k = {}, T_a n = {}, p_fa = {} (T_D = {:.4})\n",
         p.embedding, p.gamma, p.sigma2, p.k, p.n, p.p_fa, r.threshold
     );
+    render_prediction(&mut s, r);
+    render_table2(&mut s, r);
+    render_analytic(&mut s, r);
+    let _ = writeln!(
+        s,
+        "\n(delays and tails in s; tail = time in false alarm after the fault ends at 600 s; the paper: plain ≈ {PAPER_PLAIN_TAIL_S} s)\n"
+    );
+    render_scorecards(&mut s, r);
+    s
+}
+
+/// Part (a): the prediction RMSE of both methods.
+fn render_prediction(s: &mut String, r: &Seed000Result) {
     let (pt, lt) = r.prediction.rmse_truth();
     let (pm, lm) = r.prediction.rmse_measured();
     let _ = writeln!(
@@ -627,6 +678,11 @@ pub fn render(r: &Seed000Result) -> String {
     );
     let _ = writeln!(s, "{:<22} {:>12.3} {:>16.3}", METHODS[0], lt, lm);
     let _ = writeln!(s, "{:<22} {:>12.3} {:>16.3}\n", METHODS[1], pt, pm);
+}
+
+/// Part (b): Table 2's missed-detection rates beside the paper's, with false alarms,
+/// delays, tails and the residual σ of each case.
+fn render_table2(s: &mut String, r: &Seed000Result) {
     let _ = writeln!(
         s,
         "(b) Monte Carlo, {} runs per case; missed-detection rate = fault epochs (400 ≤ t < 600 s) \
@@ -678,11 +734,10 @@ pub fn render(r: &Seed000Result) -> String {
             c.residual_rms,
         );
     }
-    render_analytic(&mut s, r);
-    let _ = writeln!(
-        s,
-        "\n(delays and tails in s; tail = time in false alarm after the fault ends at 600 s; the paper: plain ≈ {PAPER_PLAIN_TAIL_S} s)\n"
-    );
+}
+
+/// The scorecards per fault, pooled over runs.
+fn render_scorecards(s: &mut String, r: &Seed000Result) {
     let _ = writeln!(
         s,
         "Scorecard (docs/methods.md §M19), pooled over runs (recover s: the longest run; SD: min_differences 30):"
@@ -702,7 +757,6 @@ pub fn render(r: &Seed000Result) -> String {
         let _ = writeln!(s, "{f}:");
         s.push_str(&scorecard::render(&cards));
     }
-    s
 }
 
 /// The figures: Fig. 3 (predictions against the truth) and T_a of run 0's 1 m/s ramp.

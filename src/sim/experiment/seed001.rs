@@ -577,7 +577,7 @@ fn render_faults(s: &mut String, r: &Seed001Result) {
 
 /// The figure: T_a against the sample index for each fault mode.
 pub fn plots(r: &Seed001Result) -> Vec<(String, String)> {
-    use super::plot::{Chart, Series};
+    use crate::sim::plot::{Chart, Series};
     let threshold = crate::detect::chi2::threshold(1, r.params.p_fa).unwrap_or(f64::NAN);
     let mut chart = Chart::new(
         "T_a of the gyro channel, faults from k = 80 (seed 001 Figs. 2–3)",

@@ -17,13 +17,13 @@ use rand::seq::SliceRandom;
 use serde_json::{Value, json};
 
 use super::ExperimentError;
-use super::plot::{Chart, Series};
 use super::scorecard::{self, FaultWindow, Scorecard};
 use crate::detect::{Health, PolicyConfig, ThresholdSpec};
 use crate::epoch::Epoch;
 use crate::features::wavelet::{self, WaveletPacketParams};
 use crate::learn::{self, AnyModel, Dataset, LearnError, ModelKind, ModelParams, NoProgress};
 use crate::monitor::{self, MonitorKind, MonitorSpec, Outputs};
+use crate::sim::plot::{Chart, Series};
 use crate::sim::rimu::{self as rsim, GyroFaultKind, RimuSimParams};
 
 /// Seed 002's detection threshold T_D for the FSS test (l' = 6).

@@ -34,8 +34,8 @@ use std::time::Instant;
 use serde_json::json;
 
 use super::ExperimentError;
-use super::plot::{Chart, Series};
 use super::scorecard::{self, FaultWindow, Scorecard};
+use crate::sim::plot::{Chart, Series};
 
 /// The one-class model's ν (the paper's choice): the share of training windows left
 /// outside the boundary, so the nominal rate of flagged clean windows.
@@ -545,10 +545,24 @@ fn pct(v: f64) -> String {
 
 /// Renders the tables: per-flight detection probabilities, the summary beside the
 /// paper's figures, and the scorecards.
-// Over 80 lines: a straight run of table rows, in the order the report prints them.
 pub fn render(r: &Seed003Result) -> String {
-    let p = &r.params;
     let mut s = String::new();
+    render_flights(&mut s, r);
+    render_summary(&mut s, r);
+    for l in &r.levels {
+        let _ = writeln!(
+            s,
+            "\nscorecard, σ² = {} m² (range test, flights end to end; delay/recovery in s)",
+            l.noise_var_m2
+        );
+        s.push_str(&scorecard::render(&l.scorecards));
+    }
+    s
+}
+
+/// The setup, then each noise level's detection probability per test flight.
+fn render_flights(s: &mut String, r: &Seed003Result) {
+    let p = &r.params;
     let _ = writeln!(
         s,
         "seed 003 — TACAN range jumps, one-class SVM {}; window {}, features {}",
@@ -578,6 +592,11 @@ pub fn render(r: &Seed003Result) -> String {
         let _ = writeln!(s);
     }
     let _ = writeln!(s, "(per-flight detection probability p_i, %)\n");
+}
+
+/// One row per noise level: detection, accuracy and false alarms pooled over the
+/// flights, the training set and the support vectors, beside the paper's figure.
+fn render_summary(s: &mut String, r: &Seed003Result) {
     let _ = writeln!(
         s,
         "{:<8} {:>9} {:>9} {:>9} {:>9} {:>9} {:>11} {:>15} {:>8} {:>5}  paper",
@@ -624,15 +643,6 @@ pub fn render(r: &Seed003Result) -> String {
         "\nP = mean of p_i = flagged / anomalous windows per flight; accuracy, TPR, FAR pooled over windows;\n\
          a window is anomalous when it holds a jumped sample. Training on every ⌈total/n⌉-th window."
     );
-    for l in &r.levels {
-        let _ = writeln!(
-            s,
-            "\nscorecard, σ² = {} m² (range test, flights end to end; delay/recovery in s)",
-            l.noise_var_m2
-        );
-        s.push_str(&scorecard::render(&l.scorecards));
-    }
-    s
 }
 
 /// The figures: per-flight detection probability per noise level (the paper's

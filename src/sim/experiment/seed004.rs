@@ -14,7 +14,6 @@
 
 use std::fmt::Write as _;
 
-use super::plot::{Chart, Series};
 use super::scorecard::{self, FaultWindow, Scorecard};
 use super::{ErrorStats, ExperimentError, MonitorRun, fault_windows, run_monitor};
 use crate::detect::{PolicyConfig, ThresholdSpec};
@@ -22,6 +21,7 @@ use crate::epoch::Aid;
 use crate::monitor::federated::FederatedConfigWire;
 use crate::monitor::guards::{DriftConfigWire, StuckConfigWire};
 use crate::monitor::{MonitorKind, MonitorSpec};
+use crate::sim::plot::{Chart, Series};
 use crate::sim::{self, Channel, Fault, Scenario};
 
 /// Seed 004's two thresholds.

@@ -1,7 +1,9 @@
-//! The experiments' figures (seed 004 Figs. 3–10) as SVG line charts, drawn by
-//! `plotters`' SVG backend: axes, ticks, labels, several series with a legend,
-//! an optional horizontal threshold line and an optional logarithmic y axis.
-//! Pure: returns the document as a `String`; the CLI writes it to a file.
+//! SVG line charts, drawn by `plotters`' SVG backend: axes, ticks, labels, several
+//! series with a legend, an optional horizontal threshold line and an optional
+//! logarithmic y axis. They draw the experiments' figures ([`crate::sim::experiment`],
+//! e.g. seed 004 Figs. 3–10) and `navguard loadgen --ramp`'s curve; nothing before
+//! `sim` in the flow plots. Pure: returns the document as a `String`; the CLI writes
+//! it to a file.
 //!
 //! What this module adds to `plotters`: the axis ranges (fitted to the data and
 //! the threshold, 1–2–5 ticks, whole decades on a log axis), the thinning of long

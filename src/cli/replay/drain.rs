@@ -1,0 +1,116 @@
+//! The end of a replay: the session's `/stats`, polled until the server has dealt
+//! with every frame sent and the socket has delivered the alarms the stats count.
+
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+use navguard::session::SessionStats;
+use tokio::time::Instant;
+
+use super::stream::Sent;
+use super::summary::Tally;
+use crate::cli::http::Endpoint;
+
+/// Longest the server may go without processing a frame while we wait for
+/// the last ones.
+const DRAIN_STALL: Duration = Duration::from_secs(30);
+/// Longest wait for alarms the stats count but the socket has not delivered.
+const ALARM_GRACE: Duration = Duration::from_secs(5);
+
+/// The session's `/stats` (`path` is `/api/v1/sessions/{id}`).
+pub(super) async fn stats(endpoint: &Endpoint, path: &str) -> anyhow::Result<SessionStats> {
+    let (status, body) = endpoint.call("GET", &format!("{path}/stats")).await?;
+    if status != 200 {
+        bail!("GET {path}/stats: HTTP {status}: {body}");
+    }
+    parse_stats(&body)
+}
+
+fn parse_stats(body: &str) -> anyhow::Result<SessionStats> {
+    serde_json::from_str(body).context("the stats do not have the session stats' shape")
+}
+
+/// Waits until the server has dealt with every frame sent (accepted ones
+/// counted in `/stats`, refused ones answered with an `error`) and the socket
+/// has delivered the alarms the stats count. Returns the final stats.
+pub(super) async fn drain(
+    endpoint: &Endpoint,
+    path: &str,
+    baseline: &SessionStats,
+    sent: &Sent,
+    tally: &Arc<Mutex<Tally>>,
+) -> anyhow::Result<SessionStats> {
+    let base_frames = baseline.frames;
+    let base_alarms = baseline.alarms();
+    let mut last_progress = (Instant::now(), u64::MAX);
+    loop {
+        let current = stats(endpoint, path).await?;
+        let (errors, numerical, closed) = {
+            let t = tally.lock().unwrap_or_else(|p| p.into_inner());
+            (t.error_total, t.numerical, t.closed.clone())
+        };
+        // A frame refused for a numerical failure was counted as accepted too.
+        let handled = current.frames.saturating_sub(base_frames) + errors - numerical;
+        if handled >= sent.frames {
+            break;
+        }
+        if let Some(reason) = closed {
+            bail!(
+                "the server closed the ingest socket before handling every frame ({handled} of {}): {reason}",
+                sent.frames
+            );
+        }
+        if handled != last_progress.1 {
+            last_progress = (Instant::now(), handled);
+        } else if last_progress.0.elapsed() > DRAIN_STALL {
+            bail!(
+                "the server handled {handled} of {} frames and then nothing for {} s",
+                sent.frames,
+                DRAIN_STALL.as_secs()
+            );
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let deadline = Instant::now() + ALARM_GRACE;
+    loop {
+        let current = stats(endpoint, path).await?;
+        let want = current.alarms().saturating_sub(base_alarms);
+        let got = tally.lock().unwrap_or_else(|p| p.into_inner()).alarm_total;
+        if got >= want {
+            return Ok(current);
+        }
+        if Instant::now() > deadline {
+            eprintln!("warning: the stats count {want} alarms, the socket delivered {got}");
+            return Ok(current);
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use navguard::monitor::MonitorKind;
+    use navguard::session::stats::TestStats;
+
+    #[test]
+    fn stats_are_read_as_the_services_session_stats() {
+        let test = |alarms: u64| {
+            let mut t = TestStats::new(1, 10.0);
+            t.alarms = alarms;
+            t
+        };
+        let body = serde_json::json!({"session": "s", "connected": true, "frames": 4,
+            "epochs": 8, "frame_errors": 0, "last_t": 0.8, "last_frame_at_ms": null,
+            "published_at_ms": 0, "epochs_per_s": 0.0,
+            "monitors": {"a": {"type": "linear", "epochs": 8, "worst_test_ratio": null,
+                               "tests": {"x": test(2), "y": test(1)}},
+                         "b": {"type": "federated", "epochs": 8, "worst_test_ratio": 0.5,
+                               "tests": {"z": test(4)}}}});
+        let stats = parse_stats(&body.to_string()).unwrap();
+        assert_eq!((stats.frames, stats.alarms()), (4, 7));
+        assert_eq!(stats.monitors["b"].kind, MonitorKind::Federated);
+        assert!(parse_stats("{}").is_err());
+    }
+}
