@@ -6,19 +6,19 @@
 //! # Layout
 //!
 //! Data flows one way; the folders follow it. Everything above `service` is a
-//! pure numerical core: no async, no I/O, usable as a library. A module may use
-//! the ones listed before it, never one after it (`tests/layering.rs` checks this
-//! for production code; tests may cross layers).
+//! pure core: no async, no I/O, usable as a library. A module may use the ones
+//! listed before it, never one after it (`tests/layering.rs` checks this for
+//! production code; tests may cross layers).
 //!
 //! - [`simd`]: whether the hot kernels run their AVX2 builds (`NAVGUARD_NO_AVX2`): a
 //!   leaf that every layer may use.
 //! - [`epoch`]: the domain epoch (sensor blocks in SI units and radians) and the
 //!   federated aids: a leaf that every layer may use.
 //! - [`geo`]: WGS84 geodesy (frames, radii, Earth and transport rates).
-//! - [`filter`]: the generic Kalman filter (fixed- and dynamic-size), and the
-//!   INS error model and federated fusion built on it.
 //! - [`detect`]: χ² thresholds and the non-central χ², test statistics, and the
 //!   decision policies (`classic`, `counters`) that turn statistics into health.
+//! - [`filter`]: the generic Kalman filter (fixed- and dynamic-size), and the
+//!   INS error model and federated fusion built on it.
 //! - [`learn`]: kernels, LS-SVM and SVM models (for the learned detectors).
 //! - [`features`]: time-domain and wavelet-packet features.
 //! - [`monitor`]: the `Monitor` trait and one monitor per sensor set; each

@@ -1,7 +1,7 @@
-//! Guards the one-way layering that `src/lib.rs` documents: the numerical core
-//! (`epoch.rs`, `geo/ filter/ detect/ learn/ features/`) imports nothing above it,
-//! `monitor/` imports neither the simulator nor the service nor the CLI, no layer
-//! below `service/` touches the async or storage crates, nothing before `sim/` plots,
+//! Guards the one-way layering that `src/lib.rs` documents: each layer of `simd.rs,
+//! epoch.rs, geo/, detect/, filter/, learn/, features/, monitor/, session/, sim/,
+//! service/` imports none after it, no layer below `service/` touches the async or
+//! storage crates or the CLI, nothing before `sim/` plots,
 //! and only the CLI's `experiment` command reaches into `sim::experiment` (the rest
 //! of the CLI and the service use `sim` and its `plot`). Test code (after a file's first
 //! `#[cfg(test)]`, and files that are whole test modules) may cross layers.
@@ -9,33 +9,44 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
-/// Each rule: the folders (or files) under `src/` it covers and the paths they may not use.
+/// The layers of `src/lib.rs`, in order: production code of each may use the ones before
+/// it, never one after it (docs/architecture.md §A1).
+const LAYERS: &[(&str, &str)] = &[
+    ("simd.rs", "simd"),
+    ("epoch.rs", "epoch"),
+    ("geo", "geo"),
+    ("detect", "detect"),
+    ("filter", "filter"),
+    ("learn", "learn"),
+    ("features", "features"),
+    ("monitor", "monitor"),
+    ("session", "session"),
+    ("sim", "sim"),
+    ("service", "service"),
+];
+
+/// Each further rule: the folders (or files) under `src/` it covers and the paths they
+/// may not use.
 const RULES: &[(&[&str], &[&str])] = &[
     (
         &[
-            "simd.rs", "epoch.rs", "geo", "filter", "detect", "learn", "features",
+            "simd.rs", "epoch.rs", "geo", "detect", "filter", "learn", "features", "monitor",
+            "session", "sim",
         ],
         &[
-            "crate::monitor",
-            "crate::sim",
-            "crate::service",
-            "crate::cli",
+            "tokio",
+            "axum",
+            "sqlx",
+            "tower",
+            "reqwest",
             "navguard::",
+            "crate::cli",
         ],
     ),
     (
-        &["monitor"],
-        &["crate::sim", "crate::service", "crate::cli", "navguard::"],
-    ),
-    (
         &[
-            "simd.rs", "epoch.rs", "geo", "filter", "detect", "learn", "features", "monitor", "sim",
-        ],
-        &["tokio", "axum", "sqlx", "tower", "reqwest"],
-    ),
-    (
-        &[
-            "simd.rs", "epoch.rs", "geo", "filter", "detect", "learn", "features", "monitor",
+            "simd.rs", "epoch.rs", "geo", "detect", "filter", "learn", "features", "monitor",
+            "session",
         ],
         &["plotters"],
     ),
@@ -53,6 +64,23 @@ const RULES: &[(&[&str], &[&str])] = &[
         &["crate::sim::experiment", "navguard::sim::experiment"],
     ),
 ];
+
+/// Every rule: each layer against the layers after it, then [`RULES`].
+fn rules() -> Vec<(Vec<&'static str>, Vec<String>)> {
+    let mut rules: Vec<(Vec<&'static str>, Vec<String>)> = LAYERS
+        .iter()
+        .enumerate()
+        .map(|(i, (root, _))| {
+            let later = LAYERS[i + 1..].iter().map(|(_, m)| format!("crate::{m}"));
+            (vec![*root], later.collect())
+        })
+        .collect();
+    for (roots, forbidden) in RULES {
+        let forbidden = forbidden.iter().map(|f| (*f).to_owned()).collect();
+        rules.push((roots.to_vec(), forbidden));
+    }
+    rules
+}
 
 fn rust_files(path: &Path, out: &mut Vec<PathBuf>) {
     if path.is_dir() {
@@ -104,13 +132,14 @@ fn offending_lines(code: &str, forbidden: &[&str]) -> Vec<String> {
 fn lower_layers_never_import_upper_layers() {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
     let mut violations = Vec::new();
-    for (roots, forbidden) in RULES {
-        for root in *roots {
+    for (roots, forbidden) in rules() {
+        let forbidden: Vec<&str> = forbidden.iter().map(String::as_str).collect();
+        for root in roots {
             let mut files = Vec::new();
             rust_files(&src.join(root), &mut files);
             assert!(!files.is_empty(), "no Rust files under src/{root}");
             for file in files {
-                for line in offending_lines(&production_code(&file), forbidden) {
+                for line in offending_lines(&production_code(&file), &forbidden) {
                     violations.push(format!(
                         "{}:{line}",
                         file.strip_prefix(&src).unwrap_or(&file).display()

@@ -8,7 +8,6 @@ use serde_json::ser::{CompactFormatter, Formatter};
 use super::ingest::{FrameError, FrameErrorCode};
 use crate::monitor::federated::FederatedSolution;
 use crate::monitor::{MonitorReport, Outputs, TestOutcome};
-pub use crate::session::{AlarmRecord, AvailabilityChange, Severity, StateChange};
 
 // ------------------------------------------------------------- server messages
 

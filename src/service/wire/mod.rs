@@ -6,15 +6,23 @@
 //! - [`ingest`]: ingest frames (epochs in, their error codes) and epochs back to frames.
 //! - [`events`]: what the server sends out (results, alarms, state changes, errors).
 //!
-//! Every item is re-exported here, so `wire::X` names it wherever it lives.
+//! Every item is re-exported here by name, so `wire::X` names it wherever it lives. The
+//! session core's records (alarm-log entries, state and availability changes) and its
+//! threshold bodies are part of the wire contract too, and are named here beside them.
 
 pub mod events;
 pub mod ingest;
 pub mod rest;
 
-pub use events::*;
-pub use ingest::*;
-pub use rest::*;
+pub use crate::session::{
+    AlarmLevel, AlarmRecord, AvailabilityChange, Severity, StateChange, TestThreshold,
+    TestThresholdSpec, ThresholdUpdate, ThresholdView,
+};
+pub use events::{
+    ErrorEvent, RESULT_FRAME_BYTES, Tagged, result_frame, tagged, write_result_frame,
+};
+pub use ingest::{FrameError, FrameErrorCode, epoch_to_wire, parse_frame};
+pub use rest::{CreateSession, MonitorSpecWire, calibrated_tests};
 
 #[cfg(test)]
 mod tests {

@@ -7,9 +7,7 @@ use serde::{Deserialize, Serialize};
 use crate::detect::PolicyConfig;
 use crate::monitor::MonitorKind;
 
-pub use crate::session::{
-    AlarmLevel, TestThreshold, TestThresholdSpec, ThresholdUpdate, ThresholdView,
-};
+use crate::session::{AlarmLevel, TestThresholdSpec};
 
 /// `POST /api/v1/sessions` body.
 #[derive(Debug, Clone, Serialize, Deserialize)]
