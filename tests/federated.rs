@@ -1,5 +1,5 @@
 //! Integration tests of the federated INS/GNSS/DVL/CNS monitor on the simulated
-//! ship (issue 3 item 9, issue 12): the counter policy's walk on seed 004's GNSS jump,
+//! ship: the counter policy's walk on seed 004's GNSS jump,
 //! false isolations without faults (every test, the drift and stuck tests included), a
 //! DVL fault against the fused covariance, the counters' advantage over the traditional
 //! and classic policies on several seeds, a slow GNSS drift caught by `gnss.drift`, a
@@ -300,7 +300,7 @@ fn the_counters_advantage_at_threshold_20_holds_on_three_seeds() {
     }
 }
 
-/// The default monitor config of `scenario` under counters at p_fa 1e-3 (the issue's
+/// The default monitor config of `scenario` under counters at p_fa 1e-3 (the target
 /// server setting), as the REST layer builds it.
 fn default_spec(scenario: &Scenario) -> MonitorSpec {
     MonitorSpec {
@@ -317,7 +317,7 @@ fn default_spec(scenario: &Scenario) -> MonitorSpec {
 
 #[test]
 fn a_slow_gnss_drift_is_excluded_by_gnss_drift_long_before_the_chi2_test_would() {
-    // 1 m/s north-east from 600 s (issue 12 item 3): the per-epoch χ² alone excludes it
+    // 1 m/s north-east from 600 s: the per-epoch χ² alone excludes it
     // after about 50 m; the drift test after about 18 m (the matched-test floor is 15 m).
     let faults = navguard::sim::experiment::ramp::ramp_faults(1.0, 600.0);
     let scenario = ship_1hz(6, faults, 720.0);

@@ -1,4 +1,4 @@
-//! Backpressure and fairness (issue 7 item 3, docs/performance.md): a client that sends
+//! Backpressure and fairness (docs/performance.md): a client that sends
 //! faster than its session is processed (and does not read its results) slows
 //! only its own socket; another session's epochs keep being answered, each in
 //! order; once the flooding client reads again, every one of its epochs is

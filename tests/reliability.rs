@@ -1,7 +1,7 @@
-//! Issue 13's defects, each with the test that failed before its fix: a frame refused
-//! by one monitor still commits and announces what the others did with it; threshold,
-//! policy and delete changes are stored in the order they were acknowledged (checked
-//! across restarts); a heavy session cannot stall the runtime or another session.
+//! Reliability of a session's writes: a frame refused by one monitor still commits and
+//! announces what the others did with it; threshold, policy and delete changes are
+//! stored in the order they were acknowledged (checked across restarts); a heavy session
+//! cannot stall the runtime or another session.
 
 mod common;
 
@@ -21,7 +21,7 @@ fn walk(name: &str, r: f64) -> Value {
     })
 }
 
-/// The issue's frames: z = 0 three times, 1e152 five times, 1e200, 1e152 three times.
+/// The frames: z = 0 three times, 1e152 five times, 1e200, 1e152 three times.
 /// With r = 1e300 the first monitor's λ stays finite throughout (1e4, then 1e100); with
 /// r = 1 the second monitor's λ overflows at 1e200 and that epoch fails for it alone.
 fn issue_zs() -> Vec<f64> {

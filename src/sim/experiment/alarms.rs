@@ -25,7 +25,7 @@ use crate::monitor::{self, MonitorConfig, MonitorKind, MonitorSpec};
 use crate::session::Severity;
 use crate::sim::{self, Scenario, Track};
 
-/// The target: at most this many alarms per fault-free hour per session.
+/// The target: at most this many alarms per fault-free hour per session.
 pub const TARGET_ALARMS_PER_HOUR: f64 = 1.0;
 
 /// Which monitor configuration a row is.

@@ -1,4 +1,4 @@
-//! The coloured-residual calibration experiment (issue 12 item 1, docs/methods.md §M20):
+//! The coloured-residual calibration experiment (docs/methods.md §M20):
 //! is T_a's false-alarm rate what its `p_fa` says when the channel's residual is not
 //! white? A slow two-tone signal with AR(1) noise and a slow Gauss–Markov wander is
 //! predicted by the `channel` monitor's online LS-SVM (seed 001's predictor), and its

@@ -40,7 +40,7 @@ use crate::sim::{self, Channel, Fault, FaultKind, Scenario, SimError};
 /// The drift rates, m/s.
 pub const RATES_MPS: [f64; 4] = [0.5, 1.0, 2.0, 5.0];
 
-/// The false-alarm probability of the target cases (the server setting).
+/// The false-alarm probability of the target cases (the server setting they target).
 pub const TARGET_P_FA: f64 = 1e-3;
 
 /// One configuration of the monitor.
@@ -105,7 +105,7 @@ impl RampCase {
 }
 
 /// The default cases: seed 004's thresholds under classic and counters (per-epoch χ²
-/// only), then the server setting (counters, p_fa 1e-3) without and with the
+/// only), then the target server setting (counters, p_fa 1e-3) without and with the
 /// drift test.
 pub fn default_cases() -> Vec<RampCase> {
     let mut cases = Vec::new();
@@ -633,7 +633,7 @@ mod tests {
         assert!((lambda - 10.8).abs() < 0.3, "{lambda}");
         let d = matched_floor_m(1.0, 10.0, 1.0, 1e-3);
         assert!((d - (300.0 * lambda).cbrt()).abs() < 1e-9);
-        // The 11–18 m at 0.5 to 2 m/s.
+        // The target's 11–18 m at 0.5 to 2 m/s.
         assert!((11.0..12.5).contains(&matched_floor_m(0.5, 10.0, 1.0, 1e-3)));
         assert!((17.5..19.5).contains(&matched_floor_m(2.0, 10.0, 1.0, 1e-3)));
     }
