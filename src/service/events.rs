@@ -99,6 +99,40 @@ async fn first_stats(state: &AppState, cluster: &Cluster, id: &str) -> Option<St
     (answer.status == 200).then(|| wire::tagged("stats", &stats))
 }
 
+/// Relays one event from the bus to the socket; false when the socket is done (the bus
+/// closed, the session ended, an event was missed, or the client went away).
+async fn relay(
+    socket: &mut WebSocket,
+    event: Option<async_nats::Message>,
+    order: &mut bus::SeqCheck,
+    cluster: &Cluster,
+) -> bool {
+    let Some(message) = event else {
+        close_socket(socket, 1011, "the event bus closed; reconnect").await;
+        return false;
+    };
+    if bus::is_end(message.headers.as_ref()) {
+        let reason = "subscriber too slow or session gone; reconnect and re-read /api/v1/alarms";
+        close_socket(socket, 1008, reason).await;
+        return false;
+    }
+    if let Some((epoch, seq)) = bus::position(message.headers.as_ref())
+        && !order.accept(epoch, seq)
+    {
+        cluster.counters.event_gaps.fetch_add(1, Ordering::Relaxed);
+        let reason = "missed events; reconnect and re-read /api/v1/alarms";
+        close_socket(socket, 1008, reason).await;
+        return false;
+    }
+    let Ok(text) = std::str::from_utf8(&message.payload) else {
+        return true;
+    };
+    socket
+        .send(Message::Text(Utf8Bytes::from(text)))
+        .await
+        .is_ok()
+}
+
 /// An observer on a cluster node: the session's events and statistics from NATS. A gap
 /// in the events' sequence closes the socket with 1008, as a local subscriber too slow for
 /// its queue is closed: the client re-reads `/api/v1/alarms?after=ID`. When the node starts
@@ -150,23 +184,7 @@ async fn run_cluster(mut socket: WebSocket, state: AppState, cluster: Arc<Cluste
                 break;
             }
             event = events.next() => {
-                let Some(message) = event else {
-                    close_socket(&mut socket, 1011, "the event bus closed; reconnect").await;
-                    break;
-                };
-                if bus::is_end(message.headers.as_ref()) {
-                    close_socket(&mut socket, 1008, "subscriber too slow or session gone; reconnect and re-read /api/v1/alarms").await;
-                    break;
-                }
-                if let Some((epoch, seq)) = bus::position(message.headers.as_ref())
-                    && !order.accept(epoch, seq)
-                {
-                    cluster.counters.event_gaps.fetch_add(1, Ordering::Relaxed);
-                    close_socket(&mut socket, 1008, "missed events; reconnect and re-read /api/v1/alarms").await;
-                    break;
-                }
-                let Ok(text) = std::str::from_utf8(&message.payload) else { continue };
-                if socket.send(Message::Text(Utf8Bytes::from(text))).await.is_err() {
+                if !relay(&mut socket, event, &mut order, &cluster).await {
                     break;
                 }
             }

@@ -136,6 +136,48 @@ fn on_text(text: &str, link: (u64, bool), state: &AppState) -> Next {
     }
 }
 
+/// What one read from the client means for the socket's loop.
+enum Read {
+    /// A frame's text.
+    Text(Utf8Bytes),
+    /// A frame refused before parsing (binary, not UTF-8).
+    Refuse(FrameError),
+    /// Nothing to do (ping and pong are answered by the protocol layer).
+    Skip,
+    /// The socket ends: the client closed (answered), went away, or broke the protocol.
+    End,
+}
+
+/// Reads the text of a frame from what the socket gave; a Close is answered here.
+async fn read(
+    socket: &mut WebSocket,
+    incoming: Option<Result<Message, axum::Error>>,
+    session: &str,
+) -> Read {
+    match incoming {
+        Some(Ok(Message::Text(text))) => Read::Text(text),
+        Some(Ok(Message::Binary(bytes))) => match std::str::from_utf8(&bytes) {
+            Ok(s) => Read::Text(Utf8Bytes::from(s)),
+            Err(_) => Read::Refuse(FrameError::new(
+                FrameErrorCode::MalformedJson,
+                "binary frame is not UTF-8 JSON",
+            )),
+        },
+        Some(Ok(Message::Close(_))) => {
+            answer_close(socket).await;
+            Read::End
+        }
+        None => Read::End,
+        Some(Ok(_)) => Read::Skip,
+        Some(Err(e)) => {
+            if !close_if_too_big(socket, e).await {
+                tracing::debug!(session = %session, "ingest socket error");
+            }
+            Read::End
+        }
+    }
+}
+
 async fn run(mut socket: WebSocket, state: AppState, handle: SessionHandle, link: IngestLink) {
     let (stream, record) = (link.stream, link.record);
     let mut outgoing = link.outgoing;
@@ -185,28 +227,14 @@ async fn run(mut socket: WebSocket, state: AppState, handle: SessionHandle, link
                 Err(_) => break,
             },
             incoming = socket.recv(), if pending.is_none() => {
-                let text = match incoming {
-                    Some(Ok(Message::Text(text))) => text,
-                    Some(Ok(Message::Binary(bytes))) => match std::str::from_utf8(&bytes) {
-                        Ok(s) => Utf8Bytes::from(s),
-                        Err(_) => {
-                            let e = FrameError::new(FrameErrorCode::MalformedJson, "binary frame is not UTF-8 JSON");
-                            if send_error(&mut socket, &state, &e).await.is_err() { break; }
-                            continue;
-                        }
-                    },
-                    Some(Ok(Message::Close(_))) => {
-                        answer_close(&mut socket).await;
-                        break;
+                let text = match read(&mut socket, incoming, handle.id()).await {
+                    Read::Text(text) => text,
+                    Read::Refuse(e) => {
+                        if send_error(&mut socket, &state, &e).await.is_err() { break; }
+                        continue;
                     }
-                    None => break,
-                    Some(Ok(_)) => continue, // ping/pong are answered by the protocol layer
-                    Some(Err(e)) => {
-                        if !close_if_too_big(&mut socket, e).await {
-                            tracing::debug!(session = %handle.id(), "ingest socket error");
-                        }
-                        break;
-                    }
+                    Read::Skip => continue,
+                    Read::End => break,
                 };
                 match on_text(&text, (stream, record), &state) {
                     // Straight into the actor's queue when it has room (one pass of this

@@ -352,7 +352,8 @@ mod tests {
         }
     }
 
-    /// Reports of every monitor kind, with awkward numbers and names.
+    /// Reports of every monitor kind, with awkward numbers and names. Over 80 lines: one
+    /// fixture, read as a table of cases.
     fn reports() -> Vec<(&'static str, MonitorReport)> {
         let tests = vec![
             outcome("cns", 1.25e-7, 11.345, 2, Health::Healthy),

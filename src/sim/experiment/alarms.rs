@@ -398,6 +398,13 @@ pub fn render(r: &AlarmsResult) -> String {
             x.integrity[2]
         );
     }
+    render_faults(&mut s, r);
+    render_verdicts(&mut s, r);
+    s
+}
+
+/// The injected faults' first warning and alarm, per session.
+fn render_faults(s: &mut String, r: &AlarmsResult) {
     let _ = writeln!(
         s,
         "\ninjected faults (first warning / first alarm after onset, any test of the faulted aid):"
@@ -429,6 +436,10 @@ pub fn render(r: &AlarmsResult) -> String {
             faults.join("; ")
         );
     }
+}
+
+/// One line per configuration: the pooled rate and whether the targets hold.
+fn render_verdicts(s: &mut String, r: &AlarmsResult) {
     for config in [
         AlarmsConfig::Defaults,
         AlarmsConfig::ChiSquareOnly,
@@ -447,7 +458,6 @@ pub fn render(r: &AlarmsResult) -> String {
             );
         }
     }
-    s
 }
 
 #[cfg(test)]
