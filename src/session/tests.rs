@@ -174,6 +174,22 @@ fn state(
     )
 }
 
+/// Monitor `m`'s availability change to `to`, as [`brief`] shows it.
+fn availability(to: &str) -> (&'static str, String, String, String, Option<Severity>) {
+    ("availability", "m".into(), String::new(), to.into(), None)
+}
+
+/// Test `r`'s standing alarm in isolated, as [`brief`] shows it.
+fn standing_r() -> (&'static str, String, String, String, Option<Severity>) {
+    (
+        "standing",
+        "m".into(),
+        "r".into(),
+        "Isolated".into(),
+        Some(Severity::Alarm),
+    )
+}
+
 #[test]
 fn under_the_default_level_suspect_is_a_warning_isolated_an_alarm_and_healthy_clears() {
     let mut core = one(AlarmLevel::Isolated);
@@ -246,22 +262,7 @@ fn while_converging_every_change_is_a_warning_and_convergence_raises_the_standin
     let effects = run(&mut core, &epoch(4.0, &[20.0], Some(1)));
     assert_eq!(
         brief(&effects),
-        vec![
-            (
-                "availability",
-                "m".into(),
-                String::new(),
-                "available".into(),
-                None
-            ),
-            (
-                "standing",
-                "m".into(),
-                "r".into(),
-                "Isolated".into(),
-                Some(Severity::Alarm)
-            ),
-        ]
+        vec![availability("available"), standing_r(),]
     );
     let Effect::Standing(entry) = &effects[1] else {
         unreachable!()
@@ -283,20 +284,8 @@ fn a_change_on_the_epoch_that_converges_is_a_warning_then_raised_as_an_alarm() {
         brief(&effects),
         vec![
             state("r", I, Some(Severity::Warning)),
-            (
-                "availability",
-                "m".into(),
-                String::new(),
-                "available".into(),
-                None
-            ),
-            (
-                "standing",
-                "m".into(),
-                "r".into(),
-                "Isolated".into(),
-                Some(Severity::Alarm)
-            ),
+            availability("available"),
+            standing_r(),
         ]
     );
 }
@@ -350,16 +339,7 @@ fn unavailable_is_an_availability_change_never_an_alarm_and_raises_nothing_stand
         run(&mut core, &epoch(k as f64, &[20.0], Some(1)));
     }
     let effects = run(&mut core, &epoch(3.0, &[20.0], Some(2)));
-    assert_eq!(
-        brief(&effects),
-        vec![(
-            "availability",
-            "m".into(),
-            String::new(),
-            "unavailable".into(),
-            None
-        )]
-    );
+    assert_eq!(brief(&effects), vec![availability("unavailable")]);
 }
 
 #[test]
