@@ -16,6 +16,8 @@ pub enum Refused {
     Duplicate,
     /// The node holds its limit of sessions.
     Full,
+    /// It was registered, and removed again (deleted) before it could be read back.
+    Gone,
 }
 
 /// Registers a started actor, or stops it and says why not.
@@ -34,7 +36,7 @@ pub async fn register(
         });
     }
     // The registered actor (a concurrent delete may have removed it: then it is gone).
-    registry.get(&id).ok_or(Refused::Duplicate)
+    registry.get(&id).ok_or(Refused::Gone)
 }
 
 /// Creates a new session: its actor (which builds every monitor, so a bad spec is refused
@@ -94,6 +96,7 @@ pub async fn create(
                 Refused::Full => SessionError::TooLarge(format!(
                     "the server holds its limit of {max_sessions} sessions"
                 )),
+                Refused::Gone => SessionError::Stopped(id.clone()),
             })?;
     if let Err(e) = handle.persist().await {
         if let Some(h) = registry.remove(&id) {
@@ -114,12 +117,16 @@ pub async fn take(
     fence: Fence,
     checkpoint: Option<Checkpoint>,
 ) -> Result<SessionHandle, SessionError> {
+    let id = stored.id.clone();
     let handle = actor::spawn_owned(stored, deps, fence, checkpoint)?;
-    register(registry, handle, max_sessions).await.map_err(|_| {
-        SessionError::Unavailable(format!(
-            "the node holds its limit of {max_sessions} sessions"
-        ))
-    })
+    register(registry, handle, max_sessions)
+        .await
+        .map_err(|refused| match refused {
+            Refused::Gone => SessionError::Stopped(id),
+            Refused::Duplicate | Refused::Full => SessionError::Unavailable(format!(
+                "the node holds its limit of {max_sessions} sessions"
+            )),
+        })
 }
 
 /// Restarts a stored session at boot (a single node); a duplicate id is refused.

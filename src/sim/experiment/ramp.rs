@@ -20,7 +20,8 @@
 //!   `n = (3σ²λ / (v²Δt²))^{1/3}` fixes, a drift of `d = v n Δt = (3σ²λ v Δt)^{1/3}`;
 //! - and, for every case, the fault-free GNSS rates on the fault-free ship (same seeds,
 //!   3600 s): the share of GNSS epochs not healthy against the nominal `p_fa`, and
-//!   alarms (entries into `isolated`) and warnings (into `suspect`) per hour.
+//!   alarms and warnings per hour: the GNSS tests' log entries as the session core writes
+//!   them (the server's rule).
 //!
 //! The drift is horizontal, split equally between east and north (rate/√2 each, like seed
 //! 004's jump in both latitude and longitude), from [`RampParams::onset_s`] to the end of
@@ -539,7 +540,7 @@ fn render_fault_free(s: &mut String, r: &RampResult) {
     let _ = writeln!(
         s,
         "\nfault-free ship, same seeds, {:.0} s each: GNSS epochs not healthy (χ² test alone; the aid, any GNSS test) as a share and\n\
-         as a multiple of the nominal p_fa per test; alarms = entries into isolated, warnings = into suspect, per fault-free hour;\n\
+         as a multiple of the nominal p_fa per test; alarms and warnings = the GNSS tests' log entries as the server writes them, per fault-free hour;\n\
          events ÷ nominal = (alarms + warnings) per hour over p_fa × GNSS epochs per hour × GNSS tests under the monitor's spec",
         p.fault_free_s
     );

@@ -140,7 +140,9 @@ impl Actor {
         if let Err(e) = self.deps.store.put_session(&stored, fence.as_ref()).await {
             self.core.undo_threshold(undo);
             *self.shared.stored.lock().unwrap_or_else(|p| p.into_inner()) = before;
-            return Err(self.store_error(e));
+            let error = self.store_error(e);
+            self.publish(true);
+            return Err(error);
         }
         self.changed();
         Ok(self.core.threshold_view(index))

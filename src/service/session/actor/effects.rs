@@ -60,6 +60,8 @@ impl Actor {
                 let text: Arc<str> = Arc::from(wire::tagged("availability", &change));
                 self.announce(&text).await;
             }
+            // After a fenced write the actor stops: raise no more (as for the first).
+            Effect::Standing(_) if self.fenced() => {}
             Effect::Standing(entry) => {
                 let Some(entry) = self.store_entry(entry).await else {
                     return;

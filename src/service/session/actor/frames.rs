@@ -320,7 +320,11 @@ impl Actor {
         self.deps
             .metrics
             .observe_frame_latency(now.duration_since(current.received));
-        self.publish(current.changed);
+        // A fenced actor stops: its statistics (which counted entries the store refused)
+        // are not published.
+        if !self.fenced() {
+            self.publish(current.changed);
+        }
     }
 
     /// A step job lost the monitors (it panicked): they are built afresh from the spec,

@@ -154,16 +154,15 @@ fn spawn_inner(
     checkpoint: Option<Checkpoint>,
 ) -> Result<SessionHandle, SessionError> {
     let monitors = build_monitors(&stored, &*deps.models)?;
-    let core = SessionCore::new(&stored.id, seats(monitors, &stored), deps.history_samples);
+    let mut core = SessionCore::new(&stored.id, seats(monitors, &stored), deps.history_samples);
     let id = core.id().clone();
     let lease_epoch = fence.as_ref().map(|f| f.epoch);
     let owned = match (&deps.cluster, fence) {
         (Some(cluster), Some(fence)) => Some(Owned::new(cluster.clone(), fence)),
         _ => None,
     };
-    let mut stats = core.stats().clone();
-    stats.published_at_ms = now_ms();
-    let (stats_tx, stats_rx) = watch::channel(Arc::new(stats));
+    core.stats_mut().published_at_ms = now_ms();
+    let (stats_tx, stats_rx) = watch::channel(Arc::new(core.stats().clone()));
     let (frames_tx, frames_rx) = mpsc::channel(FRAME_QUEUE);
     let (control_tx, control_rx) = mpsc::channel(CONTROL_QUEUE);
     let shared = Arc::new(SessionShared {
