@@ -251,6 +251,7 @@ async fn save_screenshot(client: &Client, name: &str) -> PathBuf {
     path
 }
 
+// Over 80 lines: one scenario in the order it happens; its steps share its state.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_dashboard_shows_a_faulty_replay_and_applies_a_threshold_change() {
     let (chromium, driver_path) = match browser_tools() {

@@ -457,6 +457,7 @@ fn port_of(url: &str) -> u16 {
         .unwrap()
 }
 
+// Over 80 lines: one scenario in the order it happens; its steps share its state.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_cluster_survives_a_killed_node_and_a_drain_without_losing_or_repeating_an_alarm() {
     let missing = engines_missing();

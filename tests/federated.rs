@@ -409,6 +409,7 @@ fn local_nis_moments(
     (mat.trace(), 2.0 * (&mat * &mat).trace())
 }
 
+// Over 80 lines: one scenario in the order it happens; its steps share its state.
 #[test]
 fn a_fault_free_3000_s_run_is_consistent_in_nees_and_nis() {
     let scenario = fault_free();

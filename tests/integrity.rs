@@ -383,6 +383,7 @@ async fn counter(server: &Server, name: &str) -> u64 {
 /// compute pool while the frame before is committed (docs/architecture.md §A2 step 3).
 /// The results, state changes, alarms, availability changes and the alarm log are those
 /// of the same frames sent one at a time, each after the results of the one before.
+// Over 80 lines: one scenario in the order it happens; its steps share its state.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn queued_frames_are_stepped_ahead_with_the_messages_of_one_frame_at_a_time() {
     // A GNSS offset from the start, standing when the monitor converges (30 s cap), whose

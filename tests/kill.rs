@@ -65,6 +65,7 @@ fn epoch(g: &mut Gauss, k: u64) -> String {
     format!("{{\"t\": {k}, \"z\": [{}]}}", g.normal() + fault)
 }
 
+// Over 80 lines: one scenario in the order it happens; its steps share its state.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn every_announced_alarm_survives_five_kills_exactly_once() {
     let dir = tempfile::tempdir().unwrap();

@@ -166,6 +166,7 @@ async fn serve(dir: &tempfile::TempDir, limits: Limits) -> Server {
 
 // ------------------------------------------------------------ round trips
 
+// Over 80 lines: one scenario in the order it happens; its steps share its state.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn every_kind_trains_over_rest_and_predicts_like_the_same_model_in_process() {
     let dir = tempfile::tempdir().unwrap();
@@ -341,6 +342,7 @@ async fn a_cross_validation_job_shows_its_progress_then_its_choice() {
 
 // ------------------------------------------------------------ refusals
 
+// Over 80 lines: a table of cases checked one after another.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn bad_training_requests_and_unknown_ids_get_clear_4xx() {
     let dir = tempfile::tempdir().unwrap();

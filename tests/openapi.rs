@@ -539,6 +539,7 @@ async fn token_guards_exactly_the_operations_the_spec_secures() {
     }
 }
 
+// Over 80 lines: a table of cases checked one after another.
 #[tokio::test]
 async fn rest_answers_match_their_schemas() {
     let dir = tempfile::tempdir().unwrap();
@@ -738,6 +739,7 @@ async fn spec_examples_are_accepted_by_the_server() {
     }
 }
 
+// Over 80 lines: a table of cases checked one after another.
 #[test]
 fn schema_checker_rejects_what_the_spec_forbids() {
     let doc = spec();
@@ -837,6 +839,7 @@ where
     }
 }
 
+// Over 80 lines: a table of cases checked one after another.
 #[tokio::test]
 async fn socket_messages_match_their_schemas() {
     let doc = spec();
@@ -960,6 +963,7 @@ async fn socket_messages_match_their_schemas() {
     server.shutdown().await;
 }
 
+// Over 80 lines: a table of cases checked one after another.
 #[tokio::test]
 async fn model_and_feature_answers_match_their_schemas() {
     let doc = spec();
@@ -1101,6 +1105,7 @@ fn learned_monitor_outputs_match_the_result_schema() {
     }
 }
 
+// Over 80 lines: a table of cases checked one after another.
 #[tokio::test]
 async fn federated_stats_with_a_track_match_their_schemas() {
     use navguard::service::wire::epoch_to_wire;
@@ -1205,6 +1210,7 @@ async fn federated_stats_with_a_track_match_their_schemas() {
 /// "exactly one of" rules of the missed-detection query, and a params schema
 /// chosen by the model `kind`. Each case is checked against the spec's schema
 /// and then against the server.
+// Over 80 lines: a table of cases checked one after another.
 #[tokio::test]
 async fn spec_and_server_agree_on_integers_nulls_names_and_exclusive_parameters() {
     let doc = spec();

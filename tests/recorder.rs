@@ -64,6 +64,7 @@ fn without_identity(mut v: Value) -> Value {
     v
 }
 
+// Over 80 lines: one scenario in the order it happens; its steps share its state.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_replayed_recording_reproduces_every_result_and_alarm_bit_for_bit() {
     let dir = tempfile::tempdir().unwrap();

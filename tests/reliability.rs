@@ -166,6 +166,7 @@ async fn an_epoch_refused_by_one_monitor_commits_and_announces_what_the_others_d
     server.shutdown().await;
 }
 
+// Over 80 lines: one scenario in the order it happens; its steps share its state.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn concurrent_changes_are_stored_in_the_order_acknowledged_across_restarts() {
     let dir = tempfile::tempdir().unwrap();

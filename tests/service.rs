@@ -41,6 +41,7 @@ fn step_fault(k: usize) -> f64 {
     if (1000..1010).contains(&k) { 10.0 } else { 0.0 }
 }
 
+// Over 80 lines: one scenario in the order it happens; its steps share its state.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_measurement_step_alarms_on_both_sockets_is_logged_and_survives_a_restart() {
     let dir = tempfile::tempdir().unwrap();
@@ -141,6 +142,7 @@ async fn a_measurement_step_alarms_on_both_sockets_is_logged_and_survives_a_rest
     server.shutdown().await;
 }
 
+// Over 80 lines: one scenario in the order it happens; its steps share its state.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn counters_policy_goes_suspect_then_isolated_and_recovers_after_the_step() {
     let dir = tempfile::tempdir().unwrap();
@@ -318,6 +320,7 @@ fn inv2(s: &M) -> M {
     ]
 }
 
+// Over 80 lines: one scenario in the order it happens; its steps share its state.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn echoed_lambda_equals_r_s_inverse_r_from_an_independent_filter() {
     let dir = tempfile::tempdir().unwrap();
@@ -453,6 +456,7 @@ async fn echoed_lambda_equals_r_s_inverse_r_from_an_independent_filter() {
 
 // ------------------------------------------------------------ bad input
 
+// Over 80 lines: a table of cases checked one after another.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn every_bad_frame_gets_an_error_event_and_leaves_the_session_untouched() {
     let dir = tempfile::tempdir().unwrap();
@@ -665,6 +669,7 @@ async fn open_address_without_a_token_is_refused() {
     );
 }
 
+// Over 80 lines: one scenario in the order it happens; its steps share its state.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn threshold_and_policy_changes_apply_live_and_persist() {
     let dir = tempfile::tempdir().unwrap();
@@ -780,6 +785,7 @@ async fn threshold_and_policy_changes_apply_live_and_persist() {
 
 /// Every monitor's 422 names the exact path of the bad field inside its `config`: a value
 /// of the wrong type, an unknown key and an out-of-range value each.
+// Over 80 lines: a table of cases checked one after another.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn every_monitor_names_the_field_path_of_a_bad_config() {
     let dir = tempfile::tempdir().unwrap();
@@ -873,6 +879,7 @@ async fn every_monitor_names_the_field_path_of_a_bad_config() {
     server.shutdown().await;
 }
 
+// Over 80 lines: a table of cases checked one after another.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn sessions_are_validated_listed_and_deleted() {
     let dir = tempfile::tempdir().unwrap();

@@ -67,6 +67,7 @@ fn all(limit: i64) -> AlarmQuery {
     }
 }
 
+// Over 80 lines: one scenario in the order it happens; its steps share its state.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn sessions_alarms_and_models_round_trip_and_survive_reopening() {
     let dir = tempfile::tempdir().unwrap();
@@ -286,6 +287,7 @@ fn frame(session: &str, stream: u64, first_epoch: u64, bytes: usize) -> Recorded
     }
 }
 
+// Over 80 lines: one scenario in the order it happens; its steps share its state.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn recordings_page_summarise_and_evict_oldest_first() {
     let dir = tempfile::tempdir().unwrap();
@@ -449,6 +451,7 @@ fn checkpoint(session: &str, lease_epoch: i64, version: i64) -> Checkpoint {
 /// docs/deployment.md: a lease is taken once, free or expired; every acquisition raises
 /// the epoch; the holder of an old epoch can write nothing more for the session; a
 /// release lets the next node in at once.
+// Over 80 lines: one scenario in the order it happens; its steps share its state.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn leases_fence_every_write_of_a_node_that_lost_its_session() {
     let dir = tempfile::tempdir().unwrap();
@@ -718,6 +721,7 @@ async fn a_replayed_alarm_is_one_log_entry() {
 /// callers: each caller gets the id of its own entry (checked against what is stored
 /// under that id), identical unkeyed entries distinct ids, and a keyed entry raised
 /// again — in a later burst, or twice in the same one — the first one's id.
+// Over 80 lines: one scenario in the order it happens; its steps share its state.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn each_entry_of_a_burst_gets_its_own_id() {
     // Entry `k` of a burst. k % 3 == 0: keyed (stream 7, epoch k / 6, so k and k + 3 share
