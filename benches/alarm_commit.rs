@@ -13,9 +13,9 @@
 #![allow(missing_docs)]
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
-use navguard::detect::Health;
 use navguard::service::store::{AlarmKey, Store};
 use navguard::service::wire::{AlarmRecord, Severity};
+use navguard_core::detect::Health;
 
 /// Session `s`'s entry at epoch `epoch` of stream 1.
 fn entry(s: usize, epoch: u64) -> (AlarmRecord, AlarmKey) {

@@ -20,10 +20,10 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use navguard::detect::{PolicyConfig, ThresholdSpec};
-use navguard::epoch::Epoch;
-use navguard::monitor::{self, MonitorConfig, MonitorKind, MonitorSpec, NoModels};
-use navguard::sim::scenario::ship_with;
+use navguard_core::detect::{PolicyConfig, ThresholdSpec};
+use navguard_core::epoch::Epoch;
+use navguard_core::monitor::{self, MonitorConfig, MonitorKind, MonitorSpec, NoModels};
+use navguard_sim::scenario::ship_with;
 
 /// A federated monitor for the ship and the ship's first 120 s (1200 INS epochs).
 fn ship() -> (MonitorSpec, Vec<Epoch>) {

@@ -31,16 +31,16 @@ use std::hint::black_box;
 
 use criterion::{Criterion, Throughput, criterion_group};
 use nalgebra::Vector3;
-use navguard::detect::{Decision, Health, PolicyConfig, ThresholdSpec};
-use navguard::epoch::{Aid, Epoch};
-use navguard::epoch::{CnsBlock, GnssBlock, InsBlock};
-use navguard::filter::aiding;
-use navguard::filter::federated::{FederatedFilter, Observation, equal_betas, ins_transition};
-use navguard::filter::ins::{ImuErrors, NavSolution};
-use navguard::geo::{self, Lla};
-use navguard::monitor::Monitor;
-use navguard::monitor::federated::{FederatedConfig, FederatedConfigWire, FederatedMonitor};
-use navguard::sim;
+use navguard_core::detect::{Decision, Health, PolicyConfig, ThresholdSpec};
+use navguard_core::epoch::{Aid, Epoch};
+use navguard_core::epoch::{CnsBlock, GnssBlock, InsBlock};
+use navguard_core::filter::aiding;
+use navguard_core::filter::federated::{FederatedFilter, Observation, equal_betas, ins_transition};
+use navguard_core::filter::ins::{ImuErrors, NavSolution};
+use navguard_core::geo::{self, Lla};
+use navguard_core::monitor::Monitor;
+use navguard_core::monitor::federated::{FederatedConfig, FederatedConfigWire, FederatedMonitor};
+use navguard_sim as sim;
 
 const DT: f64 = 0.1;
 

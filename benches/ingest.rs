@@ -12,9 +12,9 @@ use std::time::{Duration, Instant};
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use futures_util::{SinkExt, StreamExt};
-use navguard::detect::PolicyConfig;
-use navguard::monitor::MonitorKind;
-use navguard::monitor::linear::LinearConfigWire;
+use navguard_core::detect::PolicyConfig;
+use navguard_core::monitor::MonitorKind;
+use navguard_core::monitor::linear::LinearConfigWire;
 use serde_json::json;
 
 mod common;

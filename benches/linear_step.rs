@@ -9,10 +9,10 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use navguard::detect::{PolicyConfig, ThresholdSpec};
-use navguard::epoch::Epoch;
-use navguard::monitor::Monitor;
-use navguard::monitor::linear::{LinearConfig, LinearConfigWire, LinearMonitor};
+use navguard_core::detect::{PolicyConfig, ThresholdSpec};
+use navguard_core::epoch::Epoch;
+use navguard_core::monitor::Monitor;
+use navguard_core::monitor::linear::{LinearConfig, LinearConfigWire, LinearMonitor};
 
 /// The benched model: 2-D constant velocity, 1 s steps, seeing x and y with
 /// correlated noise; typed, so a renamed config field fails to compile.

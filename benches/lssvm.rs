@@ -16,9 +16,9 @@ use std::hint::black_box;
 use std::time::Duration;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
-use navguard::learn::Kernel;
-use navguard::learn::lssvm_solve as solve;
-use navguard::learn::online::{OnlineLsSvm, OnlineParams};
+use navguard_core::learn::Kernel;
+use navguard_core::learn::lssvm_solve as solve;
+use navguard_core::learn::online::{OnlineLsSvm, OnlineParams};
 
 const DIM: usize = 5;
 const GAMMA: f64 = 10.0;

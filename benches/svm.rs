@@ -14,8 +14,8 @@ use std::hint::black_box;
 use std::time::Instant;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use navguard::learn::Dataset;
-use navguard::learn::svm::{OcSvmParams, SvcParams};
+use navguard_core::learn::Dataset;
+use navguard_core::learn::svm::{OcSvmParams, SvcParams};
 
 /// SplitMix64 (Steele, Lea & Flood 2014), identical to the Python script's.
 struct SplitMix64(u64);
@@ -132,7 +132,7 @@ fn bench(c: &mut Criterion) {
     let fitted = ocsvm_params()
         .check()
         .expect("valid params")
-        .fit_with(&oc_data, &navguard::learn::NoProgress)
+        .fit_with(&oc_data, &navguard_core::learn::NoProgress)
         .expect("ocsvm trains");
     let (model, metrics) = (fitted.model, fitted.metrics);
     println!(

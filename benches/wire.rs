@@ -17,13 +17,13 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use navguard::detect::{PolicyConfig, ThresholdSpec};
-use navguard::monitor::federated::{FederatedConfig, FederatedMonitor};
-use navguard::monitor::{Monitor, MonitorReport};
 use navguard::service::wire::{
     RESULT_FRAME_BYTES, epoch_to_wire, parse_frame, result_frame, write_result_frame,
 };
-use navguard::sim;
+use navguard_core::detect::{PolicyConfig, ThresholdSpec};
+use navguard_core::monitor::federated::{FederatedConfig, FederatedMonitor};
+use navguard_core::monitor::{Monitor, MonitorReport};
+use navguard_sim as sim;
 
 /// The largest batch the server accepts by default is 1,000; the bench frames are smaller.
 const MAX_BATCH: usize = 1000;

@@ -25,11 +25,11 @@ use std::time::Duration;
 use fantoccini::wd::Capabilities;
 use fantoccini::{Client, ClientBuilder, Locator};
 use futures_util::SinkExt;
-use navguard::epoch::Aid;
 use navguard::service::Limits;
 use navguard::service::wire::epoch_to_wire;
-use navguard::sim::scenario::ship_with;
-use navguard::sim::{Channel, Fault, FaultKind};
+use navguard_core::epoch::Aid;
+use navguard_sim::scenario::ship_with;
+use navguard_sim::{Channel, Fault, FaultKind};
 use serde_json::{Value, json};
 use tokio_tungstenite::tungstenite::Message;
 

@@ -1,7 +1,7 @@
 //! The channel experiments' library functions at reduced size (seeds 000 and 001):
 //! real properties of the LS-SVM channel monitor on the papers' scenarios.
 
-use navguard::sim::experiment::{seed000, seed001};
+use navguard_sim::experiment::{seed000, seed001};
 
 #[test]
 fn locally_weighted_lssvm_predicts_the_seed_000_height_better_than_plain() {

@@ -24,9 +24,9 @@ use std::time::{Duration, Instant};
 
 use common::{CvModel, Socket, cv_session, get_json};
 use futures_util::{SinkExt, StreamExt};
-use navguard::detect::{Health, PolicyConfig, ThresholdSpec};
-use navguard::epoch::Epoch;
-use navguard::monitor::{MonitorConfig, MonitorKind, MonitorSpec, NoModels};
+use navguard_core::detect::{Health, PolicyConfig, ThresholdSpec};
+use navguard_core::epoch::Epoch;
+use navguard_core::monitor::{MonitorConfig, MonitorKind, MonitorSpec, NoModels};
 use serde_json::{Value, json};
 use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
@@ -175,7 +175,7 @@ fn reference(model: &CvModel, z: &[f64]) -> Reference {
         policy: PolicyConfig::Classic,
         threshold: ThresholdSpec::default(),
     };
-    let mut m = navguard::monitor::build(&spec, &NoModels).unwrap();
+    let mut m = navguard_core::monitor::build(&spec, &NoModels).unwrap();
     let mut out = Vec::new();
     let (mut epochs, mut sum, mut max) = (0u64, 0.0, f64::NEG_INFINITY);
     for (k, z) in z.iter().enumerate() {

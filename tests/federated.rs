@@ -18,17 +18,17 @@ mod common;
 use std::sync::OnceLock;
 
 use nalgebra::{SMatrix, SVector};
-use navguard::detect::{Health, PolicyConfig, ThresholdSpec};
-use navguard::epoch::Aid;
-use navguard::filter::ins::{POS, VEL};
-use navguard::geo::{self, Lla};
-use navguard::monitor::federated::{FederatedConfig, FederatedMonitor};
-use navguard::monitor::{Monitor, MonitorSpec};
 use navguard::service::Limits;
 use navguard::service::wire::{epoch_to_wire, parse_frame};
-use navguard::sim::experiment::{run_monitor, seed004};
+use navguard_core::detect::{Health, PolicyConfig, ThresholdSpec};
+use navguard_core::epoch::Aid;
+use navguard_core::filter::ins::{POS, VEL};
+use navguard_core::geo::{self, Lla};
+use navguard_core::monitor::federated::{FederatedConfig, FederatedMonitor};
+use navguard_core::monitor::{Monitor, MonitorSpec};
+use navguard_sim::experiment::{run_monitor, seed004};
 
-use navguard::sim::{self, Channel, Fault, FaultKind, Scenario};
+use navguard_sim::{self as sim, Channel, Fault, FaultKind, Scenario};
 use serde_json::{Value, json};
 use statrs::distribution::{Binomial, ChiSquared, ContinuousCDF, DiscreteCDF};
 
@@ -126,9 +126,9 @@ fn binomial_bound(n: u64, p: f64) -> u64 {
 fn no_aid_is_isolated_without_faults_at_p_fa_1e_5() {
     let scenario = fault_free();
     let spec = |policy| MonitorSpec {
-        kind: navguard::monitor::MonitorKind::Federated,
-        config: navguard::monitor::MonitorConfig::parse(
-            navguard::monitor::MonitorKind::Federated,
+        kind: navguard_core::monitor::MonitorKind::Federated,
+        config: navguard_core::monitor::MonitorConfig::parse(
+            navguard_core::monitor::MonitorKind::Federated,
             &scenario.default_monitor_config(),
         )
         .unwrap(),
@@ -304,9 +304,9 @@ fn the_counters_advantage_at_threshold_20_holds_on_three_seeds() {
 /// server setting), as the REST layer builds it.
 fn default_spec(scenario: &Scenario) -> MonitorSpec {
     MonitorSpec {
-        kind: navguard::monitor::MonitorKind::Federated,
-        config: navguard::monitor::MonitorConfig::parse(
-            navguard::monitor::MonitorKind::Federated,
+        kind: navguard_core::monitor::MonitorKind::Federated,
+        config: navguard_core::monitor::MonitorConfig::parse(
+            navguard_core::monitor::MonitorKind::Federated,
             &scenario.default_monitor_config(),
         )
         .unwrap(),
@@ -319,7 +319,7 @@ fn default_spec(scenario: &Scenario) -> MonitorSpec {
 fn a_slow_gnss_drift_is_excluded_by_gnss_drift_long_before_the_chi2_test_would() {
     // 1 m/s north-east from 600 s: the per-epoch χ² alone excludes it
     // after about 50 m; the drift test after about 18 m (the matched-test floor is 15 m).
-    let faults = navguard::sim::experiment::ramp::ramp_faults(1.0, 600.0);
+    let faults = navguard_sim::experiment::ramp::ramp_faults(1.0, 600.0);
     let scenario = ship_1hz(6, faults, 720.0);
     let run = run_monitor(&scenario, &default_spec(&scenario)).unwrap();
     let aid = run.aid_health_trace("gnss");
@@ -502,10 +502,10 @@ fn a_fault_free_3000_s_run_is_consistent_in_nees_and_nis() {
 
 /// Alarms as the server raises them: transitions of a test into suspect or isolated.
 fn in_process_alarms(
-    epochs: &[navguard::epoch::Epoch],
+    epochs: &[navguard_core::epoch::Epoch],
     spec: &MonitorSpec,
 ) -> Vec<(String, String, f64)> {
-    let mut m = navguard::monitor::build(spec, &navguard::monitor::NoModels).unwrap();
+    let mut m = navguard_core::monitor::build(spec, &navguard_core::monitor::NoModels).unwrap();
     let mut alarms = Vec::new();
     for e in epochs {
         for o in m.step(e).unwrap().tests {

@@ -22,10 +22,10 @@ mod common;
 
 use std::collections::BTreeMap;
 
-use navguard::detect::{PolicyConfig, ThresholdSpec};
-use navguard::monitor::federated::{FederatedConfig, FederatedMonitor};
-use navguard::monitor::{Monitor, Outputs};
-use navguard::sim::{self, Channel, Fault, FaultKind, Scenario};
+use navguard_core::detect::{PolicyConfig, ThresholdSpec};
+use navguard_core::monitor::federated::{FederatedConfig, FederatedMonitor};
+use navguard_core::monitor::{Monitor, Outputs};
+use navguard_sim::{self as sim, Channel, Fault, FaultKind, Scenario};
 use serde::{Deserialize, Serialize};
 
 use common::ship_1hz;
@@ -110,7 +110,7 @@ fn record(scenario: &Scenario, policy: PolicyConfig, every: usize) -> Record {
 
 fn runs() -> Golden {
     let gnss = |component, value| Fault {
-        aid: navguard::epoch::Aid::Gnss,
+        aid: navguard_core::epoch::Aid::Gnss,
         channel: Channel::Position,
         component,
         kind: FaultKind::Step { value },
@@ -118,7 +118,7 @@ fn runs() -> Golden {
         end_s: Some(210.0),
     };
     let dvl = Fault {
-        aid: navguard::epoch::Aid::Dvl,
+        aid: navguard_core::epoch::Aid::Dvl,
         channel: Channel::Velocity,
         component: 0,
         kind: FaultKind::Step { value: 0.6 },

@@ -15,7 +15,7 @@ use common::{Socket, client, create_session, get_text, http, ingest, recv, send,
 use navguard::service::session::spec::monitor_spec;
 use navguard::service::wire::{MonitorSpecWire, epoch_to_wire};
 use navguard::service::{Limits, Server};
-use navguard::sim::{Channel, Fault, FaultKind, Scenario};
+use navguard_sim::{Channel, Fault, FaultKind, Scenario};
 use serde_json::{Value, json};
 
 /// A session `id` with one federated monitor `nav` (the scenario's config with `extra`
@@ -79,7 +79,7 @@ async fn alarm_log(server: &Server, session: &str) -> Vec<Value> {
 /// A 100 m step on the GNSS north position over `[start_s, end_s)`.
 fn gnss_step(start_s: f64, end_s: f64) -> Fault {
     Fault {
-        aid: navguard::epoch::Aid::Gnss,
+        aid: navguard_core::epoch::Aid::Gnss,
         channel: Channel::Position,
         component: 0,
         kind: FaultKind::Step { value: 100.0 },
@@ -167,7 +167,7 @@ async fn a_gnss_fault_from_the_start_warns_while_converging_and_alarms_once_conv
     // A 100 m east offset on every GNSS fix from t = 0 and a 30 s convergence cap: GNSS is
     // excluded within seconds, and without it the HPL may never come within the HAL.
     let fault = Fault {
-        aid: navguard::epoch::Aid::Gnss,
+        aid: navguard_core::epoch::Aid::Gnss,
         channel: Channel::Position,
         component: 0,
         kind: FaultKind::Step { value: 100.0 },
@@ -238,7 +238,7 @@ const ONSET: f64 = 600.0;
 async fn gnss_drift_alarms_on_a_slow_gnss_drift_through_the_server() {
     // 1 m/s north-east from 600 s (as tests/federated.rs does in-process): the drift test
     // warns within about 20 m and excludes GNSS well before the per-epoch χ² test.
-    let faults = navguard::sim::experiment::ramp::ramp_faults(1.0, ONSET);
+    let faults = navguard_sim::experiment::ramp::ramp_faults(1.0, ONSET);
     let dir = tempfile::tempdir().unwrap();
     let server = start(&dir.path().join("i.db"), None, Limits::default()).await;
     let scenario = ship_1hz(6, faults, ONSET + 80.0);
@@ -509,7 +509,7 @@ async fn the_experiments_log_the_alarms_and_warnings_the_server_logs() {
 
     let wire: MonitorSpecWire = serde_json::from_value(session["monitors"][0].clone()).unwrap();
     let spec = monitor_spec(&wire).unwrap();
-    let run = navguard::sim::experiment::run_monitor(&scenario, &spec).unwrap();
+    let run = navguard_sim::experiment::run_monitor(&scenario, &spec).unwrap();
     let scored: Vec<(String, String, f64, String)> = run
         .entries
         .iter()

@@ -1,67 +1,79 @@
-//! Guards the one-way layering that `src/lib.rs` documents: each layer of `simd.rs,
-//! epoch.rs, geo/, detect/, filter/, learn/, features/, monitor/, session/, sim/,
-//! service/` imports none after it, no layer below `service/` touches the async or
-//! storage crates or the CLI, nothing before `sim/` plots,
-//! and only the CLI's `experiment` command reaches into `sim::experiment` (the rest
-//! of the CLI and the service use `sim` and its `plot`). Test code (after a file's first
-//! `#[cfg(test)]`, and files that are whole test modules) may cross layers.
+//! Guards the one-way layering that `src/lib.rs` and `crates/core/src/lib.rs` document.
+//! Across crates Cargo enforces the direction (navguard-core names neither navguard-sim
+//! nor navguard; navguard-sim does not name navguard); this test checks what Cargo
+//! cannot: inside navguard-core each layer of `simd.rs, epoch.rs, geo/, detect/, filter/,
+//! learn/, features/, monitor/, session/` imports none after it; navguard-core and
+//! navguard-sim depend on no async, storage or HTTP crate, and navguard-core on no
+//! plotting crate; and only the CLI's `experiment` command reaches into
+//! `navguard_sim::experiment` (the rest of the CLI and the service use `navguard_sim` and
+//! its `plot`). Test code (after a file's first `#[cfg(test)]`, and files that are whole
+//! test modules) may cross layers.
 
 use std::fs;
 use std::path::{Path, PathBuf};
 
-/// The layers of `src/lib.rs`, in order: production code of each may use the ones before
-/// it, never one after it (docs/architecture.md §A1).
+/// The layers of `crates/core/src/lib.rs`, in order: production code of each may use the
+/// ones before it, never one after it (docs/architecture.md §A1).
 const LAYERS: &[(&str, &str)] = &[
-    ("simd.rs", "simd"),
-    ("epoch.rs", "epoch"),
-    ("geo", "geo"),
-    ("detect", "detect"),
-    ("filter", "filter"),
-    ("learn", "learn"),
-    ("features", "features"),
-    ("monitor", "monitor"),
-    ("session", "session"),
-    ("sim", "sim"),
-    ("service", "service"),
+    ("crates/core/src/simd.rs", "simd"),
+    ("crates/core/src/epoch.rs", "epoch"),
+    ("crates/core/src/geo", "geo"),
+    ("crates/core/src/detect", "detect"),
+    ("crates/core/src/filter", "filter"),
+    ("crates/core/src/learn", "learn"),
+    ("crates/core/src/features", "features"),
+    ("crates/core/src/monitor", "monitor"),
+    ("crates/core/src/session", "session"),
 ];
 
-/// Each further rule: the folders (or files) under `src/` it covers and the paths they
-/// may not use.
-const RULES: &[(&[&str], &[&str])] = &[
+/// Each further rule: the folders (or files), from the workspace root, it covers and the
+/// paths they may not use.
+const RULES: &[(&[&str], &[&str])] = &[(
+    &[
+        "src/service",
+        "src/cli/mod.rs",
+        "src/cli/calibrate.rs",
+        "src/cli/http.rs",
+        "src/cli/loadgen.rs",
+        "src/cli/loadgen",
+        "src/cli/replay",
+        "src/cli/simulate.rs",
+    ],
+    &["navguard_sim::experiment"],
+)];
+
+/// The crates (by their `Cargo.toml`) that may not depend on the listed packages: the core
+/// and the simulator stay synchronous and offline, and only the simulator plots.
+const DEPENDENCY_RULES: &[(&str, &[&str])] = &[
     (
-        &[
-            "simd.rs", "epoch.rs", "geo", "detect", "filter", "learn", "features", "monitor",
-            "session", "sim",
-        ],
+        "crates/core/Cargo.toml",
         &[
             "tokio",
             "axum",
             "sqlx",
             "tower",
+            "tower-http",
             "reqwest",
-            "navguard::",
-            "crate::cli",
+            "hyper",
+            "async-nats",
+            "navguard",
+            "navguard-sim",
+            "plotters",
         ],
     ),
     (
+        "crates/sim/Cargo.toml",
         &[
-            "simd.rs", "epoch.rs", "geo", "detect", "filter", "learn", "features", "monitor",
-            "session",
+            "tokio",
+            "axum",
+            "sqlx",
+            "tower",
+            "tower-http",
+            "reqwest",
+            "hyper",
+            "async-nats",
+            "navguard",
         ],
-        &["plotters"],
-    ),
-    (
-        &[
-            "service",
-            "cli/mod.rs",
-            "cli/calibrate.rs",
-            "cli/http.rs",
-            "cli/loadgen.rs",
-            "cli/loadgen",
-            "cli/replay",
-            "cli/simulate.rs",
-        ],
-        &["crate::sim::experiment", "navguard::sim::experiment"],
     ),
 ];
 
@@ -80,6 +92,23 @@ fn rules() -> Vec<(Vec<&'static str>, Vec<String>)> {
         rules.push((roots.to_vec(), forbidden));
     }
     rules
+}
+
+/// The package names in the `[dependencies]` table of a `Cargo.toml` (`name = ...` and
+/// `name.workspace = true` lines; dev-dependencies may cross layers, like test code).
+fn dependencies(manifest: &str) -> Vec<String> {
+    let mut in_deps = false;
+    let mut names = Vec::new();
+    for line in manifest.lines() {
+        let line = line.trim();
+        if line.starts_with('[') {
+            in_deps = line == "[dependencies]";
+        } else if in_deps && !line.is_empty() && !line.starts_with('#') {
+            let name = line.split(['=', '.', ' ']).next().unwrap_or("");
+            names.push(name.trim().to_owned());
+        }
+    }
+    names
 }
 
 fn rust_files(path: &Path, out: &mut Vec<PathBuf>) {
@@ -130,14 +159,14 @@ fn offending_lines(code: &str, forbidden: &[&str]) -> Vec<String> {
 
 #[test]
 fn lower_layers_never_import_upper_layers() {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let src = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut violations = Vec::new();
     for (roots, forbidden) in rules() {
         let forbidden: Vec<&str> = forbidden.iter().map(String::as_str).collect();
         for root in roots {
             let mut files = Vec::new();
             rust_files(&src.join(root), &mut files);
-            assert!(!files.is_empty(), "no Rust files under src/{root}");
+            assert!(!files.is_empty(), "no Rust files under {root}");
             for file in files {
                 for line in offending_lines(&production_code(&file), &forbidden) {
                     violations.push(format!(
@@ -150,7 +179,28 @@ fn lower_layers_never_import_upper_layers() {
     }
     assert!(
         violations.is_empty(),
-        "layering broken (see src/lib.rs # Layout):\n{}",
+        "layering broken (see crates/core/src/lib.rs # Layout):\n{}",
+        violations.join("\n")
+    );
+}
+
+#[test]
+fn the_core_and_the_simulator_stay_synchronous() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut violations = Vec::new();
+    for (manifest, forbidden) in DEPENDENCY_RULES {
+        let text = fs::read_to_string(root.join(manifest)).expect("read Cargo.toml");
+        let deps = dependencies(&text);
+        assert!(!deps.is_empty(), "no [dependencies] in {manifest}");
+        for dep in deps {
+            if forbidden.contains(&dep.as_str()) {
+                violations.push(format!("{manifest}: {dep}"));
+            }
+        }
+    }
+    assert!(
+        violations.is_empty(),
+        "layering broken:\n{}",
         violations.join("\n")
     );
 }
@@ -167,5 +217,11 @@ fn the_checker_sees_an_upward_import() {
         offending_lines("let t = tokio::spawn(f);\n", &["tokio"]).len(),
         1,
         "a bare crate path is caught"
+    );
+    assert_eq!(
+        dependencies(
+            "[dependencies]\ntokio = \"1\"\nserde.workspace = true\n[dev-dependencies]\nx = \"1\"\n"
+        ),
+        vec!["tokio".to_owned(), "serde".to_owned()]
     );
 }

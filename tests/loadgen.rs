@@ -15,11 +15,11 @@
 use std::time::Duration;
 
 use futures_util::{SinkExt, StreamExt};
-use navguard::detect::PolicyConfig;
-use navguard::monitor::MonitorKind;
-use navguard::monitor::linear::LinearConfigWire;
 use navguard::service::wire::{CreateSession, MonitorSpecWire};
 use navguard::service::{self, ServiceConfig};
+use navguard_core::detect::PolicyConfig;
+use navguard_core::monitor::MonitorKind;
+use navguard_core::monitor::linear::LinearConfigWire;
 use serde_json::Value;
 use tokio::net::{TcpSocket, TcpStream};
 use tokio_tungstenite::tungstenite::Message;

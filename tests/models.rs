@@ -10,8 +10,8 @@ mod common;
 use std::time::Duration;
 
 use common::*;
-use navguard::learn::{self, Dataset, ModelKind, ModelParams, NoProgress, Prediction};
 use navguard::service::{Limits, Server};
+use navguard_core::learn::{self, Dataset, ModelKind, ModelParams, NoProgress, Prediction};
 use reqwest::StatusCode;
 use serde_json::{Value, json};
 
@@ -693,7 +693,7 @@ async fn features_are_computed_over_rest_and_bad_requests_name_the_field() {
         serde_json::from_value(json!({"wavelet": "db1", "level": 1, "normalize": false})).unwrap();
     assert_eq!(
         e[0],
-        navguard::features::wavelet::packet_energies(&signal, &params).unwrap()
+        navguard_core::features::wavelet::packet_energies(&signal, &params).unwrap()
     );
 
     let ins: Vec<f64> = (0..12).map(|i| 1000.0 + i as f64).collect();
@@ -710,7 +710,7 @@ async fn features_are_computed_over_rest_and_bad_requests_name_the_field() {
     .await;
     assert_eq!(status, 200, "{got}");
     let params = serde_json::from_value(json!({"window": 4, "crest": false})).unwrap();
-    let want = navguard::features::tacan::series_features(&ins, &tacan, &params).unwrap();
+    let want = navguard_core::features::tacan::series_features(&ins, &tacan, &params).unwrap();
     assert_eq!(want.len(), 9);
     assert_eq!(got["features"], json!(want));
 

@@ -1069,7 +1069,7 @@ async fn model_and_feature_answers_match_their_schemas() {
 
 #[test]
 fn learned_monitor_outputs_match_the_result_schema() {
-    use navguard::monitor::Outputs;
+    use navguard_core::monitor::Outputs;
     let doc = spec();
     let c = Checker::new(&doc);
     let outputs = [
@@ -1109,7 +1109,7 @@ fn learned_monitor_outputs_match_the_result_schema() {
 #[tokio::test]
 async fn federated_stats_with_a_track_match_their_schemas() {
     use navguard::service::wire::epoch_to_wire;
-    use navguard::sim::scenario::ship_with;
+    use navguard_sim::scenario::ship_with;
     let doc = spec();
     let checker = Checker::new(&doc);
     let events_schema =

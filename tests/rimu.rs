@@ -7,13 +7,13 @@ use std::collections::HashMap;
 use std::sync::Arc;
 
 use nalgebra::DMatrix;
-use navguard::detect::parity::SKEW;
-use navguard::detect::{PolicyConfig, ThresholdSpec};
-use navguard::epoch::Epoch;
-use navguard::learn::{self, AnyModel, Dataset, ModelKind, ModelParams, NoProgress};
-use navguard::monitor::{self, BuildError, MonitorKind, MonitorSpec, Outputs};
-use navguard::sim::experiment::seed002::{self, Seed002Params};
-use navguard::sim::rimu::{GyroFaultKind, RimuSimParams};
+use navguard_core::detect::parity::SKEW;
+use navguard_core::detect::{PolicyConfig, ThresholdSpec};
+use navguard_core::epoch::Epoch;
+use navguard_core::learn::{self, AnyModel, Dataset, ModelKind, ModelParams, NoProgress};
+use navguard_core::monitor::{self, BuildError, MonitorKind, MonitorSpec, Outputs};
+use navguard_sim::experiment::seed002::{self, Seed002Params};
+use navguard_sim::rimu::{GyroFaultKind, RimuSimParams};
 use serde_json::{Value, json};
 
 /// A reduced version of the paper's training set (400 + 288 windows).
@@ -31,7 +31,7 @@ fn small_classifier() -> HashMap<String, Arc<AnyModel>> {
 fn spec(config: Value) -> MonitorSpec {
     MonitorSpec {
         kind: MonitorKind::Rimu,
-        config: navguard::monitor::MonitorConfig::parse(MonitorKind::Rimu, &config).unwrap(),
+        config: navguard_core::monitor::MonitorConfig::parse(MonitorKind::Rimu, &config).unwrap(),
         policy: PolicyConfig::Classic,
         threshold: ThresholdSpec::Threshold(seed002::T_D),
     }
@@ -61,7 +61,7 @@ fn steady_flight_isolates_each_gyros_bias_fault() {
             let tail = &out.omega_sq[out.omega_sq.len() - 100..];
             let rms = (tail.iter().sum::<f64>() / tail.len() as f64).sqrt();
             assert!(
-                rms < 3.5 * navguard::monitor::rimu::default_sigma(),
+                rms < 3.5 * navguard_core::monitor::rimu::default_sigma(),
                 "gyro {gyro}: {rms}"
             );
         }
@@ -115,8 +115,7 @@ fn five_and_six_gyro_sets_detect_and_isolate_through_monitor_build() {
     for (rows, bad) in [(five_gyros(), 3), (six_gyros(), 4)] {
         let m = rows.len();
         let h = DMatrix::from_fn(m, 3, |i, j| rows[i][j]);
-        let config =
-            json!({"h": rows, "sigma": navguard::monitor::rimu::default_sigma(), "model": "svc"});
+        let config = json!({"h": rows, "sigma": navguard_core::monitor::rimu::default_sigma(), "model": "svc"});
         let spec = spec(config);
         let built = monitor::build(&spec, &models).unwrap();
         assert_eq!(built.tests().slots()[0].dof, 6 * (m as u32 - 3));

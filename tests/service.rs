@@ -1254,7 +1254,7 @@ async fn the_last_frame_of_a_burst_reaches_observers_while_the_stream_stays_open
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn federated_stats_track_is_the_last_echoed_solution_and_ins_position() {
     use navguard::service::wire::epoch_to_wire;
-    use navguard::sim::scenario::ship_with;
+    use navguard_sim::scenario::ship_with;
 
     let dir = tempfile::tempdir().unwrap();
     let server = start(&dir.path().join("t.db"), None, Limits::default()).await;

@@ -8,12 +8,12 @@ use std::collections::{HashMap, HashSet};
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use navguard::detect::Health;
 use navguard::service::store::{
     Acquire, AlarmKey, AlarmQuery, Checkpoint, Fence, RecordedFrame, Retention, Store, StoreError,
     StoredModel, StoredSession,
 };
 use navguard::service::wire::{AlarmRecord, Severity};
+use navguard_core::detect::Health;
 
 /// The stores to run on: a SQLite file, and a Postgres schema when the variable is set.
 async fn backends(dir: &tempfile::TempDir, name: &str) -> Vec<(&'static str, PathBuf)> {

@@ -5,11 +5,11 @@
 use std::collections::HashMap;
 use std::sync::Arc;
 
-use navguard::detect::{PolicyConfig, ThresholdSpec};
-use navguard::features::tacan::TacanFeatureParams;
-use navguard::learn::AnyModel;
-use navguard::monitor::{self, BuildError, MonitorKind, MonitorSpec};
-use navguard::sim::experiment::seed003::{self, Seed003Params, train_model};
+use navguard_core::detect::{PolicyConfig, ThresholdSpec};
+use navguard_core::features::tacan::TacanFeatureParams;
+use navguard_core::learn::AnyModel;
+use navguard_core::monitor::{self, BuildError, MonitorKind, MonitorSpec};
+use navguard_sim::experiment::seed003::{self, Seed003Params, train_model};
 use serde_json::json;
 
 /// Seed 003 at reduced sizes: 10 training flights of 30 s (subsampled to 1,500 windows),
@@ -56,7 +56,7 @@ fn seed_003_reaches_99_percent_mean_detection_at_noise_variance_20() {
 fn spec(config: serde_json::Value) -> MonitorSpec {
     MonitorSpec {
         kind: MonitorKind::Tacan,
-        config: navguard::monitor::MonitorConfig::parse(MonitorKind::Tacan, &config).unwrap(),
+        config: navguard_core::monitor::MonitorConfig::parse(MonitorKind::Tacan, &config).unwrap(),
         policy: PolicyConfig::Classic,
         threshold: ThresholdSpec::default(),
     }

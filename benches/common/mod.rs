@@ -2,10 +2,10 @@
 //! their runtime, and an in-process navguard on a temporary SQLite store with one
 //! `echo` session.
 
-use navguard::detect::PolicyConfig;
-use navguard::monitor::MonitorKind;
 use navguard::service::wire::{CreateSession, MonitorSpecWire};
 use navguard::service::{self, ServiceConfig};
+use navguard_core::detect::PolicyConfig;
+use navguard_core::monitor::MonitorKind;
 use serde_json::Value;
 use tokio::runtime::Runtime;
 

@@ -12,14 +12,14 @@ use anyhow::{Context, bail};
 use clap::Args;
 use serde::Serialize;
 
-use navguard::epoch::Epoch;
-use navguard::monitor::calibrate::{self, CalibrationLine};
-use navguard::monitor::{self, ModelSource, NoModels};
 use navguard::service::Limits;
 use navguard::service::session::spec::monitor_spec;
 use navguard::service::store::Store;
 use navguard::service::train::Models;
 use navguard::service::wire::{CreateSession, TestThresholdSpec, calibrated_tests, parse_frame};
+use navguard_core::epoch::Epoch;
+use navguard_core::monitor::calibrate::{self, CalibrationLine};
+use navguard_core::monitor::{self, ModelSource, NoModels};
 
 /// Flags of `navguard calibrate`.
 #[derive(Debug, Args)]

@@ -1,5 +1,5 @@
 //! `navguard experiment NAME`: reruns a paper's experiment in-process (the pure
-//! core, no server) through [`navguard::sim::experiment`], prints its table and
+//! core, no server) through [`navguard_sim::experiment`], prints its table and
 //! writes its figures. Thin: the experiment is a library function returning a
 //! result struct; this file only calls it, prints, and writes files.
 
@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use super::spinner;
 
 use anyhow::{Context, bail};
-use navguard::sim::experiment::{
+use navguard_sim::experiment::{
     alarms, coloured, guards, ramp, seed000, seed001, seed002, seed003, seed004,
 };
 
@@ -152,7 +152,7 @@ pub(crate) struct Seed004Args {
     #[arg(long, default_value = "target/experiments/seed004")]
     pub out_dir: PathBuf,
     /// Run length, s.
-    #[arg(long, default_value_t = navguard::sim::SHIP_DURATION_S)]
+    #[arg(long, default_value_t = navguard_sim::SHIP_DURATION_S)]
     pub duration: f64,
     /// Error statistics start at this time, s (0: the whole run, initial convergence included).
     #[arg(long, default_value_t = seed004::SETTLE_S)]
@@ -250,7 +250,7 @@ pub(crate) struct RampArgs {
     #[arg(long)]
     pub drift_p_fa: Option<f64>,
     /// Length of the fault-free runs, s (0: skip them).
-    #[arg(long, default_value_t = navguard::sim::SHIP_DURATION_S)]
+    #[arg(long, default_value_t = navguard_sim::SHIP_DURATION_S)]
     pub fault_free: f64,
     /// Exit non-zero unless the `+drift` case excludes every 0.5 and 1 m/s drift within
     /// 20 m and every 2 m/s drift within 25 m, on every seed.
@@ -351,7 +351,7 @@ impl Experiment for Seed002Args {
 
     fn check(&self, output: &Self::Output) -> anyhow::Result<()> {
         let steady_bias = output.rows.iter().filter(|r| {
-            r.scenario == "steady" && matches!(r.fault, navguard::sim::rimu::GyroFaultKind::Bias(_))
+            r.scenario == "steady" && matches!(r.fault, navguard_sim::rimu::GyroFaultKind::Bias(_))
         });
         let (_, isolated, _, runs) = seed002::totals(steady_bias);
         if self.check && isolated < runs {
@@ -379,7 +379,7 @@ impl Experiment for Seed003Args {
             test_duration_s: self.test_duration,
             jumps: self.jumps,
             train_samples: self.train_samples,
-            features: navguard::features::tacan::TacanFeatureParams {
+            features: navguard_core::features::tacan::TacanFeatureParams {
                 window: self.window,
                 crest: self.crest,
             },
@@ -525,7 +525,7 @@ impl Experiment for AlarmsArgs {
         } else {
             let text = std::fs::read_to_string(&self.track)
                 .with_context(|| format!("reading --track {}", self.track.display()))?;
-            let track = navguard::sim::Track::parse(&text)
+            let track = navguard_sim::Track::parse(&text)
                 .with_context(|| format!("--track {}", self.track.display()))?;
             Some((track, self.track_seed))
         };

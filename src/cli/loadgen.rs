@@ -8,7 +8,7 @@
 //! until the p99 crosses a limit ([`ramp`]).
 //!
 //! The workload is generated once and shared by every session: the `ship`
-//! scenario of [`navguard::sim`] for `federated`, a constant-velocity track for
+//! scenario of [`navguard_sim`] for `federated`, a constant-velocity track for
 //! `linear`. A session streams it in passes; each pass is a fresh socket (the
 //! server restarts filter state and time on a new stream, docs/architecture.md §A3), so a
 //! long run never needs an unbounded scenario in memory. The tool talks only
@@ -23,13 +23,13 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use futures_util::StreamExt;
-use navguard::detect::PolicyConfig;
-use navguard::epoch::Aid;
-use navguard::monitor::MonitorKind;
-use navguard::monitor::linear::LinearConfigWire;
 use navguard::service::metrics::process_cpu_seconds;
 use navguard::service::wire::{CreateSession, MonitorSpecWire, epoch_to_wire};
-use navguard::sim::{self, Channel, Fault, FaultKind};
+use navguard_core::detect::PolicyConfig;
+use navguard_core::epoch::Aid;
+use navguard_core::monitor::MonitorKind;
+use navguard_core::monitor::linear::LinearConfigWire;
+use navguard_sim::{self as sim, Channel, Fault, FaultKind};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, Normal};

@@ -1,4 +1,4 @@
-//! `navguard simulate ship`: runs a scenario of [`navguard::sim`] and writes it
+//! `navguard simulate ship`: runs a scenario of [`navguard_sim`] and writes it
 //! as ingest frames, one epoch per JSON line (the input of `navguard replay`),
 //! and optionally the truth, the injected faults and a matching session spec.
 
@@ -7,10 +7,10 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
-use navguard::detect::PolicyConfig;
-use navguard::monitor::MonitorKind;
 use navguard::service::wire::{CreateSession, MonitorSpecWire, epoch_to_wire};
-use navguard::sim::{self, Fault, Scenario, Track};
+use navguard_core::detect::PolicyConfig;
+use navguard_core::monitor::MonitorKind;
+use navguard_sim::{self as sim, Fault, Scenario, Track};
 
 use super::thousands;
 

@@ -51,8 +51,8 @@ impl AppState {
             models: self.models.clone(),
             compute: self.compute.clone(),
             record_default: self.config.record_default,
-            history_samples: (f64::from(self.config.history_s) / crate::session::history::PERIOD_S)
-                as usize,
+            history_samples: (f64::from(self.config.history_s)
+                / navguard_core::session::history::PERIOD_S) as usize,
             cluster: self.cluster.clone(),
         }
     }

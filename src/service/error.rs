@@ -7,9 +7,9 @@ use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use serde_json::json;
 
-use crate::monitor::BuildError;
 use crate::service::session::SessionError;
 use crate::service::store::StoreError;
+use navguard_core::monitor::BuildError;
 
 /// An error a handler returns.
 #[derive(Debug, thiserror::Error)]

@@ -63,10 +63,10 @@ pub struct SessionGauges {
 
 impl SessionGauges {
     /// Adds one session's statistics.
-    pub fn add(&mut self, stats: &crate::session::SessionStats) {
-        use crate::detect::Health;
-        use crate::detect::consistency::ConsistencyFlag;
-        use crate::monitor::Availability;
+    pub fn add(&mut self, stats: &navguard_core::session::SessionStats) {
+        use navguard_core::detect::Health;
+        use navguard_core::detect::consistency::ConsistencyFlag;
+        use navguard_core::monitor::Availability;
         for m in stats.monitors.values() {
             for t in m.tests.values() {
                 // Tests fed no normalised innovation have no diagnostics to count.

@@ -13,14 +13,14 @@ use serde::Serialize;
 use serde_json::Value;
 use tokio::sync::Semaphore;
 
-use crate::learn::cv::CvParams;
-use crate::learn::{self, AnyModel, Dataset, LearnError, ModelKind, ModelParams, Progress};
-use crate::monitor::ModelSource;
 use crate::service::config::Limits;
 use crate::service::error::ApiError;
 use crate::service::now_ms;
 use crate::service::store::models::RESTARTED;
 use crate::service::store::{Store, StoreError, StoredModel};
+use navguard_core::learn::cv::CvParams;
+use navguard_core::learn::{self, AnyModel, Dataset, LearnError, ModelKind, ModelParams, Progress};
+use navguard_core::monitor::ModelSource;
 
 /// Where a model is in its life.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]

@@ -79,18 +79,18 @@ pub(crate) async fn get_text(url: &str) -> String {
 /// tests assert while a debug build runs it ten times faster.
 pub(crate) fn ship_1hz(
     seed: u64,
-    faults: Vec<navguard::sim::Fault>,
+    faults: Vec<navguard_sim::Fault>,
     duration_s: f64,
-) -> navguard::sim::Scenario {
-    let truth = navguard::sim::ship_trajectory()
+) -> navguard_sim::Scenario {
+    let truth = navguard_sim::ship_trajectory()
         .unwrap()
         .sample(1.0, duration_s)
         .unwrap();
-    let params = navguard::sim::scenario::ScenarioParams {
+    let params = navguard_sim::scenario::ScenarioParams {
         ins_rate_hz: 1.0,
-        ..navguard::sim::scenario::ship_params(seed, faults)
+        ..navguard_sim::scenario::ship_params(seed, faults)
     };
-    navguard::sim::simulate(params, truth).unwrap()
+    navguard_sim::simulate(params, truth).unwrap()
 }
 
 /// `http://addr`

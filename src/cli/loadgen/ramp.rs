@@ -9,7 +9,7 @@
 use std::sync::Arc;
 
 use anyhow::Context;
-use navguard::sim::plot::{Chart, Series};
+use navguard_sim::plot::{Chart, Series};
 use serde::Serialize;
 
 use super::report::{Report, ms, rate_label};

@@ -5,7 +5,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use anyhow::{Context, bail};
-use navguard::session::SessionStats;
+use navguard_core::session::SessionStats;
 use tokio::time::Instant;
 
 use super::stream::Sent;
@@ -91,8 +91,8 @@ pub(super) async fn drain(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use navguard::monitor::MonitorKind;
-    use navguard::session::stats::TestStats;
+    use navguard_core::monitor::MonitorKind;
+    use navguard_core::session::stats::TestStats;
 
     #[test]
     fn stats_are_read_as_the_services_session_stats() {

@@ -3,11 +3,11 @@
 //! (`SPEC_HELP` says how the monitor is chosen).
 
 use anyhow::{Context, bail};
-use navguard::detect::PolicyConfig;
-use navguard::epoch::Aid;
-use navguard::monitor::MonitorKind;
-use navguard::monitor::federated::FederatedConfigWire;
 use navguard::service::wire::{CreateSession, MonitorSpecWire};
+use navguard_core::detect::PolicyConfig;
+use navguard_core::epoch::Aid;
+use navguard_core::monitor::MonitorKind;
+use navguard_core::monitor::federated::FederatedConfigWire;
 use serde_json::Value;
 
 use super::input::FileScan;
@@ -177,7 +177,7 @@ mod tests {
         let config: FederatedConfigWire = serde_json::from_value(m.config.clone()).unwrap();
         assert_eq!(config, FederatedConfigWire::new(vec![Aid::Gnss, Aid::Cns]));
         // The monitor runs exactly as it would on the bare aids list.
-        let parse = navguard::monitor::federated::FederatedConfig::from_json;
+        let parse = navguard_core::monitor::federated::FederatedConfig::from_json;
         assert_eq!(
             parse(&m.config).unwrap(),
             parse(&serde_json::json!({"aids": ["gnss", "cns"]})).unwrap()

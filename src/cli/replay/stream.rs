@@ -11,7 +11,7 @@ use anyhow::bail;
 use futures_util::stream::{SplitSink, SplitStream};
 use futures_util::{SinkExt, StreamExt};
 use indicatif::ProgressBar;
-use navguard::session::SessionStats;
+use navguard_core::session::SessionStats;
 use tokio::time::Instant;
 use tokio_tungstenite::tungstenite::Message;
 

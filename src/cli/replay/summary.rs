@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 use anyhow::Context;
-use navguard::session::SessionStats;
+use navguard_core::session::SessionStats;
 use serde::Serialize;
 
 use super::stream::Sent;
@@ -303,8 +303,8 @@ fn render_stats(out: &mut String, view: &SessionStats) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use navguard::detect::Health;
     use navguard::service::wire::{AlarmRecord, StateChange, tagged};
+    use navguard_core::detect::Health;
 
     fn alarm(test: &str, t: f64) -> String {
         let record = AlarmRecord {

@@ -3,9 +3,9 @@
 use axum::Json;
 use serde::{Deserialize, Serialize};
 
-use crate::detect::chi2;
 use crate::service::error::ApiError;
 use crate::service::extract::{ApiQuery, query_integer};
+use navguard_core::detect::chi2;
 
 /// Query of `GET /api/v1/chi2/threshold`.
 #[derive(Debug, Deserialize)]

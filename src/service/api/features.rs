@@ -12,11 +12,11 @@ use serde::de::DeserializeOwned;
 use serde_json::{Map, Value};
 
 use super::models::{json_body, numbers, object};
-use crate::features::FeatureError;
-use crate::features::tacan::{TacanFeatureParams, series_features};
-use crate::features::wavelet::{WaveletPacketParams, packet_energies};
 use crate::service::app::AppState;
 use crate::service::error::ApiError;
+use navguard_core::features::FeatureError;
+use navguard_core::features::tacan::{TacanFeatureParams, series_features};
+use navguard_core::features::wavelet::{WaveletPacketParams, packet_energies};
 
 /// The answer: one feature vector per window.
 #[derive(Debug, Serialize)]

@@ -12,13 +12,13 @@ use axum::response::IntoResponse;
 use serde::Serialize;
 use serde_json::{Map, Value};
 
-use crate::learn::cv::CvParams;
-use crate::learn::{self, Dataset, LearnError, ModelKind, ModelParams, Prediction};
 use crate::service::app::AppState;
 use crate::service::config::Limits;
 use crate::service::error::ApiError;
 use crate::service::extract::{integral_numbers, refuse_nulls_at};
 use crate::service::train::{ModelRecord, TrainJob, error_field};
+use navguard_core::learn::cv::CvParams;
+use navguard_core::learn::{self, Dataset, LearnError, ModelKind, ModelParams, Prediction};
 
 /// Longest model `name`, characters.
 const MAX_NAME_CHARS: usize = 200;

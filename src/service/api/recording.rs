@@ -19,8 +19,6 @@ use serde_json::value::RawValue;
 
 use std::collections::BTreeMap;
 
-use crate::epoch::Epoch;
-use crate::monitor::calibrate::{self, CalibrationLine};
 use crate::service::app::AppState;
 use crate::service::error::ApiError;
 use crate::service::extract::{ApiQuery, query_integer_opt};
@@ -28,7 +26,9 @@ use crate::service::session::SessionError;
 use crate::service::session::spec::build_monitors;
 use crate::service::store::{RecordedFrame, Store};
 use crate::service::wire::{TestThresholdSpec, calibrated_tests, parse_frame};
-use crate::session::history::HistoryView;
+use navguard_core::epoch::Epoch;
+use navguard_core::monitor::calibrate::{self, CalibrationLine};
+use navguard_core::session::history::HistoryView;
 
 /// Frames read from the store per chunk of the response.
 const PAGE: i64 = 500;

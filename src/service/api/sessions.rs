@@ -6,7 +6,6 @@ use axum::http::StatusCode;
 use serde::Serialize;
 use serde_json::Value;
 
-use crate::detect::{Health, ThresholdSpec};
 use crate::service::api::thresholds::check_policy_keys;
 use crate::service::app::AppState;
 use crate::service::error::ApiError;
@@ -16,7 +15,8 @@ use crate::service::session::lifecycle;
 use crate::service::session::{SessionHandle, validate_session};
 use crate::service::store::StoredSession;
 use crate::service::wire::{CreateSession, MonitorSpecWire};
-use crate::session::SessionStats;
+use navguard_core::detect::{Health, ThresholdSpec};
+use navguard_core::session::SessionStats;
 
 /// A test's effective threshold and current state, in a session view.
 #[derive(Debug, Serialize)]
@@ -31,7 +31,7 @@ pub struct TestView {
 pub struct MonitorView {
     #[serde(flatten)]
     spec: MonitorSpecWire,
-    tests: std::collections::BTreeMap<crate::monitor::TestName, TestView>,
+    tests: std::collections::BTreeMap<navguard_core::monitor::TestName, TestView>,
 }
 
 /// A session as the API shows it.

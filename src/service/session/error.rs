@@ -4,7 +4,7 @@
 //!
 //! [`ApiError`]: crate::service::error::ApiError
 
-use crate::monitor::BuildError;
+use navguard_core::monitor::BuildError;
 
 /// A session operation that failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -84,8 +84,8 @@ impl SessionError {
     }
 }
 
-impl From<crate::session::ThresholdRefusal> for SessionError {
-    fn from(e: crate::session::ThresholdRefusal) -> Self {
+impl From<navguard_core::session::ThresholdRefusal> for SessionError {
+    fn from(e: navguard_core::session::ThresholdRefusal) -> Self {
         SessionError::Invalid {
             field: e.field,
             reason: e.reason,

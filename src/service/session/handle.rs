@@ -7,10 +7,10 @@ use std::time::{Duration, Instant};
 use tokio::sync::{mpsc, oneshot, watch};
 
 use super::SessionError;
-use crate::epoch::Epoch;
 use crate::service::store::StoredSession;
 use crate::service::wire::{ThresholdUpdate, ThresholdView};
-use crate::session::SessionStats;
+use navguard_core::epoch::Epoch;
+use navguard_core::session::SessionStats;
 
 /// How long a REST call waits for a busy session actor before answering 503.
 const CONTROL_TIMEOUT: Duration = Duration::from_secs(5);
@@ -97,7 +97,7 @@ pub enum ControlCommand {
     /// The statistics history at or after an epoch time.
     History(
         Option<f64>,
-        oneshot::Sender<crate::session::history::HistoryView>,
+        oneshot::Sender<navguard_core::session::history::HistoryView>,
     ),
     /// Stop the actor.
     Shutdown,
@@ -259,7 +259,7 @@ impl SessionHandle {
     pub async fn history(
         &self,
         since: Option<f64>,
-    ) -> Result<crate::session::history::HistoryView, SessionError> {
+    ) -> Result<navguard_core::session::history::HistoryView, SessionError> {
         self.ask(|tx| ControlCommand::History(since, tx)).await
     }
 

@@ -1,5 +1,5 @@
 //! Sessions on the server: one actor task per session runs its session core
-//! (`crate::session`) and carries out what it decides (`actor`); everyone else holds
+//! (`navguard_core::session`) and carries out what it decides (`actor`); everyone else holds
 //! a cheap `SessionHandle` (`handle`); the `registry` maps ids to handles; `lifecycle`
 //! starts, registers and rolls back sessions; `spec` validates what a user asks for.
 

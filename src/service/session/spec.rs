@@ -2,13 +2,13 @@
 //! configuration (built once here so a bad model is a 422 naming its field).
 
 use super::SessionError;
-use crate::detect::ThresholdSpec;
-use crate::monitor::{self, BuildError, ModelSource, Monitor, MonitorConfig, MonitorSpec};
 use crate::service::config::Limits;
 use crate::service::extract::integral_numbers;
 use crate::service::store::StoredSession;
 use crate::service::wire::{CreateSession, MonitorSpecWire};
-use crate::session::thresholds::{test_spec, unknown_test};
+use navguard_core::detect::ThresholdSpec;
+use navguard_core::monitor::{self, BuildError, ModelSource, Monitor, MonitorConfig, MonitorSpec};
+use navguard_core::session::thresholds::{test_spec, unknown_test};
 
 /// Ids and names: 1–64 characters of `A–Z a–z 0–9 _ - .`, so they are safe in
 /// URLs and logs; `.` and `..` are refused, as no client can address them (a
@@ -105,7 +105,7 @@ fn check_dimensions(i: usize, m: &MonitorSpecWire, limits: &Limits) -> Result<()
         ))
     };
     match m.kind {
-        crate::monitor::MonitorKind::Linear => {
+        navguard_core::monitor::MonitorKind::Linear => {
             let (n, k) = (rows("f"), rows("h"));
             if n > limits.max_state_dim {
                 return Err(over(
@@ -124,7 +124,7 @@ fn check_dimensions(i: usize, m: &MonitorSpecWire, limits: &Limits) -> Result<()
                 ));
             }
         }
-        crate::monitor::MonitorKind::Channel => {
+        navguard_core::monitor::MonitorKind::Channel => {
             let channels = m.config.get("channels").and_then(|v| v.as_array());
             for (j, c) in channels.into_iter().flatten().enumerate() {
                 let dim = c.get("dim").and_then(|d| d.as_u64()).unwrap_or(1) as usize;

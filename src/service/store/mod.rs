@@ -31,8 +31,8 @@ use sqlx::sqlite::{
     SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteSynchronous,
 };
 
-use crate::detect::Health;
 use crate::service::wire::{AlarmLevel, AlarmRecord, MonitorSpecWire, Severity};
+use navguard_core::detect::Health;
 
 pub use alarm_writer::AlarmKey;
 pub use cluster::{Acquire, Checkpoint, Fence, Lease};

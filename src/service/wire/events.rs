@@ -6,8 +6,8 @@ use serde::Serialize;
 use serde_json::ser::{CompactFormatter, Formatter};
 
 use super::ingest::{FrameError, FrameErrorCode};
-use crate::monitor::federated::FederatedSolution;
-use crate::monitor::{MonitorReport, Outputs, TestOutcome};
+use navguard_core::monitor::federated::FederatedSolution;
+use navguard_core::monitor::{MonitorReport, Outputs, TestOutcome};
 
 // ------------------------------------------------------------- server messages
 
@@ -246,9 +246,9 @@ mod tests {
     use serde::{Serialize, Serializer};
 
     use super::*;
-    use crate::detect::{Decision, Health, Statistic};
-    use crate::monitor::Availability;
-    use crate::monitor::Integrity;
+    use navguard_core::detect::{Decision, Health, Statistic};
+    use navguard_core::monitor::Availability;
+    use navguard_core::monitor::Integrity;
 
     // The `result` frame as serde writes it from types: the form the hand-written writer
     // replaced, kept as its reference.
@@ -467,14 +467,15 @@ mod tests {
 
     #[test]
     fn a_federated_report_of_the_ship_is_written_as_serde_writes_it() {
-        let scenario = crate::sim::ship_with(4, Vec::new(), 30.0).unwrap();
-        let spec = crate::monitor::MonitorSpec {
-            kind: crate::monitor::MonitorKind::Federated,
-            config: crate::monitor::MonitorConfig::Federated(scenario.monitor_config()),
-            policy: crate::detect::PolicyConfig::Counters { n1: 10, n2: 5 },
-            threshold: crate::detect::ThresholdSpec::PFa(1e-3),
+        let scenario = navguard_sim::ship_with(4, Vec::new(), 30.0).unwrap();
+        let spec = navguard_core::monitor::MonitorSpec {
+            kind: navguard_core::monitor::MonitorKind::Federated,
+            config: navguard_core::monitor::MonitorConfig::Federated(scenario.monitor_config()),
+            policy: navguard_core::detect::PolicyConfig::Counters { n1: 10, n2: 5 },
+            threshold: navguard_core::detect::ThresholdSpec::PFa(1e-3),
         };
-        let mut monitor = crate::monitor::build(&spec, &crate::monitor::NoModels).unwrap();
+        let mut monitor =
+            navguard_core::monitor::build(&spec, &navguard_core::monitor::NoModels).unwrap();
         for e in &scenario.epochs {
             let report = monitor.step(&e.epoch).unwrap();
             let monitors = [("federated", &report)];

@@ -9,8 +9,8 @@ use std::fmt;
 use serde::de::{self, DeserializeSeed, Deserializer, IgnoredAny, SeqAccess, Visitor};
 use serde::{Deserialize, Serialize};
 
-use crate::epoch::Epoch;
-use crate::epoch::{AdsBlock, CnsBlock, GnssBlock, InsBlock};
+use navguard_core::epoch::Epoch;
+use navguard_core::epoch::{AdsBlock, CnsBlock, GnssBlock, InsBlock};
 
 // ---------------------------------------------------------------- ingest frames
 

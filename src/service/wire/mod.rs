@@ -14,20 +14,20 @@ pub mod events;
 pub mod ingest;
 pub mod rest;
 
-pub use crate::session::{
-    AlarmLevel, AlarmRecord, AvailabilityChange, Severity, StateChange, TestThreshold,
-    TestThresholdSpec, ThresholdUpdate, ThresholdView,
-};
 pub use events::{
     ErrorEvent, RESULT_FRAME_BYTES, Tagged, result_frame, tagged, write_result_frame,
 };
 pub use ingest::{FrameError, FrameErrorCode, epoch_to_wire, parse_frame};
+pub use navguard_core::session::{
+    AlarmLevel, AlarmRecord, AvailabilityChange, Severity, StateChange, TestThreshold,
+    TestThresholdSpec, ThresholdUpdate, ThresholdView,
+};
 pub use rest::{CreateSession, MonitorSpecWire, calibrated_tests};
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::detect::Health;
+    use navguard_core::detect::Health;
 
     #[test]
     fn one_epoch_and_batches_parse() {

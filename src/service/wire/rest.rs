@@ -4,10 +4,10 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::detect::PolicyConfig;
-use crate::monitor::MonitorKind;
+use navguard_core::detect::PolicyConfig;
+use navguard_core::monitor::MonitorKind;
 
-use crate::session::{AlarmLevel, TestThresholdSpec};
+use navguard_core::session::{AlarmLevel, TestThresholdSpec};
 
 /// `POST /api/v1/sessions` body.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -72,7 +72,7 @@ fn empty_object() -> serde_json::Value {
 /// The `tests` of a `PUT …/threshold` body that sets every calibrated test's proposed
 /// level as its own `p_fa` (refused tests are left out).
 pub fn calibrated_tests(
-    lines: &[crate::monitor::calibrate::CalibrationLine],
+    lines: &[navguard_core::monitor::calibrate::CalibrationLine],
 ) -> BTreeMap<String, TestThresholdSpec> {
     lines
         .iter()

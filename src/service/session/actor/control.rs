@@ -8,13 +8,13 @@ use std::time::Instant;
 use tokio::sync::mpsc;
 
 use super::{Actor, INGEST_QUEUE};
-use crate::detect::Health;
 use crate::service::cluster::bus;
 use crate::service::now_ms;
 use crate::service::session::SessionError;
 use crate::service::session::handle::{IngestLink, Resumed};
 use crate::service::store::StoredSession;
 use crate::service::wire::{self, StateChange, ThresholdUpdate, ThresholdView};
+use navguard_core::detect::Health;
 
 impl Actor {
     /// A copy of the session's spec as in force.

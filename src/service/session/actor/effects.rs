@@ -10,13 +10,13 @@ use std::time::Instant;
 use axum::extract::ws::Utf8Bytes;
 
 use super::Actor;
-use crate::epoch::Epoch;
-use crate::monitor::MonitorReport;
 use crate::service::cluster::bus;
 use crate::service::now_ms;
 use crate::service::store::{AlarmKey, StoreError};
 use crate::service::wire::{self, AlarmRecord, Severity, StateChange};
-use crate::session::Effect;
+use navguard_core::epoch::Epoch;
+use navguard_core::monitor::MonitorReport;
+use navguard_core::session::Effect;
 
 impl Actor {
     /// Commits the stepped epochs in order; true if any state changed.

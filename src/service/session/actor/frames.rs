@@ -11,14 +11,14 @@ use bytes::BytesMut;
 use tokio::sync::mpsc;
 
 use super::{Actor, Flow, seats};
-use crate::epoch::Epoch;
-use crate::monitor::{EpochError, MonitorReport};
 use crate::service::compute::{ComputeError, SLICE_BUDGET};
 use crate::service::now_ms;
 use crate::service::session::build_monitors;
 use crate::service::session::handle::{ControlCommand, FrameCommand};
 use crate::service::wire::{FrameError, FrameErrorCode};
-use crate::session::{FrameRefusal, Slice, step_slice};
+use navguard_core::epoch::Epoch;
+use navguard_core::monitor::{EpochError, MonitorReport};
+use navguard_core::session::{FrameRefusal, Slice, step_slice};
 
 /// A frame whose epochs are expected to take at most this much compute (from the
 /// session's last measured cost per epoch) is stepped on the actor's own task instead of
@@ -351,7 +351,7 @@ impl Actor {
         epochs: &[Epoch],
         index: usize,
         monitor: usize,
-        e: &crate::monitor::StepError,
+        e: &navguard_core::monitor::StepError,
     ) {
         let t = epochs[index].t;
         let monitor = &self.core.roster()[monitor].name;

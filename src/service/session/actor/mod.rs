@@ -35,8 +35,8 @@ use crate::service::now_ms;
 use crate::service::store::{Checkpoint, Fence, Store, StoredSession};
 use crate::service::train::Models;
 use crate::service::wire::{self, ErrorEvent, FrameError};
-use crate::session::{Effect, Seat, SessionCore, SessionStats};
 use lease::Owned;
+use navguard_core::session::{Effect, Seat, SessionCore, SessionStats};
 
 /// Frames queued per session before the ingest socket stops reading.
 const FRAME_QUEUE: usize = 8;
