@@ -17,7 +17,7 @@ Run (single-threaded BLAS, then the default thread count):
     python3 benches/numpy_lssvm.py
 
 `--golden 250` prints, at full precision (repr), the solution entries
-`src/learn/lssvm_tests.rs` (`bench_system_matches_numpy_golden_numbers`) pins:
+`crates/core/src/learn/lssvm_tests.rs` (`bench_system_matches_numpy_golden_numbers`) pins:
 b, alpha_0, alpha_124 and alpha_249 (alpha_k is entry k + 1 of the bordered solution).
 """
 import argparse

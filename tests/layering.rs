@@ -171,7 +171,7 @@ fn lower_layers_never_import_upper_layers() {
                 for line in offending_lines(&production_code(&file), &forbidden) {
                     violations.push(format!(
                         "{}:{line}",
-                        file.strip_prefix(&src).unwrap_or(&file).display()
+                        file.strip_prefix(src).unwrap_or(&file).display()
                     ));
                 }
             }

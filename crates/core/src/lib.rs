@@ -3,10 +3,10 @@
 //!
 //! # Layout
 //!
-//! Data flows one way; the folders follow it. This crate is the
-//! pure core: no async, no I/O, usable as a library. A module may use the ones
-//! listed before it, never one after it (the workspace root's `tests/layering.rs` checks this for
-//! production code; tests may cross layers).
+//! Data flows one way; the folders follow it. This crate is the pure core: no async,
+//! no I/O, usable as a library. A module may use the ones listed before it, never one
+//! after it (the workspace root's `tests/layering.rs` checks this for production code;
+//! tests may cross layers).
 //!
 //! - [`simd`]: whether the hot kernels run their AVX2 builds (`NAVGUARD_NO_AVX2`): a
 //!   leaf that every layer may use.
