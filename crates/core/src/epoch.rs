@@ -76,6 +76,140 @@ pub struct Epoch {
     pub z: Option<Vec<f64>>,
     /// Control input for the `linear` monitor (with its `b` matrix).
     pub u: Option<Vec<f64>>,
+    /// GNSS pseudoranges for the `gnss` monitor.
+    pub gnss_raw: Option<GnssRawBlock>,
+}
+
+/// A GNSS constellation, by its RINEX letter.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Constellation {
+    /// GPS (`G`).
+    Gps,
+    /// Galileo (`E`).
+    Galileo,
+    /// GLONASS (`R`).
+    Glonass,
+    /// BeiDou (`C`).
+    Beidou,
+    /// QZSS (`J`).
+    Qzss,
+    /// NavIC / IRNSS (`I`).
+    Navic,
+    /// SBAS (`S`).
+    Sbas,
+}
+
+impl Constellation {
+    /// Every constellation, in the order clocks are numbered.
+    pub const ALL: [Constellation; 7] = [
+        Constellation::Gps,
+        Constellation::Galileo,
+        Constellation::Glonass,
+        Constellation::Beidou,
+        Constellation::Qzss,
+        Constellation::Navic,
+        Constellation::Sbas,
+    ];
+
+    /// The RINEX letter.
+    pub fn letter(self) -> char {
+        match self {
+            Constellation::Gps => 'G',
+            Constellation::Galileo => 'E',
+            Constellation::Glonass => 'R',
+            Constellation::Beidou => 'C',
+            Constellation::Qzss => 'J',
+            Constellation::Navic => 'I',
+            Constellation::Sbas => 'S',
+        }
+    }
+
+    /// The constellation of RINEX letter `c`, if any.
+    pub fn from_letter(c: char) -> Option<Self> {
+        Constellation::ALL.into_iter().find(|k| k.letter() == c)
+    }
+}
+
+/// A satellite: constellation and number (`G05`, `E11`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct SatId {
+    /// Constellation.
+    pub constellation: Constellation,
+    /// PRN or slot number, 1–99.
+    pub prn: u8,
+}
+
+impl SatId {
+    /// Parses `G05`-style ids: a constellation letter and a number 1–99 (one or two digits).
+    pub fn parse(s: &str) -> Result<Self, SatIdError> {
+        let mut chars = s.chars();
+        let letter = chars.next().ok_or(SatIdError::Malformed)?;
+        let digits = chars.as_str();
+        if digits.is_empty() || digits.len() > 2 || !digits.bytes().all(|b| b.is_ascii_digit()) {
+            return Err(SatIdError::Malformed);
+        }
+        let constellation =
+            Constellation::from_letter(letter).ok_or(SatIdError::UnknownConstellation(letter))?;
+        let prn: u8 = digits.parse().map_err(|_| SatIdError::Malformed)?;
+        if prn == 0 {
+            return Err(SatIdError::Malformed);
+        }
+        Ok(SatId { constellation, prn })
+    }
+}
+
+impl std::fmt::Display for SatId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}{:02}", self.constellation.letter(), self.prn)
+    }
+}
+
+/// Why a satellite id was refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum SatIdError {
+    /// Not a letter followed by a number 1–99.
+    #[error("a satellite id is a constellation letter and a number 1-99, e.g. G05")]
+    Malformed,
+    /// The letter is no constellation's.
+    #[error("unknown constellation letter '{0}' (G, E, R, C, J, I or S)")]
+    UnknownConstellation(char),
+}
+
+/// One satellite's pseudorange and what is needed to use it (docs/methods.md §M20).
+/// The corrected pseudorange is `pr + clk − iono − tropo`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SatObs {
+    /// The satellite.
+    pub id: SatId,
+    /// Pseudorange, m.
+    pub pr: f64,
+    /// Satellite position at transmit time, ECEF (the frame at transmit time), m.
+    pub pos: [f64; 3],
+    /// Satellite clock correction c·δt_sv, m (relativistic term and group delay
+    /// included): added to the pseudorange.
+    pub clk: f64,
+    /// Ionospheric delay, m (subtracted); absent means none (e.g. an iono-free code).
+    pub iono: Option<f64>,
+    /// Tropospheric delay, m (subtracted); absent means the monitor's model.
+    pub tropo: Option<f64>,
+    /// Pseudorange 1-σ, m; absent means the monitor's σ model.
+    pub sigma: Option<f64>,
+    /// Carrier-to-noise density, dB-Hz.
+    pub cn0: Option<f64>,
+    /// Elevation, rad; computed from the position if absent.
+    pub el: Option<f64>,
+    /// Azimuth, rad, clockwise from north; computed from the position if absent.
+    pub az: Option<f64>,
+}
+
+/// The pseudoranges of one epoch, and the true position when it is known (evaluation only:
+/// the monitor never uses it to decide, it only reports the errors against it).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct GnssRawBlock {
+    /// One entry per satellite, no satellite twice.
+    pub sats: Vec<SatObs>,
+    /// True latitude, longitude (rad) and ellipsoidal height (m).
+    pub truth: Option<[f64; 3]>,
 }
 
 /// An aid of the federated filter (also the simulator's aid sensors).

@@ -369,6 +369,7 @@ impl TryFrom<WireEpoch> for Epoch {
             channels: w.channels.map(channels).transpose()?,
             z: w.z,
             u: w.u,
+            gnss_raw: None,
         })
     }
 }
@@ -813,6 +814,7 @@ mod epoch_to_wire_tests {
             ]),
             z: Some(vec![1.5]),
             u: Some(vec![-0.5]),
+            gnss_raw: None,
         }
     }
 
