@@ -1,7 +1,7 @@
 //! Guards the one-way layering that `src/lib.rs` and `crates/core/src/lib.rs` document.
 //! Across crates Cargo enforces the direction (navguard-core names neither navguard-sim
 //! nor navguard; navguard-sim does not name navguard); this test checks what Cargo
-//! cannot: inside navguard-core each layer of `simd.rs, epoch.rs, geo/, detect/, filter/,
+//! cannot: inside navguard-core each layer of `simd.rs, epoch.rs, geo/, detect/, gnss/, filter/,
 //! learn/, features/, monitor/, session/` imports none after it; navguard-core and
 //! navguard-sim depend on no async, storage or HTTP crate, and navguard-core on no
 //! plotting crate; and only the CLI's `experiment` command reaches into
@@ -19,6 +19,7 @@ const LAYERS: &[(&str, &str)] = &[
     ("crates/core/src/epoch.rs", "epoch"),
     ("crates/core/src/geo", "geo"),
     ("crates/core/src/detect", "detect"),
+    ("crates/core/src/gnss", "gnss"),
     ("crates/core/src/filter", "filter"),
     ("crates/core/src/learn", "learn"),
     ("crates/core/src/features", "features"),

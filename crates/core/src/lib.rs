@@ -15,6 +15,8 @@
 //! - [`geo`]: WGS84 geodesy (frames, radii, Earth and transport rates).
 //! - [`detect`]: χ² thresholds and the non-central χ², test statistics, and the
 //!   decision policies (`classic`, `counters`) that turn statistics into health.
+//! - [`gnss`]: pseudorange corrections, weighted least squares, RAIM fault detection
+//!   and exclusion, and protection levels (slope RAIM, ARAIM) for one epoch.
 //! - [`filter`]: the generic Kalman filter (fixed- and dynamic-size), and the
 //!   INS error model and federated fusion built on it.
 //! - [`learn`]: kernels, LS-SVM and SVM models (for the learned detectors).
@@ -33,6 +35,7 @@ pub mod epoch;
 pub mod features;
 pub mod filter;
 pub mod geo;
+pub mod gnss;
 pub mod learn;
 pub mod monitor;
 pub mod session;
