@@ -145,7 +145,11 @@ impl SatId {
         let mut chars = s.chars();
         let letter = chars.next().ok_or(SatIdError::Malformed)?;
         let digits = chars.as_str();
-        if digits.is_empty() || digits.len() > 2 || !digits.bytes().all(|b| b.is_ascii_digit()) {
+        if !letter.is_ascii_alphabetic()
+            || digits.is_empty()
+            || digits.len() > 2
+            || !digits.bytes().all(|b| b.is_ascii_digit())
+        {
             return Err(SatIdError::Malformed);
         }
         let constellation =

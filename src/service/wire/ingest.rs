@@ -10,7 +10,9 @@ use serde::de::{self, DeserializeSeed, Deserializer, IgnoredAny, SeqAccess, Visi
 use serde::{Deserialize, Serialize};
 
 use navguard_core::epoch::Epoch;
-use navguard_core::epoch::{AdsBlock, CnsBlock, GnssBlock, InsBlock};
+use navguard_core::epoch::{AdsBlock, CnsBlock, GnssBlock, GnssRawBlock, InsBlock};
+
+use super::gnss::{OutGnssRaw, WireGnssRaw};
 
 // ---------------------------------------------------------------- ingest frames
 
@@ -95,6 +97,8 @@ struct WireEpoch {
     z: Option<Vec<f64>>,
     #[serde(default)]
     u: Option<Vec<f64>>,
+    #[serde(default)]
+    gnss_raw: Option<WireGnssRaw>,
 }
 
 /// The stable machine-readable code of a refused frame, as sent in `error` events.
@@ -123,6 +127,12 @@ pub enum FrameErrorCode {
     Numerical,
     /// A server fault (the session's monitors were restarted).
     Internal,
+    /// A `gnss_raw` satellite id names no constellation.
+    UnknownConstellation,
+    /// A `gnss_raw` block holds one satellite twice.
+    DuplicateSatellite,
+    /// A `gnss_raw` satellite position is not on a GNSS orbit.
+    SatellitePosition,
 }
 
 impl FrameErrorCode {
@@ -140,6 +150,9 @@ impl FrameErrorCode {
             FrameErrorCode::EmptyBatch => "empty_batch",
             FrameErrorCode::Numerical => "numerical",
             FrameErrorCode::Internal => "internal",
+            FrameErrorCode::UnknownConstellation => "unknown_constellation",
+            FrameErrorCode::DuplicateSatellite => "duplicate_satellite",
+            FrameErrorCode::SatellitePosition => "satellite_position",
         }
     }
 }
@@ -369,7 +382,7 @@ impl TryFrom<WireEpoch> for Epoch {
             channels: w.channels.map(channels).transpose()?,
             z: w.z,
             u: w.u,
-            gnss_raw: None,
+            gnss_raw: w.gnss_raw.map(GnssRawBlock::try_from).transpose()?,
         })
     }
 }
@@ -587,6 +600,8 @@ struct OutEpoch<'a> {
     z: Option<&'a [f64]>,
     #[serde(skip_serializing_if = "Option::is_none")]
     u: Option<&'a [f64]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    gnss_raw: Option<OutGnssRaw>,
 }
 
 /// Serialises a domain `Epoch` to one ingest frame (a JSON object, degrees on
@@ -618,6 +633,9 @@ pub fn epoch_to_wire(epoch: &Epoch) -> Result<String, FrameError> {
     }
     for (_, v) in epoch.channels.iter().flatten() {
         numbers.extend(v);
+    }
+    if let Some(b) = &epoch.gnss_raw {
+        super::gnss::numbers(b, &mut numbers);
     }
     finite("epoch", &numbers)?;
     let out = OutEpoch {
@@ -661,6 +679,7 @@ pub fn epoch_to_wire(epoch: &Epoch) -> Result<String, FrameError> {
         }),
         z: epoch.z.as_deref(),
         u: epoch.u.as_deref(),
+        gnss_raw: epoch.gnss_raw.as_ref().map(OutGnssRaw::from),
     };
     serde_json::to_string(&out)
         .map_err(|e| FrameError::new(FrameErrorCode::InvalidEpoch, e.to_string()))
@@ -814,7 +833,21 @@ mod epoch_to_wire_tests {
             ]),
             z: Some(vec![1.5]),
             u: Some(vec![-0.5]),
-            gnss_raw: None,
+            gnss_raw: Some(GnssRawBlock {
+                sats: vec![navguard_core::epoch::SatObs {
+                    id: navguard_core::epoch::SatId::parse("C30").unwrap(),
+                    pr: 38_000_123.25,
+                    pos: [-32e6, 27e6, 0.5e6],
+                    clk: -1.5,
+                    iono: Some(3.25),
+                    tropo: None,
+                    sigma: Some(4.0),
+                    cn0: Some(38.5),
+                    el: Some(0.5),
+                    az: None,
+                }],
+                truth: Some([0.6, -2.1, -28.0]),
+            }),
         }
     }
 
@@ -846,6 +879,15 @@ mod epoch_to_wire_tests {
         assert_eq!(back.gyros, epoch.gyros);
         assert_eq!(back.channels, epoch.channels);
         assert_eq!((back.z, back.u), (epoch.z, epoch.u));
+        let (a, b) = (back.gnss_raw.unwrap(), epoch.gnss_raw.unwrap());
+        assert_close(&a.truth.unwrap(), &b.truth.unwrap());
+        let (a, b) = (&a.sats[0], &b.sats[0]);
+        assert_close(&[a.el.unwrap()], &[b.el.unwrap()]);
+        assert_eq!((a.id, a.pr, a.pos, a.clk), (b.id, b.pr, b.pos, b.clk));
+        assert_eq!(
+            (a.iono, a.tropo, a.sigma, a.cn0, a.az),
+            (b.iono, b.tropo, b.sigma, b.cn0, b.az)
+        );
     }
 
     #[test]

@@ -4,6 +4,7 @@
 //!
 //! - [`rest`]: REST request and response bodies (sessions, thresholds).
 //! - [`ingest`]: ingest frames (epochs in, their error codes) and epochs back to frames.
+//! - [`gnss`]: the `gnss_raw` block (pseudoranges) of an ingest epoch.
 //! - [`events`]: what the server sends out (results, alarms, state changes, errors).
 //!
 //! Every item is re-exported here by name, so `wire::X` names it wherever it lives. The
@@ -11,6 +12,7 @@
 //! threshold bodies are part of the wire contract too, and are named here beside them.
 
 pub mod events;
+pub mod gnss;
 pub mod ingest;
 pub mod rest;
 
