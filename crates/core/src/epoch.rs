@@ -179,7 +179,7 @@ pub enum SatIdError {
     UnknownConstellation(char),
 }
 
-/// One satellite's pseudorange and what is needed to use it (docs/methods.md §M20).
+/// One satellite's pseudorange and what is needed to use it (docs/methods.md §M26).
 /// The corrected pseudorange is `pr + clk − iono − tropo`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SatObs {

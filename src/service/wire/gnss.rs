@@ -1,5 +1,5 @@
 //! The `gnss_raw` block of an ingest epoch: per satellite a pseudorange and what is
-//! needed to use it (docs/methods.md §M20), parsed and checked here into
+//! needed to use it (docs/methods.md §M26), parsed and checked here into
 //! [`GnssRawBlock`]; and the block written back as a frame (`navguard convert`).
 //! Angles are degrees on the wire, radians inside.
 
