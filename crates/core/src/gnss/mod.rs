@@ -3,3 +3,22 @@
 //! detection and exclusion, and protection levels (slope RAIM and ARAIM). Pure
 //! functions on one epoch's measurements; the `gnss` monitor keeps the state between
 //! epochs.
+//!
+//! - [`correct`]: Sagnac rotation, elevation/azimuth, Saastamoinen troposphere, the
+//!   corrected pseudorange.
+//! - [`wls`]: iterated weighted least squares (position and one clock per
+//!   constellation), DOPs, residuals and their w-tests.
+//! - [`raim`]: the residual χ² test, fault detection and exclusion, slope protection
+//!   levels.
+
+// `araim` (ARAIM solution-separation protection levels and FDE) goes here.
+pub mod correct;
+pub mod raim;
+pub mod wls;
+
+#[cfg(test)]
+mod raim_tests;
+#[cfg(test)]
+mod testdata;
+#[cfg(test)]
+mod wls_tests;

@@ -1,0 +1,364 @@
+//! RAIM on a [`super::wls`] fix, the last step of the `gnss` layer before the monitors:
+//! the residual χ² test (WSSR against `detect::chi2`), fault detection and exclusion
+//! ([`FdeMethod`]: RTKLIB's leave-one-out, greedy w-test, and the hook for ARAIM's
+//! solution separation), and slope-based protection levels for weighted RAIM.
+
+use nalgebra::DMatrix;
+
+use super::wls::{MIN_REDUNDANCY, WlsError, WlsParams, WlsSolution, solve, solve_excluding};
+use crate::detect::chi2::{self, Chi2Error};
+use crate::epoch::{SatId, SatObs};
+
+/// RTKLIB's GDOP limit in `valsol` (`maxgdop` default 30), applied by [`FdeMethod::Rtklib`].
+pub const RTKLIB_MAX_GDOP: f64 = 30.0;
+
+/// RTKLIB's starting residual RMS (m) in `raim_fde`: a leave-one-out subset must do better.
+const RTKLIB_MAX_RMS_M: f64 = 100.0;
+
+/// Why a RAIM step failed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RaimError {
+    /// The WLS fix failed.
+    #[error(transparent)]
+    Wls(#[from] WlsError),
+    /// The χ² machinery refused its inputs (e.g. P_FA outside (0, 1)).
+    #[error(transparent)]
+    Chi2(#[from] Chi2Error),
+    /// No redundancy (dof = 0): nothing to test.
+    #[error("no redundancy: the residual test needs dof >= 1")]
+    NoRedundancy,
+    /// The method is not available in this build (solution separation lives in ARAIM).
+    #[error("FDE method not available here")]
+    Unsupported,
+}
+
+/// The residual χ² test of one fix: `WSSR ~ χ²(dof)` when fault-free.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Chi2Test {
+    /// Weighted sum of squared residuals.
+    pub wssr: f64,
+    /// Degrees of freedom.
+    pub dof: u32,
+    /// Threshold `F⁻¹_{χ²(dof)}(1 − P_FA)`.
+    pub threshold: f64,
+    /// `wssr <= threshold`.
+    pub passed: bool,
+}
+
+/// The χ² test of `sol` at false-alarm probability `p_fa`.
+pub fn chi2_test(sol: &WlsSolution, p_fa: f64) -> Result<Chi2Test, RaimError> {
+    if sol.dof == 0 {
+        return Err(RaimError::NoRedundancy);
+    }
+    let threshold = chi2::threshold(sol.dof, p_fa)?;
+    Ok(Chi2Test {
+        wssr: sol.wssr,
+        dof: sol.dof,
+        threshold,
+        passed: sol.wssr <= threshold,
+    })
+}
+
+/// How faulty satellites are found and excluded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FdeMethod {
+    /// RTKLIB's `raim_fde` (pntpos.c): when the χ² test fails and there are at least 6
+    /// observations, solve once without each satellite; among the subsets that pass χ²
+    /// (and GDOP ≤ 30) with at least 5 satellites, keep the one with the smallest
+    /// (unweighted) residual RMS, if below 100 m. At most one exclusion.
+    Rtklib,
+    /// Exclude the largest |w-test|, re-solve, re-test, up to `max_exclusions`, while
+    /// the test fails and `dof ≥ 2` (with dof = 1 every w-test has the same size).
+    Greedy,
+    /// ARAIM solution separation: see [`solution_separation_fde`].
+    SolutionSeparation,
+}
+
+/// What ARAIM's solution-separation FDE needs beyond the WLS settings (ARAIM ADD v3
+/// terms; the values belong to the caller's integrity support message).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SolutionSeparationParams {
+    /// Prior probability of a satellite fault, per satellite and approach.
+    pub p_sat: f64,
+    /// Prior probability of a constellation-wide fault.
+    pub p_const: f64,
+    /// Integrity risk budget (horizontal and vertical together).
+    pub p_hmi: f64,
+}
+
+impl Default for SolutionSeparationParams {
+    /// ARAIM reference values: `P_sat = 1e-5`, `P_const = 1e-4`, `P_HMI = 1e-7`.
+    fn default() -> Self {
+        SolutionSeparationParams {
+            p_sat: 1e-5,
+            p_const: 1e-4,
+            p_hmi: 1e-7,
+        }
+    }
+}
+
+/// Settings of fault detection and exclusion.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FdeParams {
+    /// The method.
+    pub method: FdeMethod,
+    /// False-alarm probability of each χ² test.
+    pub p_fa: f64,
+    /// Most exclusions ([`FdeMethod::Greedy`]; Rtklib makes at most one).
+    pub max_exclusions: usize,
+    /// For [`FdeMethod::SolutionSeparation`].
+    pub solution_separation: SolutionSeparationParams,
+}
+
+impl Default for FdeParams {
+    /// RTKLIB's method at RTKLIB's α = 0.001, one exclusion.
+    fn default() -> Self {
+        FdeParams {
+            method: FdeMethod::Rtklib,
+            p_fa: 1e-3,
+            max_exclusions: 1,
+            solution_separation: SolutionSeparationParams::default(),
+        }
+    }
+}
+
+/// What became of one input satellite.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SatStatus {
+    /// In the final fix.
+    Used,
+    /// Excluded by FDE.
+    Excluded,
+    /// Below the elevation mask.
+    Masked,
+}
+
+/// The result of FDE.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FdeOutcome {
+    /// The final fix (the all-in-view one when nothing was excluded).
+    pub solution: WlsSolution,
+    /// Excluded satellites, in the order they were excluded.
+    pub excluded: Vec<SatId>,
+    /// Per input satellite, in input order.
+    pub status: Vec<(SatId, SatStatus)>,
+    /// The all-in-view test failed (`None` when it could not be run, dof = 0).
+    pub detected: Option<bool>,
+    /// The final fix's test (`None` when dof = 0).
+    pub test: Option<Chi2Test>,
+}
+
+/// Fault detection and exclusion on one epoch by `params.method`.
+pub fn fde(obs: &[SatObs], wls: &WlsParams, params: &FdeParams) -> Result<FdeOutcome, RaimError> {
+    match params.method {
+        FdeMethod::Rtklib => rtklib_fde(obs, wls, params.p_fa),
+        FdeMethod::Greedy => greedy_fde(obs, wls, params.p_fa, params.max_exclusions),
+        FdeMethod::SolutionSeparation => {
+            solution_separation_fde(obs, wls, params.p_fa, &params.solution_separation)
+        }
+    }
+}
+
+/// Solution-separation FDE (ARAIM): the all-in-view fix against the fault-tolerant
+/// subset fixes, excluding the fault mode whose separation exceeds its threshold.
+/// This is the hook for `gnss::araim`, which provides the implementation; here it
+/// returns [`RaimError::Unsupported`].
+pub fn solution_separation_fde(
+    _obs: &[SatObs],
+    _wls: &WlsParams,
+    _p_fa: f64,
+    _params: &SolutionSeparationParams,
+) -> Result<FdeOutcome, RaimError> {
+    Err(RaimError::Unsupported)
+}
+
+/// The χ² test, `None` when dof = 0.
+fn maybe_test(sol: &WlsSolution, p_fa: f64) -> Result<Option<Chi2Test>, RaimError> {
+    match chi2_test(sol, p_fa) {
+        Ok(t) => Ok(Some(t)),
+        Err(RaimError::NoRedundancy) => Ok(None),
+        Err(e) => Err(e),
+    }
+}
+
+/// Per-satellite status of `obs` in `sol` after excluding `excluded`.
+fn statuses(obs: &[SatObs], sol: &WlsSolution, excluded: &[SatId]) -> Vec<(SatId, SatStatus)> {
+    obs.iter()
+        .map(|o| {
+            let s = if excluded.contains(&o.id) {
+                SatStatus::Excluded
+            } else if sol.masked.contains(&o.id) {
+                SatStatus::Masked
+            } else {
+                SatStatus::Used
+            };
+            (o.id, s)
+        })
+        .collect()
+}
+
+fn outcome(
+    obs: &[SatObs],
+    solution: WlsSolution,
+    excluded: Vec<SatId>,
+    detected: Option<bool>,
+    p_fa: f64,
+) -> Result<FdeOutcome, RaimError> {
+    let test = maybe_test(&solution, p_fa)?;
+    let status = statuses(obs, &solution, &excluded);
+    Ok(FdeOutcome {
+        solution,
+        excluded,
+        status,
+        detected,
+        test,
+    })
+}
+
+/// [`FdeMethod::Rtklib`].
+fn rtklib_fde(obs: &[SatObs], wls: &WlsParams, p_fa: f64) -> Result<FdeOutcome, RaimError> {
+    let full = solve(obs, wls);
+    let full_test = match &full {
+        Ok(sol) => maybe_test(sol, p_fa)?,
+        Err(_) => None,
+    };
+    let detected = full_test.map(|t| !t.passed);
+    let gdop_ok = |s: &WlsSolution| s.dops.gdop > 0.0 && s.dops.gdop <= RTKLIB_MAX_GDOP;
+    let full_ok = matches!((&full, full_test), (Ok(s), Some(t)) if t.passed && gdop_ok(s));
+    // pntpos: raim_fde only after a failed estpos, with n >= 6 observations.
+    if full_ok || obs.len() < 6 || matches!(&full, Ok(s) if s.dof == 0) {
+        return outcome(obs, full?, Vec::new(), detected, p_fa);
+    }
+    let mut best: Option<(f64, SatId, WlsSolution)> = None;
+    for o in obs {
+        let Ok(sol) = solve_excluding(obs, wls, &[o.id]) else {
+            continue;
+        };
+        let passed = maybe_test(&sol, p_fa)?.is_some_and(|t| t.passed);
+        if !passed || !gdop_ok(&sol) || sol.sats.len() < 5 {
+            continue;
+        }
+        let rms = (sol.sats.iter().map(|s| s.residual_m.powi(2)).sum::<f64>()
+            / sol.sats.len() as f64)
+            .sqrt();
+        let limit = best.as_ref().map_or(RTKLIB_MAX_RMS_M, |b| b.0);
+        if rms <= limit {
+            best = Some((rms, o.id, sol));
+        }
+    }
+    match best {
+        Some((_, id, sol)) => outcome(obs, sol, vec![id], detected.or(Some(true)), p_fa),
+        None => outcome(obs, full?, Vec::new(), detected, p_fa),
+    }
+}
+
+/// [`FdeMethod::Greedy`].
+fn greedy_fde(
+    obs: &[SatObs],
+    wls: &WlsParams,
+    p_fa: f64,
+    max_exclusions: usize,
+) -> Result<FdeOutcome, RaimError> {
+    let mut sol = solve(obs, wls)?;
+    let detected = maybe_test(&sol, p_fa)?.map(|t| !t.passed);
+    let mut excluded = Vec::new();
+    while let Some(test) = maybe_test(&sol, p_fa)? {
+        if test.passed || excluded.len() >= max_exclusions || sol.dof < 2 {
+            break;
+        }
+        let worst = sol
+            .sats
+            .iter()
+            .filter(|s| s.redundancy > MIN_REDUNDANCY)
+            .max_by(|a, b| a.normalised.abs().total_cmp(&b.normalised.abs()));
+        let Some(worst) = worst else { break };
+        excluded.push(worst.id);
+        match solve_excluding(obs, wls, &excluded) {
+            Ok(next) => sol = next,
+            Err(_) => {
+                excluded.pop();
+                break;
+            }
+        }
+    }
+    outcome(obs, sol, excluded, detected, p_fa)
+}
+
+/// One satellite's slopes: the position error per unit of `sqrt(λ)` that a bias on it
+/// causes (m), `∞` when its redundancy is zero (the bias is unobservable).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SatSlope {
+    /// The satellite.
+    pub id: SatId,
+    /// Horizontal slope, m.
+    pub horizontal: f64,
+    /// Vertical slope, m.
+    pub vertical: f64,
+}
+
+/// Slope-based protection levels of a weighted-RAIM fix.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SlopeProtection {
+    /// `max_i slope_H,i · sqrt(λ_det)`, m.
+    pub hpl_m: f64,
+    /// `max_i slope_V,i · sqrt(λ_det)`, m.
+    pub vpl_m: f64,
+    /// The non-centrality at which the test misses with probability P_MD.
+    pub lambda_det: f64,
+    /// The detection threshold.
+    pub threshold: f64,
+    /// Per used satellite, in the fix's order.
+    pub slopes: Vec<SatSlope>,
+}
+
+/// Slope protection levels (Walter & Enge 1995, "Weighted RAIM for precision approach",
+/// ION GPS-95; the unweighted form is Brown & Chin 1997): with `S = (GᵀWG)⁻¹GᵀW` and
+/// `P = I − GS`, a bias `b` on satellite `i` moves east/north/up by `S_{·i} b` and makes
+/// the statistic `WSSR = yᵀPᵀWPy` non-central with `λ = b²(WP)_ii = b² r_i/σ_i²`
+/// (r_i the redundancy number). So `slope_H,i = ‖S_{EN,i}‖ σ_i / sqrt(r_i)`, and the
+/// largest horizontal error missed with probability P_MD is `slope_H,i · sqrt(λ_det)`,
+/// `λ_det` from `chi2::noncentrality_for_missed_detection(dof, T_D, P_MD)`.
+///
+/// The fault-free noise term (`k(P_FF)·σ_H`, as Brown & Chin add) is not included:
+/// these are the bias-only bounds of Walter & Enge; a caller wanting it adds it with
+/// `detect::hpl::combine`.
+pub fn slope_protection_levels(
+    sol: &WlsSolution,
+    p_fa: f64,
+    p_md: f64,
+) -> Result<SlopeProtection, RaimError> {
+    let test = chi2_test(sol, p_fa)?;
+    let lambda_det = chi2::noncentrality_for_missed_detection(sol.dof, test.threshold, p_md)?;
+    let g = &sol.geometry_enu;
+    let mut gw: DMatrix<f64> = g.clone();
+    for (j, s) in sol.sats.iter().enumerate() {
+        gw.row_mut(j).scale_mut(1.0 / s.sigma_m);
+    }
+    let q = gw
+        .tr_mul(&gw)
+        .try_inverse()
+        .ok_or(WlsError::SingularGeometry)?;
+    let mut slopes = Vec::with_capacity(sol.sats.len());
+    for (j, s) in sol.sats.iter().enumerate() {
+        // Column i of S = Q g_iᵀ / σ_i².
+        let col = &q * g.row(j).transpose() / (s.sigma_m * s.sigma_m);
+        let per_sqrt_lambda = if s.redundancy > MIN_REDUNDANCY {
+            s.sigma_m / s.redundancy.sqrt()
+        } else {
+            f64::INFINITY
+        };
+        slopes.push(SatSlope {
+            id: s.id,
+            horizontal: col[0].hypot(col[1]) * per_sqrt_lambda,
+            vertical: col[2].abs() * per_sqrt_lambda,
+        });
+    }
+    let worst = |f: fn(&SatSlope) -> f64| slopes.iter().map(f).fold(0.0, f64::max);
+    Ok(SlopeProtection {
+        hpl_m: worst(|s| s.horizontal) * lambda_det.sqrt(),
+        vpl_m: worst(|s| s.vertical) * lambda_det.sqrt(),
+        lambda_det,
+        threshold: test.threshold,
+        slopes,
+    })
+}
