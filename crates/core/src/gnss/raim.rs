@@ -144,6 +144,8 @@ pub struct FdeOutcome {
     pub status: Vec<(SatId, SatStatus)>,
     /// The all-in-view test failed (`None` when it could not be run, dof = 0).
     pub detected: Option<bool>,
+    /// The all-in-view test itself (`None` when it could not be run).
+    pub all_in_view: Option<Chi2Test>,
     /// The final fix's test (`None` when dof = 0).
     pub test: Option<Chi2Test>,
 }
@@ -201,16 +203,17 @@ fn outcome(
     obs: &[SatObs],
     solution: WlsSolution,
     excluded: Vec<SatId>,
-    detected: Option<bool>,
+    all_in_view: Option<Chi2Test>,
     p_fa: f64,
 ) -> Result<FdeOutcome, RaimError> {
     let test = maybe_test(&solution, p_fa)?;
     let status = statuses(obs, &solution, &excluded);
     Ok(FdeOutcome {
         solution,
+        detected: all_in_view.map(|t| !t.passed),
+        all_in_view,
         excluded,
         status,
-        detected,
         test,
     })
 }
@@ -222,12 +225,11 @@ fn rtklib_fde(obs: &[SatObs], wls: &WlsParams, p_fa: f64) -> Result<FdeOutcome, 
         Ok(sol) => maybe_test(sol, p_fa)?,
         Err(_) => None,
     };
-    let detected = full_test.map(|t| !t.passed);
     let gdop_ok = |s: &WlsSolution| s.dops.gdop > 0.0 && s.dops.gdop <= RTKLIB_MAX_GDOP;
     let full_ok = matches!((&full, full_test), (Ok(s), Some(t)) if t.passed && gdop_ok(s));
     // pntpos: raim_fde only after a failed estpos, with n >= 6 observations.
     if full_ok || obs.len() < 6 || matches!(&full, Ok(s) if s.dof == 0) {
-        return outcome(obs, full?, Vec::new(), detected, p_fa);
+        return outcome(obs, full?, Vec::new(), full_test, p_fa);
     }
     let mut best: Option<(f64, SatId, WlsSolution)> = None;
     for o in obs {
@@ -247,8 +249,8 @@ fn rtklib_fde(obs: &[SatObs], wls: &WlsParams, p_fa: f64) -> Result<FdeOutcome, 
         }
     }
     match best {
-        Some((_, id, sol)) => outcome(obs, sol, vec![id], detected.or(Some(true)), p_fa),
-        None => outcome(obs, full?, Vec::new(), detected, p_fa),
+        Some((_, id, sol)) => outcome(obs, sol, vec![id], full_test, p_fa),
+        None => outcome(obs, full?, Vec::new(), full_test, p_fa),
     }
 }
 
@@ -260,7 +262,7 @@ fn greedy_fde(
     max_exclusions: usize,
 ) -> Result<FdeOutcome, RaimError> {
     let mut sol = solve(obs, wls)?;
-    let detected = maybe_test(&sol, p_fa)?.map(|t| !t.passed);
+    let all_in_view = maybe_test(&sol, p_fa)?;
     let mut excluded = Vec::new();
     while let Some(test) = maybe_test(&sol, p_fa)? {
         if test.passed || excluded.len() >= max_exclusions || sol.dof < 2 {
@@ -281,7 +283,7 @@ fn greedy_fde(
             }
         }
     }
-    outcome(obs, sol, excluded, detected, p_fa)
+    outcome(obs, sol, excluded, all_in_view, p_fa)
 }
 
 /// One satellite's slopes: the position error per unit of `sqrt(λ)` that a bias on it

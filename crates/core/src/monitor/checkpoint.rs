@@ -81,6 +81,7 @@ fn kind_code(kind: MonitorKind) -> u8 {
         MonitorKind::Channel => 3,
         MonitorKind::Rimu => 4,
         MonitorKind::Tacan => 5,
+        MonitorKind::Gnss => 6,
     }
 }
 
@@ -105,6 +106,7 @@ pub fn checkpoint_kind(bytes: &[u8]) -> Result<MonitorKind, CheckpointError> {
         MonitorKind::Channel,
         MonitorKind::Rimu,
         MonitorKind::Tacan,
+        MonitorKind::Gnss,
     ]
     .into_iter()
     .find(|&k| kind_code(k) == code)

@@ -6,6 +6,7 @@ pub mod calibrate;
 pub mod channel;
 pub mod checkpoint;
 pub mod federated;
+pub mod gnss;
 pub mod guards;
 pub mod linear;
 pub mod rimu;
@@ -40,6 +41,8 @@ pub enum MonitorKind {
     Rimu,
     /// TACAN range one-class SVM (docs/methods.md §M18).
     Tacan,
+    /// GNSS pseudoranges: least squares, RAIM FDE, protection levels (docs/methods.md §M26–§M28).
+    Gnss,
 }
 
 impl MonitorKind {
@@ -51,6 +54,7 @@ impl MonitorKind {
             MonitorKind::Channel => "channel",
             MonitorKind::Rimu => "rimu",
             MonitorKind::Tacan => "tacan",
+            MonitorKind::Gnss => "gnss",
         }
     }
 }
@@ -155,6 +159,9 @@ pub enum Outputs {
         /// One-class decision value.
         decision: Option<f64>,
     },
+    /// `gnss`: the fix, its DOPs and protection levels, and every satellite
+    /// (shared with the statistics' snapshot, so a step copies no satellite list).
+    Gnss(Arc<gnss::GnssOutputs>),
 }
 
 /// Whether a monitor's solution can be trusted to its protection level
@@ -294,6 +301,8 @@ pub enum MonitorConfig {
     Rimu(rimu::RimuConfigWire),
     /// `tacan`.
     Tacan(tacan::TacanConfigWire),
+    /// `gnss`.
+    Gnss(gnss::GnssConfigWire),
 }
 
 impl MonitorConfig {
@@ -305,6 +314,7 @@ impl MonitorConfig {
             MonitorKind::Channel => MonitorConfig::Channel(parse_config(value)?),
             MonitorKind::Rimu => MonitorConfig::Rimu(parse_config(value)?),
             MonitorKind::Tacan => MonitorConfig::Tacan(parse_config(value)?),
+            MonitorKind::Gnss => MonitorConfig::Gnss(parse_config(value)?),
         })
     }
 
@@ -316,6 +326,7 @@ impl MonitorConfig {
             MonitorConfig::Channel(_) => MonitorKind::Channel,
             MonitorConfig::Rimu(_) => MonitorKind::Rimu,
             MonitorConfig::Tacan(_) => MonitorKind::Tacan,
+            MonitorConfig::Gnss(_) => MonitorKind::Gnss,
         }
     }
 }
@@ -414,5 +425,6 @@ pub fn build(spec: &MonitorSpec, models: &dyn ModelSource) -> Result<Box<dyn Mon
         MonitorConfig::Channel(c) => channel::build(c, policy, threshold, models),
         MonitorConfig::Rimu(c) => rimu::build(c, policy, threshold, models),
         MonitorConfig::Tacan(c) => tacan::build(c, policy, threshold, models),
+        MonitorConfig::Gnss(c) => gnss::build(c, policy, threshold),
     }
 }

@@ -7,7 +7,7 @@
 use super::SessionCore;
 use super::records::{AlarmRecord, AvailabilityChange, Raised, StateChange};
 use super::rule::Severity;
-use super::stats::{IntegrityStats, MonitorStats, Position, Track};
+use super::stats::{GnssSnapshot, IntegrityStats, MonitorStats, Position, Track};
 use crate::detect::Statistic;
 use crate::epoch::Epoch;
 use crate::monitor::{Availability, Integrity, MonitorReport, Outputs, TestOutcome};
@@ -256,9 +256,17 @@ fn record_integrity(
     }
 }
 
-/// Moves a federated monitor's track. It moves only on INS epochs: on the others the
-/// monitor repeats its last solution, which is already recorded with its own time.
+/// Moves a federated monitor's track, or a gnss monitor's snapshot. The track moves only
+/// on INS epochs (the snapshot on epochs with pseudoranges): on the others the monitor
+/// repeats its last solution, which is already recorded with its own time.
 fn record_track(stats: &mut MonitorStats, t: f64, report: &MonitorReport, epoch: &Epoch) {
+    if let (Outputs::Gnss(outputs), Some(_)) = (&report.outputs, &epoch.gnss_raw) {
+        stats.gnss = Some(GnssSnapshot {
+            t,
+            outputs: outputs.clone(),
+        });
+        return;
+    }
     if let (
         Outputs::Federated {
             solution: Some(s), ..

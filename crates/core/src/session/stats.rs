@@ -5,12 +5,14 @@
 //! session core as it commits epochs.
 
 use std::collections::{BTreeMap, VecDeque};
+use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
 use super::rule::Severity;
 use crate::detect::Health;
 use crate::detect::consistency::ConsistencySummary;
+use crate::monitor::gnss::GnssOutputs;
 use crate::monitor::{Availability, Integrity, MonitorKind, TestName, TestOutcome};
 
 /// Availability changes kept in a monitor's timeline.
@@ -327,6 +329,16 @@ pub struct Track {
     pub ins: Position,
 }
 
+/// The latest epoch of a `gnss` monitor: its outputs (the `result` frame's) and time.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct GnssSnapshot {
+    /// Time of the epoch, s.
+    pub t: f64,
+    /// The monitor's outputs at that epoch, shared with its report.
+    #[serde(flatten)]
+    pub outputs: Arc<GnssOutputs>,
+}
+
 /// Statistics of one monitor.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct MonitorStats {
@@ -343,6 +355,10 @@ pub struct MonitorStats {
     /// before the first INS epoch and for other kinds.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub track: Option<Track>,
+    /// `gnss` only: the latest epoch with pseudoranges; absent before it and for other
+    /// kinds.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gnss: Option<GnssSnapshot>,
     /// Monitors with a protection level: availability now and its timeline; absent
     /// before the first epoch that reports one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -462,6 +478,7 @@ mod tests {
                     solution: position,
                     ins: position,
                 }),
+                gnss: None,
                 integrity: None,
             },
         );
@@ -473,6 +490,7 @@ mod tests {
                 worst_test_ratio: None,
                 tests: BTreeMap::from([(TestName::from("r"), test)]),
                 track: None,
+                gnss: None,
                 integrity: None,
             },
         );
