@@ -3,3 +3,5 @@
 //! detection and exclusion, and protection levels (slope RAIM and ARAIM). Pure
 //! functions on one epoch's measurements; the `gnss` monitor keeps the state between
 //! epochs.
+
+pub mod araim;
