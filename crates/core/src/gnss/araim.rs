@@ -25,7 +25,7 @@ mod pl;
 #[cfg(test)]
 mod tests;
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVector, SMatrix};
 use serde::{Deserialize, Serialize};
 
 use crate::epoch::{Constellation, SatId};
@@ -35,6 +35,15 @@ pub use pl::{PlTerm, lhs as pl_lhs, q, q_inv, solve as solve_pl};
 
 /// Most satellites one epoch may hold (fault modes are 64-bit masks).
 pub const MAX_SATS: usize = 64;
+
+/// Most clock columns (one per constellation of [`Constellation::ALL`]).
+pub const MAX_CLOCKS: usize = 7;
+
+/// The normal matrices are fixed 10 × 10 (3 position + [`MAX_CLOCKS`]) so a subset costs
+/// no allocation; unused clock columns carry the identity, which leaves the position
+/// block of the inverse that of the reduced geometry.
+const M: usize = 3 + MAX_CLOCKS;
+type Normal = SMatrix<f64, M, M>;
 
 /// The ARAIM integrity and continuity allocations and ISM fault priors. Defaults are
 /// the LPV-200 allocations of ADD v2.0/v3.0 (Table "parameters", also [B15] Table 1)
@@ -330,7 +339,7 @@ impl AraimModel {
         params.check()?;
         let n = sats.len();
         let n_clk = sats.iter().map(|s| s.clock + 1).max().unwrap_or(0);
-        if n > MAX_SATS || n < 4 + n_clk.saturating_sub(1) || n_clk > 16 {
+        if n > MAX_SATS || n < 4 + n_clk.saturating_sub(1) || n_clk > MAX_CLOCKS {
             return Err(AraimError::SatelliteCount(n));
         }
         for s in sats {
@@ -346,7 +355,6 @@ impl AraimModel {
                 return Err(AraimError::Satellite(s.id));
             }
         }
-        let m = 3 + n_clk;
         // C_int and C_acc (diagonal), and W = C_int⁻¹ ([B15] eqs. for the nominal model).
         let var_int: Vec<f64> = sats
             .iter()
@@ -388,9 +396,12 @@ impl AraimModel {
         let mut p_nm = set.p_not_monitored;
 
         // Normal matrix of the all-in-view, N_0 = Gᵀ W G.
-        let mut n0 = DMatrix::<f64>::zeros(m, m);
+        let mut n0 = Normal::zeros();
         for (i, s) in sats.iter().enumerate() {
             accumulate(&mut n0, &g[i], s.clock, w[i]);
+        }
+        for c in n_clk..MAX_CLOCKS {
+            n0[(3 + c, 3 + c)] = 1.0;
         }
 
         let mut masks = vec![0u64];
@@ -402,13 +413,13 @@ impl AraimModel {
             // N_k = N_0 − Σ_{excluded} w_i g_i g_iᵀ (the ADD's W_k with zero weights),
             // then a lost clock column is replaced by the identity so the position block
             // of N_k⁻¹ is that of the reduced geometry.
-            let mut nk = n0.clone();
+            let mut nk = n0;
             for i in (0..n).filter(|i| mask & (1 << i) != 0) {
                 accumulate(&mut nk, &g[i], sats[i].clock, -w[i]);
             }
             let clk = clocks_of(mask);
             for c in (0..n_clk).filter(|c| clk & (1 << c) == 0) {
-                for j in 0..m {
+                for j in 0..M {
                     nk[(3 + c, j)] = 0.0;
                     nk[(j, 3 + c)] = 0.0;
                 }
@@ -422,11 +433,7 @@ impl AraimModel {
                 continue;
             };
             // The first three columns of N_k⁻¹ (= its first three rows, N_k symmetric).
-            let mut e3 = DMatrix::<f64>::zeros(m, 3);
-            for q in 0..3 {
-                e3[(q, q)] = 1.0;
-            }
-            let x = chol.solve(&e3);
+            let x = chol.solve(&SMatrix::<f64, M, 3>::identity());
             let sig = [x[(0, 0)].sqrt(), x[(1, 1)].sqrt(), x[(2, 2)].sqrt()];
             if sig.iter().any(|s| !s.is_finite()) {
                 if k == 0 {
@@ -669,7 +676,7 @@ impl AraimModel {
 }
 
 /// `N += w g gᵀ` for a row `g = [g_e, g_n, g_u, 1 at clock]`.
-fn accumulate(n: &mut DMatrix<f64>, g: &[f64; 4], clock: usize, w: f64) {
+fn accumulate(n: &mut Normal, g: &[f64; 4], clock: usize, w: f64) {
     let idx = [0, 1, 2, 3 + clock];
     for a in 0..4 {
         for b in 0..4 {
