@@ -10,8 +10,10 @@
 //!   constellation), DOPs, residuals and their w-tests.
 //! - [`raim`]: the residual χ² test, fault detection and exclusion, slope protection
 //!   levels.
+//! - [`araim`]: ARAIM by solution separation: fault modes, protection levels, the
+//!   separation tests and exclusion.
 
-// `araim` (ARAIM solution-separation protection levels and FDE) goes here.
+pub mod araim;
 pub mod correct;
 pub mod raim;
 pub mod wls;
