@@ -7,7 +7,7 @@
 
 import { fmtNum, fmtT, isNum } from "./dom.js";
 
-const COLORS = {
+export const COLORS = {
   line: "#0b5cad", threshold: "#c62828", grid: "#e3e7ec", axis: "#57606a",
   suspect: "rgba(212, 155, 0, 0.22)", isolated: "rgba(210, 59, 59, 0.22)", hover: "#1b1f24",
 };
@@ -21,7 +21,7 @@ function lowerBound(a, x) {
 }
 
 /** "Nice" tick values covering [lo, hi], about `n` of them. */
-function ticks(lo, hi, n) {
+export function ticks(lo, hi, n) {
   const span = hi - lo;
   if (!(span > 0)) return [lo];
   const raw = span / n;

@@ -2,7 +2,8 @@
 // REST, so new sessions appear without a reload), one events socket per
 // session (stats, state, alarm and availability messages), and a bounded
 // history of every test's statistic, and of every protection level against
-// its alert limit, for the charts. Views read from here and subscribe to
+// its alert limit, for the charts (and for gnss monitors their horizontal and
+// vertical levels, errors and latest satellites). Views read from here and subscribe to
 // changes; nothing here touches the DOM.
 
 import { get, socketUrl, AuthError } from "./api.js";
@@ -17,6 +18,8 @@ const STABLE_OPEN_MS = 10000;
 const HISTORY_CAP = 6000;
 /** Track points kept per federated monitor (about 17 minutes at 20 stats/s). Trimmed in chunks. */
 const TRACK_CAP = 20000;
+/** GNSS epochs kept per gnss monitor (over an hour at 1 Hz). Trimmed in chunks. */
+const GNSS_CAP = 6000;
 /** WGS84 semi-major axis (m) and first eccentricity squared, for the local ENU frame. */
 const WGS84_A = 6378137.0;
 const WGS84_E2 = 6.69437999014e-3;
@@ -181,6 +184,57 @@ export class Track {
   }
 }
 
+/**
+ * One gnss monitor's protection levels over time and its latest epoch, from
+ * the `gnss` snapshot of each stats message. The snapshot repeats until the
+ * next epoch with pseudoranges, so a repeated `t` is skipped. Parallel arrays
+ * of t, hpl, vpl, hal, val, hpe, vpe (null where the epoch had none: no
+ * solution, no VAL configured, no truth position).
+ */
+export class GnssHistory {
+  constructor() { this.clear(); }
+  clear() {
+    this.t = []; this.hpl = []; this.vpl = []; this.hal = []; this.val = []; this.hpe = []; this.vpe = [];
+    this.latest = null; // the last snapshot as received
+    this.version = (this.version || 0) + 1; // lets a chart tell new data from a redraw
+  }
+  get length() { return this.t.length; }
+  /** Adds one snapshot; false when it repeats the last epoch. */
+  push(g) {
+    const n = this.t.length;
+    if (n && g.t === this.t[n - 1]) return false;
+    if (n && g.t < this.t[n - 1]) this.clear(); // stream restarted (t went back)
+    this.append(g);
+    this.latest = g;
+    this.version++;
+    if (this.t.length > GNSS_CAP + GNSS_CAP / 4) {
+      const drop = this.t.length - GNSS_CAP;
+      for (const a of this.arrays()) a.splice(0, drop);
+    }
+    return true;
+  }
+  /** Puts history snapshots (oldest first) before what is held; the latest stays. */
+  prepend(list) {
+    const first = this.t.length ? this.t[0] : Infinity;
+    const older = list.filter((g) => isNum(g.t) && g.t < first);
+    if (!older.length) return;
+    const keep = this.arrays().map((a) => a.slice());
+    const latest = this.latest || older[older.length - 1];
+    this.clear();
+    for (const g of older) this.append(g);
+    this.arrays().forEach((a, k) => { for (const v of keep[k]) a.push(v); });
+    if (this.t.length > GNSS_CAP) for (const a of this.arrays()) a.splice(0, this.t.length - GNSS_CAP);
+    this.latest = latest;
+    this.version++;
+  }
+  append(g) {
+    const num = (x) => (isNum(x) ? x : null);
+    this.t.push(g.t); this.hpl.push(num(g.hpl)); this.vpl.push(num(g.vpl)); this.hal.push(num(g.hal));
+    this.val.push(num(g.val)); this.hpe.push(num(g.hpe)); this.vpe.push(num(g.vpe));
+  }
+  arrays() { return [this.t, this.hpl, this.vpl, this.hal, this.val, this.hpe, this.vpe]; }
+}
+
 /** Everything the page knows about one session. */
 class SessionLive {
   constructor(id) {
@@ -190,6 +244,7 @@ class SessionLive {
     this.statsAt = 0;      // our clock when it arrived
     this.series = new Map(); // "monitor/test" → Series
     this.tracks = new Map(); // federated monitor name → Track
+    this.gnss = new Map();   // gnss monitor name → GnssHistory
     this.ws = null; this.openedAt = 0; this.delay = BACKOFF_MIN_MS;
     this.retryTimer = null; this.retryAt = 0; this.removed = false;
     this.maxAlarmId = 0;
@@ -204,6 +259,11 @@ class SessionLive {
     let tr = this.tracks.get(monitor);
     if (!tr) { tr = new Track(); this.tracks.set(monitor, tr); }
     return tr;
+  }
+  gnssFor(monitor) {
+    let g = this.gnss.get(monitor);
+    if (!g) { g = new GnssHistory(); this.gnss.set(monitor, g); }
+    return g;
   }
   /** "live", "connecting…", "reconnecting in N s" or "off". */
   liveText() {
@@ -326,7 +386,7 @@ export class Live {
       this.historyWanted.add(id);
       return;
     }
-    const tests = new Map(), integrity = new Map(), tracks = new Map();
+    const tests = new Map(), integrity = new Map(), tracks = new Map(), gnss = new Map();
     for (const sample of (h && h.samples) || []) {
       for (const [m, mv] of Object.entries(sample.monitors || {})) {
         for (const [t, tv] of Object.entries(mv.tests || {})) {
@@ -343,6 +403,10 @@ export class Live {
           if (!tracks.has(m)) tracks.set(m, []);
           tracks.get(m).push(mv.track);
         }
+        if (mv.gnss && isNum(mv.gnss.t)) {
+          if (!gnss.has(m)) gnss.set(m, []);
+          gnss.get(m).push(mv.gnss);
+        }
       }
     }
     for (const [key, points] of tests) {
@@ -351,6 +415,7 @@ export class Live {
     }
     for (const [m, points] of integrity) s.seriesFor(m, INTEGRITY).prepend(points);
     for (const [m, list] of tracks) s.trackFor(m).prepend(list);
+    for (const [m, list] of gnss) s.gnssFor(m).prepend(list);
     this.emit("stats", s);
   }
 
@@ -447,6 +512,7 @@ export class Live {
     // monitors with a protection level their integrity.
     for (const [mname, m] of Object.entries(st.monitors || {})) {
       if (m.track && isNum(m.track.t)) s.trackFor(mname).push(m.track);
+      if (m.gnss && isNum(m.gnss.t)) s.gnssFor(mname).push(m.gnss);
       const i = m.integrity;
       if (i && isNum(t) && isNum(i.protection_level)) {
         const series = s.seriesFor(mname, INTEGRITY);

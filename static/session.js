@@ -1,7 +1,8 @@
 // session.js — one session in detail: for each monitor a strip chart per
 // test (statistic against threshold, suspect/isolated bands), HPL against HAL
 // for federated monitors with their corrected track against the raw INS
-// track, the threshold controls, and the session's alarms.
+// track, a gnss monitor's sky plot, levels, residuals and Stanford diagram
+// (gnss.js), the threshold controls, and the session's alarms.
 // All charts of the session share one time range, so zooming one zooms all.
 
 import { el, setText, badge, setBadge, fmtNum, fmtRatio, fmtT, fmtClock, policyLevelText, isNum, severityTag, consistencyText } from "./dom.js";
@@ -9,6 +10,7 @@ import { StripChart, TrackChart } from "./chart.js";
 import { ThresholdControls } from "./controls.js";
 import { INTEGRITY } from "./live.js";
 import { download } from "./api.js";
+import { GnssPanel } from "./gnss.js";
 
 const SESSION_ALARMS = 50;
 
@@ -20,6 +22,7 @@ export class SessionView {
     this.shape = "";
     this.charts = [];       // {chart, monitor, test, caption}
     this.tracks = [];       // {chart, track, value}: one per federated monitor
+    this.gnss = [];         // GnssPanel: one per gnss monitor
     this.range = null;      // shared zoom [t0, t1]
     this.paused = false;
     this.log = false;
@@ -68,6 +71,7 @@ export class SessionView {
       if (s.id !== this.id) return;
       this.headDirty = true;
       for (const c of this.charts) c.chart.invalidate();
+      for (const p of this.gnss) p.invalidate();
     });
     live.on("sessions", () => { this.headDirty = true; });
   }
@@ -82,6 +86,7 @@ export class SessionView {
       this.body.replaceChildren();
       this.charts = [];
       this.tracks = [];
+      this.gnss = [];
     }
     this.headDirty = true;
     this.alarmsDirty = true;
@@ -111,6 +116,7 @@ export class SessionView {
 
   applyRange() {
     for (const c of this.charts) c.chart.setRange(this.range);
+    for (const p of this.gnss) p.setRange(this.range);
     setText(this.rangeText, this.range ? "showing t " + fmtT(this.range[0]) + " \u2013 " + fmtT(this.range[1]) + " s" : "live");
   }
 
@@ -131,6 +137,7 @@ export class SessionView {
       const tr = tc.track, n = tr.length;
       setText(tc.value, n ? "INS \u2212 corrected " + fmtNum(Math.hypot(tr.iE[n - 1] - tr.sE[n - 1], tr.iN[n - 1] - tr.sN[n - 1])) + " m \u00b7 " + n + " points" : "");
     }
+    for (const p of this.gnss) p.draw();
     if (this.alarmsDirty) { this.alarmsDirty = false; this.fillAlarms(); }
   }
 
@@ -138,10 +145,12 @@ export class SessionView {
     setText(this.title, "Session " + s.id);
     this.charts = [];
     this.tracks = [];
+    this.gnss = [];
     const cards = monitors.map((m) => {
       const tests = Object.keys(m.tests).sort();
       // The protection level first: for a federated monitor it is the integrity headline.
-      if (m.live && m.live.integrity) tests.unshift(INTEGRITY);
+      // A gnss monitor draws its HPL with its VPL in its own chart (below) instead.
+      if (m.live && m.live.integrity && m.type !== "gnss") tests.unshift(INTEGRITY);
       const figures = tests.map((t) => {
         const hpl = t === INTEGRITY;
         const chart = new StripChart({
@@ -194,6 +203,12 @@ export class SessionView {
             "Sampled from the session's stats messages (\u2264 20 per second, so a faster INS is thinned); " +
             "the last 20,000 points are kept.")));
       }
+      if (m.type === "gnss") {
+        const panel = new GnssPanel(s.id, m.name, s.gnssFor(m.name), s.seriesFor(m.name, INTEGRITY));
+        panel.setRange(this.range);
+        this.gnss.push(panel);
+        extra.push(...panel.figures);
+      }
       const wide = tests.length > 1 || extra.length > 0;
       return el("section", { class: "card monitor" + (wide ? " wide" : ""), "data-monitor": m.name },
         el("div", { class: "monitor-head" },
@@ -206,6 +221,7 @@ export class SessionView {
   }
 
   fillHead(s, monitors) {
+    for (const p of this.gnss) p.fill(monitors.find((x) => x.name === p.monitor));
     for (const m of monitors) {
       const cell = this.policyCells && this.policyCells.get(m.name);
       if (cell && m.spec) {

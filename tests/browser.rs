@@ -7,7 +7,9 @@
 //! URL opened directly in a new tab draws the run's history, and that a threshold change made through the page's controls is what
 //! the REST API then reports. It also feeds 10 monitors at 20 stats messages a
 //! second and prints the page's own frame-time figures (never asserted: no
-//! test asserts wall-clock time), and saves screenshots under `target/`.
+//! test asserts wall-clock time), and saves screenshots under `target/`. A
+//! second test streams real phone pseudoranges into a `gnss` monitor and checks
+//! that its sky plot, protection-level chart and Stanford diagram are drawn.
 //!
 //! Needs `/usr/bin/chromium` and `/usr/bin/chromedriver` (Debian's `chromium`
 //! and `chromium-driver`; `CHROMIUM` / `CHROMEDRIVER` override the paths). With
@@ -42,6 +44,12 @@ const EPOCHS_PER_FRAME: usize = 10;
 const FRAME_PERIOD: Duration = Duration::from_millis(50);
 /// Monitors in the load session.
 const LOAD_MONITORS: usize = 10;
+/// GSDC 2023's Pixel 7 Pro (tests/data/gnss/README.md): five 1 Hz epochs of 21
+/// satellites with a truth position, as ingest frames written by `navguard convert`.
+const GNSS_FRAMES: &str = "tests/data/gnss/gsdc2023_pixel7pro.jsonl";
+/// Pause between GNSS frames: well over the 50 ms between stats messages, so each
+/// epoch reaches the page in a stats message of its own.
+const GNSS_FRAME_PERIOD: Duration = Duration::from_millis(200);
 
 fn tool(env: &str, default: &str) -> PathBuf {
     std::env::var_os(env).map_or_else(|| PathBuf::from(default), PathBuf::from)
@@ -60,6 +68,23 @@ fn browser_tools() -> Result<(PathBuf, PathBuf), String> {
         }
     }
     Ok((chromium, driver))
+}
+
+/// The browser and its driver, or `None` (after saying why) when the test is to be
+/// skipped; without them, `NAVGUARD_BROWSER_TEST=1` fails the test instead.
+fn browser_tools_or_skip() -> Option<(PathBuf, PathBuf)> {
+    match browser_tools() {
+        Ok(tools) => Some(tools),
+        Err(reason) if std::env::var("NAVGUARD_BROWSER_TEST").as_deref() == Ok("1") => {
+            panic!("NAVGUARD_BROWSER_TEST=1 but {reason}")
+        }
+        Err(reason) => {
+            eprintln!(
+                "skipping the browser test: {reason}; set NAVGUARD_BROWSER_TEST=1 to require it"
+            );
+            None
+        }
+    }
 }
 
 /// chromedriver on a free port; killed on drop.
@@ -231,13 +256,18 @@ fn load_frames(n: usize) -> Vec<String> {
 }
 
 async fn stream(url: String, frames: Vec<String>) {
+    stream_every(url, frames, FRAME_PERIOD).await;
+}
+
+/// Sends `frames` into the ingest socket at `url`, one every `period`.
+async fn stream_every(url: String, frames: Vec<String>, period: Duration) {
     let mut socket = common::connect(&url).await;
     for frame in frames {
         socket
             .send(Message::Text(frame.into()))
             .await
             .expect("send");
-        tokio::time::sleep(FRAME_PERIOD).await;
+        tokio::time::sleep(period).await;
     }
     let _ = socket.close(None).await;
 }
@@ -254,17 +284,8 @@ async fn save_screenshot(client: &Client, name: &str) -> PathBuf {
 // Over 80 lines: one scenario in the order it happens; its steps share its state.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_dashboard_shows_a_faulty_replay_and_applies_a_threshold_change() {
-    let (chromium, driver_path) = match browser_tools() {
-        Ok(tools) => tools,
-        Err(reason) if std::env::var("NAVGUARD_BROWSER_TEST").as_deref() == Ok("1") => {
-            panic!("NAVGUARD_BROWSER_TEST=1 but {reason}")
-        }
-        Err(reason) => {
-            eprintln!(
-                "skipping the browser test: {reason}; set NAVGUARD_BROWSER_TEST=1 to require it"
-            );
-            return;
-        }
+    let Some((chromium, driver_path)) = browser_tools_or_skip() else {
+        return;
     };
     let dir = tempfile::tempdir().unwrap();
     let server = common::start(&dir.path().join("t.db"), None, Limits::default()).await;
@@ -747,6 +768,117 @@ async fn the_dashboard_shows_a_faulty_replay_and_applies_a_threshold_change() {
         js(&client, "return sessionStorage.getItem('navguard.token');").await,
         "s3cret"
     );
+
+    client.close().await.unwrap();
+    server.shutdown().await;
+}
+
+/// The ingest frames of [`GNSS_FRAMES`], one JSON line each.
+fn gnss_frames() -> Vec<String> {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(GNSS_FRAMES);
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| {
+        panic!(
+            "{}: {e} (written by `navguard convert` from tests/data/gnss/gsdc)",
+            path.display()
+        )
+    });
+    text.lines()
+        .filter(|line| !line.trim().is_empty())
+        .map(str::to_owned)
+        .collect()
+}
+
+/// A JS expression: the number a gnss canvas published as `dataset[field]`, null before it exists.
+fn gnss_canvas(plot: &str, field: &str) -> String {
+    format!(
+        r#"(() => {{ const c = document.querySelector('canvas[data-monitor="gnss"][data-plot="{plot}"]'); return c ? Number(c.dataset.{field}) : null; }})()"#
+    )
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_dashboard_draws_a_gnss_monitors_sky_plot_levels_and_stanford_diagram() {
+    let Some((chromium, driver_path)) = browser_tools_or_skip() else {
+        return;
+    };
+    let frames = gnss_frames();
+    let dir = tempfile::tempdir().unwrap();
+    let server = common::start(&dir.path().join("t.db"), None, Limits::default()).await;
+    let http = common::http(&server);
+    let ws = common::ws(&server);
+    let created = reqwest::Client::new()
+        .post(format!("{http}/api/v1/sessions"))
+        .json(&json!({
+            "id": "gnss",
+            "monitors": [{"name": "gnss", "type": "gnss", "config": {}}],
+        }))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(created.status(), 201, "{}", created.text().await.unwrap());
+
+    let driver = start_driver(&driver_path).await;
+    let profile = tempfile::tempdir().unwrap();
+    let client = open_browser(&driver, &chromium, profile.path()).await;
+    client
+        .goto(&format!("{http}/#/session/gnss"))
+        .await
+        .unwrap();
+    client
+        .wait()
+        .for_element(Locator::Css(
+            r#"canvas[data-monitor="gnss"][data-plot="stanford"]"#,
+        ))
+        .await
+        .expect("the gnss monitor's figures appear");
+    stream_every(
+        format!("{ws}/api/v1/sessions/gnss/ingest"),
+        frames,
+        GNSS_FRAME_PERIOD,
+    )
+    .await;
+
+    // The last epoch's satellites on the sky plot (21 tracked in every epoch).
+    let sky = wait_js(
+        &client,
+        &format!("{} >= 15 && {0}", gnss_canvas("sky", "points")),
+        "the sky plot to draw at least 15 satellites",
+    )
+    .await;
+    // One point per epoch with a solution; the Stanford diagram one per epoch with a truth too.
+    let pl = wait_js(
+        &client,
+        &format!("{} >= 3 && {0}", gnss_canvas("pl", "points")),
+        "the protection-level chart to draw at least 3 epochs",
+    )
+    .await;
+    let stanford = wait_js(
+        &client,
+        &format!("{} >= 3 && {0}", gnss_canvas("stanford", "points")),
+        "the Stanford diagram to hold at least 3 epochs",
+    )
+    .await;
+    let regions = js(
+        &client,
+        r#"const d = document.querySelector('canvas[data-monitor="gnss"][data-plot="stanford"]').dataset;
+           return {nominal: d.nominal, mi: d.mi, hmi: d.hmi, unavailable: d.unavailable};"#,
+    )
+    .await;
+    // The HPL the caption shows is the latest epoch's, a finite number of metres.
+    let hpl = js(
+        &client,
+        r#"const v = document.querySelector('[data-field="hpl"][data-monitor="gnss"]');
+           return {value: v && v.dataset.value, text: v && v.textContent};"#,
+    )
+    .await;
+    println!(
+        "gnss: sky {sky} satellites, PL {pl} epochs, Stanford {stanford} epochs {regions}, {hpl}"
+    );
+    let value: f64 = hpl["value"]
+        .as_str()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(f64::NAN);
+    assert!(value.is_finite() && value > 0.0, "{hpl}");
+    save_screenshot(&client, "dashboard-gnss.png").await;
 
     client.close().await.unwrap();
     server.shutdown().await;
