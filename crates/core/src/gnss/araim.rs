@@ -381,10 +381,13 @@ impl AraimModel {
         let constellations: Vec<Constellation> = sats.iter().map(|s| s.id.constellation).collect();
         let p_sat = vec![params.p_sat; n];
         let (events, p_unmon) = modes::events(&constellations, &p_sat, |c| params.p_const_of(c));
-        // A subset is a candidate when it keeps more satellites than unknowns.
+        // A subset is a candidate when it keeps at least as many satellites as unknowns:
+        // solution separation needs the subset's solution, not its redundancy (a subset
+        // whose geometry is still singular is caught by the Cholesky below and counted
+        // as unmonitored).
         let solvable = |mask: u64| {
             let kept = (all & !mask).count_ones() as usize;
-            kept > 3 + clocks_of(mask).count_ones() as usize
+            kept >= 3 + clocks_of(mask).count_ones() as usize
         };
         let set = modes::determine(
             &events,

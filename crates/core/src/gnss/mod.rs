@@ -21,6 +21,6 @@ pub mod wls;
 #[cfg(test)]
 mod raim_tests;
 #[cfg(test)]
-mod testdata;
+pub(crate) mod testdata;
 #[cfg(test)]
 mod wls_tests;

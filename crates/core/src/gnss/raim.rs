@@ -5,6 +5,7 @@
 
 use nalgebra::DMatrix;
 
+use super::araim::{self, AraimParams, AraimSat};
 use super::wls::{MIN_REDUNDANCY, WlsError, WlsParams, WlsSolution, solve, solve_excluding};
 use crate::detect::chi2::{self, Chi2Error};
 use crate::epoch::{SatId, SatObs};
@@ -27,9 +28,9 @@ pub enum RaimError {
     /// No redundancy (dof = 0): nothing to test.
     #[error("no redundancy: the residual test needs dof >= 1")]
     NoRedundancy,
-    /// The method is not available in this build (solution separation lives in ARAIM).
-    #[error("FDE method not available here")]
-    Unsupported,
+    /// ARAIM could not run on the fix (too many satellites, a singular subset).
+    #[error("araim: {0}")]
+    Araim(String),
 }
 
 /// The residual χ² test of one fix: `WSSR ~ χ²(dof)` when fault-free.
@@ -74,31 +75,69 @@ pub enum FdeMethod {
     SolutionSeparation,
 }
 
-/// What ARAIM's solution-separation FDE needs beyond the WLS settings (ARAIM ADD v3
-/// terms; the values belong to the caller's integrity support message).
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// What ARAIM's solution separation needs beyond the WLS settings: the allocations and
+/// priors ([`AraimParams`], the ADD's defaults) and the nominal error model of the
+/// integrity support message. Each satellite's integrity σ is
+/// `sqrt(σ_URA² + σ_i²)` and its accuracy σ `sqrt(σ_URE² + σ_i²)`, with `σ_i` the WLS σ
+/// model's (which stands for the ADD's σ_tropo and σ_user, and for whatever else the
+/// receiver's pseudoranges carry).
+#[derive(Debug, Clone, PartialEq)]
 pub struct SolutionSeparationParams {
-    /// Prior probability of a satellite fault, per satellite and approach.
-    pub p_sat: f64,
-    /// Prior probability of a constellation-wide fault.
-    pub p_const: f64,
-    /// Integrity risk budget (horizontal and vertical together).
-    pub p_hmi: f64,
+    /// Allocations, priors and tolerances.
+    pub araim: AraimParams,
+    /// σ_URA, m (integrity).
+    pub sigma_ura_m: f64,
+    /// σ_URE, m (accuracy and continuity).
+    pub sigma_ure_m: f64,
+    /// b_nom, m (integrity).
+    pub b_nom_m: f64,
 }
 
 impl Default for SolutionSeparationParams {
-    /// ARAIM reference values: `P_sat = 1e-5`, `P_const = 1e-4`, `P_HMI = 1e-7`.
+    /// The ADD's allocations; σ_URA = 1 m, σ_URE = 0.5 m, b_nom = 0.5 m (this crate's
+    /// defaults, of the order ARAIM studies assume for GPS and Galileo; set them from
+    /// the ISM in use).
     fn default() -> Self {
         SolutionSeparationParams {
-            p_sat: 1e-5,
-            p_const: 1e-4,
-            p_hmi: 1e-7,
+            araim: AraimParams::default(),
+            sigma_ura_m: 1.0,
+            sigma_ure_m: 0.5,
+            b_nom_m: 0.5,
         }
     }
 }
 
+/// The ARAIM view of a WLS fix: per used satellite its line of sight, clock column,
+/// error model and elevation, and the residual vector `y` at the fix (the linearisation
+/// point, so every subset solution is a correction `S_k y` about it).
+pub fn araim_inputs(sol: &WlsSolution, ss: &SolutionSeparationParams) -> (Vec<AraimSat>, Vec<f64>) {
+    let g = &sol.geometry_enu;
+    let sats = sol
+        .sats
+        .iter()
+        .enumerate()
+        .map(|(j, s)| {
+            let clock = (3..g.ncols()).position(|c| g[(j, c)] != 0.0).unwrap_or(0);
+            let u = [-g[(j, 0)], -g[(j, 1)], -g[(j, 2)]];
+            let norm = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt();
+            AraimSat {
+                id: s.id,
+                los_enu: u.map(|x| x / norm),
+                clock,
+                sigma_ura: ss.sigma_ura_m,
+                sigma_ure: ss.sigma_ure_m,
+                b_nom: ss.b_nom_m,
+                el: s.az_el.el,
+                sigma_local: Some(s.sigma_m),
+            }
+        })
+        .collect();
+    let y = sol.sats.iter().map(|s| s.residual_m).collect();
+    (sats, y)
+}
+
 /// Settings of fault detection and exclusion.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct FdeParams {
     /// The method.
     pub method: FdeMethod,
@@ -161,17 +200,27 @@ pub fn fde(obs: &[SatObs], wls: &WlsParams, params: &FdeParams) -> Result<FdeOut
     }
 }
 
-/// Solution-separation FDE (ARAIM): the all-in-view fix against the fault-tolerant
-/// subset fixes, excluding the fault mode whose separation exceeds its threshold.
-/// This is the hook for `gnss::araim`, which provides the implementation; here it
-/// returns [`RaimError::Unsupported`].
+/// Solution-separation FDE (ARAIM, [`araim::solution_separation_fde`]) on the all-in-view
+/// WLS fix: when a separation exceeds its threshold, the fault mode whose subset passes
+/// is excluded (a constellation mode excludes every satellite of it) and the fix is
+/// solved again without it. `p_fa` is for the χ² tests the outcome also reports; the
+/// separation tests use the ADD's P_FA allocations.
 pub fn solution_separation_fde(
-    _obs: &[SatObs],
-    _wls: &WlsParams,
-    _p_fa: f64,
-    _params: &SolutionSeparationParams,
+    obs: &[SatObs],
+    wls: &WlsParams,
+    p_fa: f64,
+    params: &SolutionSeparationParams,
 ) -> Result<FdeOutcome, RaimError> {
-    Err(RaimError::Unsupported)
+    let full = solve(obs, wls)?;
+    let all_in_view = maybe_test(&full, p_fa)?;
+    let (sats, y) = araim_inputs(&full, params);
+    let decided = araim::solution_separation_fde(&sats, &y, &params.araim)
+        .map_err(|e| RaimError::Araim(e.to_string()))?;
+    if decided.excluded.is_empty() {
+        return outcome(obs, full, Vec::new(), all_in_view, p_fa);
+    }
+    let sol = solve_excluding(obs, wls, &decided.excluded)?;
+    outcome(obs, sol, decided.excluded, all_in_view, p_fa)
 }
 
 /// The χ² test, `None` when dof = 0.

@@ -5,9 +5,7 @@ use nalgebra::Vector3;
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 
-use super::raim::{
-    FdeMethod, FdeParams, RaimError, SatStatus, chi2_test, fde, slope_protection_levels,
-};
+use super::raim::{FdeMethod, FdeParams, SatStatus, chi2_test, fde, slope_protection_levels};
 use super::testdata::{self, add_noise, errors, random_sky, synthetic};
 use super::wls::{SigmaModel, WlsParams, solve};
 use crate::epoch::{Constellation, SatObs};
@@ -89,8 +87,14 @@ fn wssr_follows_chi2_of_dof_in_a_seeded_monte_carlo() {
     );
 }
 
+const METHODS: [FdeMethod; 3] = [
+    FdeMethod::Rtklib,
+    FdeMethod::Greedy,
+    FdeMethod::SolutionSeparation,
+];
+
 fn step_is_detected_and_excluded(clean: &[SatObs], what: &str) {
-    for method in [FdeMethod::Rtklib, FdeMethod::Greedy] {
+    for method in METHODS {
         for faulty in [0, clean.len() / 2, clean.len() - 1] {
             let mut obs = clean.to_vec();
             add_noise(&mut obs, &mut StdRng::seed_from_u64(faulty as u64));
@@ -140,7 +144,7 @@ fn a_50_m_step_on_one_satellite_is_detected_and_excluded_on_gsdc_2023_geometry()
 fn fault_free_draws_rarely_exclude() {
     let clean = real_geometry();
     let mut rng = StdRng::seed_from_u64(77);
-    for method in [FdeMethod::Rtklib, FdeMethod::Greedy] {
+    for method in METHODS {
         let mut exclusions = 0;
         for _ in 0..200 {
             let mut obs = clean.clone();
@@ -157,18 +161,6 @@ fn fault_free_draws_rarely_exclude() {
             "{method:?}: {exclusions} exclusions in 200 draws"
         );
     }
-}
-
-#[test]
-fn solution_separation_is_a_hook_for_araim() {
-    let p = FdeParams {
-        method: FdeMethod::SolutionSeparation,
-        ..FdeParams::default()
-    };
-    assert_eq!(
-        fde(&synthetic_sky(1), &params(), &p),
-        Err(RaimError::Unsupported)
-    );
 }
 
 #[test]

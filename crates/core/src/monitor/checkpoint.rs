@@ -48,7 +48,7 @@ const MAGIC: [u8; 4] = *b"NGCP";
 pub const FORMAT_VERSION: u8 = 1;
 
 /// Header length: magic, version, kind.
-const HEADER: usize = MAGIC.len() + 2;
+pub(crate) const HEADER: usize = MAGIC.len() + 2;
 
 /// Why a checkpoint could not be written or restored. A failed restore changes nothing.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

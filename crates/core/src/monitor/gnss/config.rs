@@ -5,6 +5,8 @@
 use serde::{Deserialize, Serialize};
 
 use super::super::ConfigError;
+use crate::gnss::araim::AraimParams;
+use crate::gnss::raim::SolutionSeparationParams;
 
 /// Default elevation mask, degrees (RTKLIB's default is 15°; 10° keeps more satellites
 /// for phones and still drops the noisiest low ones).
@@ -118,8 +120,34 @@ pub struct GnssConfigWire {
     pub val_m: Option<f64>,
     /// Missed-detection probability of the slope protection levels.
     pub p_md: f64,
-    /// ARAIM parameters overriding the defaults (docs/methods.md §M28).
-    pub araim: serde_json::Value,
+    /// ARAIM allocations, priors and tolerances; every field defaults to the ADD's
+    /// (docs/methods.md §M28).
+    pub araim: AraimParams,
+    /// The nominal error model of the integrity support message.
+    pub ism: IsmWire,
+}
+
+/// The integrity support message's nominal error model (docs/methods.md §M28).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct IsmWire {
+    /// σ_URA, m (integrity).
+    pub sigma_ura_m: f64,
+    /// σ_URE, m (accuracy and continuity).
+    pub sigma_ure_m: f64,
+    /// b_nom, m.
+    pub b_nom_m: f64,
+}
+
+impl Default for IsmWire {
+    fn default() -> Self {
+        let d = SolutionSeparationParams::default();
+        IsmWire {
+            sigma_ura_m: d.sigma_ura_m,
+            sigma_ure_m: d.sigma_ure_m,
+            b_nom_m: d.b_nom_m,
+        }
+    }
 }
 
 impl Default for GnssConfigWire {
@@ -132,7 +160,8 @@ impl Default for GnssConfigWire {
             hal_m: DEFAULT_HAL_M,
             val_m: None,
             p_md: DEFAULT_P_MD,
-            araim: serde_json::Value::Object(Default::default()),
+            araim: AraimParams::default(),
+            ism: IsmWire::default(),
         }
     }
 }

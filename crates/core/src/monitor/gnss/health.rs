@@ -27,7 +27,9 @@ impl SatHealth {
 
     /// The health of `id` after the last epoch it was seen.
     pub fn health(&self, id: SatId) -> Health {
-        self.states.get(&id).map_or(Health::Healthy, PolicyState::health)
+        self.states
+            .get(&id)
+            .map_or(Health::Healthy, PolicyState::health)
     }
 
     /// Steps the policy of `id` (under `policy` for a satellite first seen) with this
@@ -49,9 +51,10 @@ impl SatHealth {
 
     /// The decision for an epoch on which `id` could not be tested: nothing changes.
     pub fn idle(&self, id: SatId) -> Decision {
-        self.states
-            .get(&id)
-            .map_or(PolicyState::new(PolicyConfig::Classic).idle(), PolicyState::idle)
+        self.states.get(&id).map_or(
+            PolicyState::new(PolicyConfig::Classic).idle(),
+            PolicyState::idle,
+        )
     }
 
     /// Follows a live change of the monitor's policy: satellites under another policy

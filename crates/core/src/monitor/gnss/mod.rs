@@ -30,8 +30,8 @@ use crate::detect::{PolicyConfig, PolicyState, ThresholdSpec};
 use crate::epoch::Epoch;
 use crate::gnss::raim::{FdeMethod, FdeParams, SolutionSeparationParams};
 use crate::gnss::wls::{SigmaModel, WlsParams};
-pub use config::{FdeKind, GnssConfigWire, ProtectionKind, SigmaKind};
 use config::checked;
+pub use config::{FdeKind, GnssConfigWire, ProtectionKind, SigmaKind};
 pub use health::SatHealth;
 pub use outputs::GnssOutputs;
 
@@ -79,8 +79,9 @@ fn sigma_model(w: &config::SigmaWire) -> Result<SigmaModel, ConfigError> {
     };
     Ok(match w.model {
         SigmaKind::Given => SigmaModel::Given {
-            fallback_m: (positive("a_m", w.a_m, rtk_a)?.powi(2) + positive("b_m", w.b_m, 3.0)?.powi(2))
-                .sqrt(),
+            fallback_m: (positive("a_m", w.a_m, rtk_a)?.powi(2)
+                + positive("b_m", w.b_m, 3.0)?.powi(2))
+            .sqrt(),
         },
         SigmaKind::Elevation => SigmaModel::Elevation {
             a_m: positive("a_m", w.a_m, rtk_a)?,
@@ -92,15 +93,6 @@ fn sigma_model(w: &config::SigmaWire) -> Result<SigmaModel, ConfigError> {
             fallback_m,
         },
     })
-}
-
-/// The ARAIM overrides the config may carry.
-#[derive(Debug, Clone, Copy, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct AraimWire {
-    p_sat: Option<f64>,
-    p_const: Option<f64>,
-    p_hmi: Option<f64>,
 }
 
 impl TryFrom<GnssConfigWire> for GnssConfig {
@@ -127,18 +119,20 @@ impl TryFrom<GnssConfigWire> for GnssConfig {
             }
         };
         let hal_m = checked("hal_m", w.hal_m, 0.1..=1e6)?;
-        let val_m = w.val_m.map(|v| checked("val_m", v, 0.1..=1e6)).transpose()?;
+        let val_m = w
+            .val_m
+            .map(|v| checked("val_m", v, 0.1..=1e6))
+            .transpose()?;
         let p_md = checked("p_md", w.p_md, 1e-12..=0.5)?;
-        let overrides: AraimWire =
-            super::parse_config(&w.araim).map_err(|e| ConfigError::new(format!("araim.{}", e.field).trim_end_matches('.'), e.reason))?;
-        let d = SolutionSeparationParams::default();
-        let p = |field: &str, v: Option<f64>, default: f64| {
-            checked(&format!("araim.{field}"), v.unwrap_or(default), 1e-15..=0.5)
-        };
+        w.araim
+            .check()
+            .map_err(|e| ConfigError::new("araim", e.to_string()))?;
+        let ism = |field: &str, v: f64, low: f64| checked(&format!("ism.{field}"), v, low..=1e3);
         let araim = SolutionSeparationParams {
-            p_sat: p("p_sat", overrides.p_sat, d.p_sat)?,
-            p_const: p("p_const", overrides.p_const, d.p_const)?,
-            p_hmi: p("p_hmi", overrides.p_hmi, d.p_hmi)?,
+            sigma_ura_m: ism("sigma_ura_m", w.ism.sigma_ura_m, 1e-6)?,
+            sigma_ure_m: ism("sigma_ure_m", w.ism.sigma_ure_m, 1e-6)?,
+            b_nom_m: ism("b_nom_m", w.ism.b_nom_m, 0.0)?,
+            araim: w.araim,
         };
         Ok(GnssConfig {
             wls,
@@ -206,7 +200,7 @@ impl GnssMonitor {
             method,
             p_fa,
             max_exclusions,
-            solution_separation: self.config.araim,
+            solution_separation: self.config.araim.clone(),
         }
     }
 }
@@ -274,8 +268,13 @@ impl Monitor for GnssMonitor {
     fn restore(&mut self, bytes: &[u8]) -> Result<(), CheckpointError> {
         let saved: GnssSaved = checkpoint::decode(MonitorKind::Gnss, bytes)?;
         let health = SatHealth::restored(saved.satellites).map_err(CheckpointError::Mismatch)?;
-        if saved.last_fix.is_some_and(|p| p.iter().any(|x| !x.is_finite())) {
-            return Err(CheckpointError::mismatch("a non-finite last fix".to_owned()));
+        if saved
+            .last_fix
+            .is_some_and(|p| p.iter().any(|x| !x.is_finite()))
+        {
+            return Err(CheckpointError::mismatch(
+                "a non-finite last fix".to_owned(),
+            ));
         }
         let bank = self
             .bank
@@ -298,3 +297,6 @@ impl Monitor for GnssMonitor {
         ));
     }
 }
+
+#[cfg(test)]
+mod tests;

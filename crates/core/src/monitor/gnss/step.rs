@@ -13,6 +13,7 @@ use crate::detect::chi2;
 use crate::epoch::{GnssRawBlock, SatObs};
 use crate::filter::kalman::FilterError;
 use crate::geo::{self, Lla, ecef_to_enu_rotation};
+use crate::gnss::araim::AraimModel;
 use crate::gnss::correct::{az_el, corrected_pseudorange, saastamoinen, sagnac_rotate};
 use crate::gnss::raim::{self, FdeOutcome, RaimError};
 use crate::gnss::wls::{WlsError, WlsSolution};
@@ -76,17 +77,17 @@ fn solve(
     }
 }
 
-/// The protection levels of the final fix by the configured method.
-fn protection(
-    monitor: &GnssMonitor,
-    sol: &WlsSolution,
-    p_fa: f64,
-) -> Option<(f64, f64)> {
+/// The protection levels of the final fix by the configured method; `None` when they
+/// cannot be computed (no redundancy, a geometry ARAIM refuses).
+fn protection(monitor: &GnssMonitor, sol: &WlsSolution, p_fa: f64) -> Option<(f64, f64)> {
     match monitor.config.protection {
-        ProtectionKind::Slope | ProtectionKind::Araim => {
-            raim::slope_protection_levels(sol, p_fa, monitor.config.p_md)
-                .ok()
-                .map(|p| (p.hpl_m, p.vpl_m))
+        ProtectionKind::Slope => raim::slope_protection_levels(sol, p_fa, monitor.config.p_md)
+            .ok()
+            .map(|p| (p.hpl_m, p.vpl_m)),
+        ProtectionKind::Araim => {
+            let (sats, _) = raim::araim_inputs(sol, &monitor.config.araim);
+            let model = AraimModel::fit(&sats, &monitor.config.araim.araim).ok()?;
+            Some((model.hpl(), model.vpl()))
         }
     }
 }
@@ -146,7 +147,15 @@ pub(super) fn step(
     let levels = sol.and_then(|s| protection(monitor, s, p_fa));
     let mut health = monitor.health.clone();
     health.follow(policy);
-    let satellites = satellite_outputs(monitor, &mut health, block, outcome.as_ref(), &left_out, k, policy);
+    let satellites = satellite_outputs(
+        monitor,
+        &mut health,
+        block,
+        outcome.as_ref(),
+        &left_out,
+        k,
+        policy,
+    );
     let outputs = match (&outcome, sol) {
         (Some(o), Some(s)) => {
             let (hpe, vpe) = errors(s, block.truth);
