@@ -1,6 +1,6 @@
 //! The `navguard` binary: parses flags, opens the store and serves (thin; the
 //! service lives in the library), or runs one of the tools in [`cli`]
-//! (`simulate`, `replay`, `loadgen`, `calibrate`, `experiment`). `anyhow` is used only here and in `cli/`.
+//! (`simulate`, `convert`, `replay`, `loadgen`, `calibrate`, `experiment`). `anyhow` is used only here and in `cli/`.
 
 mod cli;
 
@@ -28,6 +28,8 @@ enum Command {
     Serve(ServeArgs),
     /// Write a simulated scenario as ingest frames, one epoch per JSON line.
     Simulate(cli::simulate::SimulateArgs),
+    /// Convert real receiver files (RINEX, GnssLogger, GSDC) into ingest frames with raw pseudoranges.
+    Convert(cli::convert::ConvertArgs),
     /// Stream a JSON-lines file of epochs into a session of a running server.
     Replay(cli::replay::ReplayArgs),
     /// Put simulated load on a running server: N sessions, a rate, a batch size; report throughput, latency and memory.
@@ -259,6 +261,7 @@ async fn run() -> anyhow::Result<()> {
     match cli.command {
         Some(Command::Serve(args)) => serve(args).await,
         Some(Command::Simulate(args)) => cli::simulate::run(args),
+        Some(Command::Convert(args)) => cli::convert::run(args),
         Some(Command::Replay(args)) => cli::replay::run(args).await,
         Some(Command::Loadgen(args)) => cli::loadgen::run(args).await,
         Some(Command::Calibrate(args)) => cli::calibrate::run(args).await,

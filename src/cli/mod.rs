@@ -1,12 +1,13 @@
 //! The command-line tools beside `serve`: `simulate` writes a scenario as
 //! ingest frames (JSON lines), `replay` streams such a file into a running
 //! server, `loadgen` puts simulated load on one and measures it (docs/performance.md),
-//! `calibrate` proposes thresholds from fault-free data, and `experiment` reruns the
-//! papers' experiments in-process.
+//! `calibrate` proposes thresholds from fault-free data, `convert` turns real receiver
+//! files into ingest frames, and `experiment` reruns the papers' experiments in-process.
 //! Thin: parsing flags, files, sockets and printing; the algorithms live in
 //! the library. `anyhow` is used here and in `main.rs` only.
 
 pub(crate) mod calibrate;
+pub(crate) mod convert;
 pub(crate) mod experiment;
 pub(crate) mod http;
 pub(crate) mod loadgen;

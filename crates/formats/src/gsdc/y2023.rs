@@ -1,0 +1,143 @@
+//! GSDC 2023 `device_gnss.csv` (one signal per row) and its `ground_truth.csv`.
+//!
+//! Rows with an empty `SignalType` carry no position or pseudorange and are skipped.
+//! `pr = RawPseudorangeMeters − IsrbMeters`, `clk = SvClockBiasMeters`,
+//! `iono = IonosphericDelayMeters`, `tropo = TroposphericDelayMeters`,
+//! σ = `RawPseudorangeUncertaintyMeters`, `Cn0DbHz`, `SvElevationDegrees`,
+//! `SvAzimuthDegrees`. The epoch is `utcTimeMillis` (UTC); GPST − UTC is read from the
+//! file itself, as the whole seconds between `ArrivalTimeNanosSinceGpsEpoch` and
+//! `utcTimeMillis` (18 s in 2023).
+
+use std::path::Path;
+
+use navguard_core::epoch::{Epoch, GnssRawBlock, SatObs};
+
+use super::{Band, Columns, Truths, android_sat, read_csv};
+use crate::error::{FormatError, missing};
+use crate::gpstime::unix_ms_utc_to_gps;
+
+/// Seconds from the Unix epoch to the GPS epoch.
+const GPS_EPOCH_UNIX_S: f64 = 315_964_800.0;
+
+/// Reads `ground_truth.csv`: `UnixTimeMillis` → lat, lon (rad), `AltitudeMeters`.
+pub fn read_truth(path: &Path) -> Result<Truths, FormatError> {
+    let file = path.display().to_string();
+    let (headers, rows) = read_csv(path)?;
+    let c = Columns {
+        file: &file,
+        headers: &headers,
+    };
+    let (t, lat, lon, h) = (
+        c.idx("UnixTimeMillis")?,
+        c.idx("LatitudeDegrees")?,
+        c.idx("LongitudeDegrees")?,
+        c.idx("AltitudeMeters")?,
+    );
+    let mut out = Truths::new();
+    for row in &rows {
+        let key = c.req(row, t)? as i64;
+        out.insert(
+            key,
+            [
+                c.req(row, lat)?.to_radians(),
+                c.req(row, lon)?.to_radians(),
+                c.req(row, h)?,
+            ],
+        );
+    }
+    Ok(out)
+}
+
+/// Reads `device_gnss.csv` into epochs, keeping `band`, with truths by `utcTimeMillis`.
+pub fn read(path: &Path, band: Band, truth: Option<&Truths>) -> Result<Vec<Epoch>, FormatError> {
+    let file = path.display().to_string();
+    let (headers, rows) = read_csv(path)?;
+    let c = Columns {
+        file: &file,
+        headers: &headers,
+    };
+    let i = |n: &str| c.idx(n);
+    let (utc, sig, cons, svid) = (
+        i("utcTimeMillis")?,
+        i("SignalType")?,
+        i("ConstellationType")?,
+        i("Svid")?,
+    );
+    let (raw, unc, isrb, clk) = (
+        i("RawPseudorangeMeters")?,
+        i("RawPseudorangeUncertaintyMeters")?,
+        i("IsrbMeters")?,
+        i("SvClockBiasMeters")?,
+    );
+    let (iono, tropo, el, az, cn0) = (
+        i("IonosphericDelayMeters")?,
+        i("TroposphericDelayMeters")?,
+        i("SvElevationDegrees")?,
+        i("SvAzimuthDegrees")?,
+        i("Cn0DbHz")?,
+    );
+    let pos = [
+        i("SvPositionXEcefMeters")?,
+        i("SvPositionYEcefMeters")?,
+        i("SvPositionZEcefMeters")?,
+    ];
+    let arrival = i("ArrivalTimeNanosSinceGpsEpoch")?;
+    let mut leap: Option<f64> = None;
+    let mut epochs: Vec<(i64, Epoch)> = Vec::new();
+    for row in &rows {
+        let signal = row.1.get(sig).map_or("", |s| s.trim());
+        if signal.is_empty() || Band::of_signal(signal) != Some(band) {
+            continue;
+        }
+        let Some(id) = android_sat(c.req(row, cons)? as i64, c.req(row, svid)? as i64) else {
+            continue;
+        };
+        let ms = c.req(row, utc)? as i64;
+        if leap.is_none() {
+            let gps_s = c.req(row, arrival)? * 1e-9;
+            leap = Some((gps_s - (ms as f64 / 1000.0 - GPS_EPOCH_UNIX_S)).round());
+        }
+        if epochs.last().is_none_or(|(k, _)| *k != ms) {
+            let t = unix_ms_utc_to_gps(ms, leap.unwrap_or(0.0));
+            let truth = truth.and_then(|tr| tr.get(&ms).copied());
+            epochs.push((
+                ms,
+                Epoch {
+                    t,
+                    gnss_raw: Some(GnssRawBlock {
+                        sats: vec![],
+                        truth,
+                    }),
+                    ..Epoch::default()
+                },
+            ));
+        }
+        let block = epochs
+            .last_mut()
+            .and_then(|(_, e)| e.gnss_raw.as_mut())
+            .expect("pushed above");
+        if block.sats.iter().any(|s| s.id == id) {
+            continue;
+        }
+        block.sats.push(SatObs {
+            id,
+            pr: c.req(row, raw)? - c.num(row, isrb)?.unwrap_or(0.0),
+            pos: [
+                c.req(row, pos[0])?,
+                c.req(row, pos[1])?,
+                c.req(row, pos[2])?,
+            ],
+            clk: c.req(row, clk)?,
+            iono: c.num(row, iono)?,
+            tropo: c.num(row, tropo)?,
+            sigma: c.num(row, unc)?,
+            cn0: c.num(row, cn0)?,
+            el: c.num(row, el)?.map(f64::to_radians),
+            az: c.num(row, az)?.map(f64::to_radians),
+        });
+    }
+    if epochs.is_empty() {
+        return Err(missing(&file, "no usable rows"));
+    }
+    Ok(epochs.into_iter().map(|(_, e)| e).collect())
+}

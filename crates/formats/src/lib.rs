@@ -1,0 +1,40 @@
+//! navguard-formats: real receiver files → domain [`Epoch`](navguard_core::epoch::Epoch)s
+//! with raw pseudoranges (`gnss_raw`), at the edge of navguard like the wire: files are
+//! parsed and validated once here, and the core only sees SI units and radians.
+//! Every epoch's `t` is seconds since the GPS epoch 1980-01-06 00:00:00 GPST, so
+//! files of one drive merge in time.
+//!
+//! # Layout
+//!
+//! In the order data flows through them:
+//! - [`error`]: one error enum; every malformed line is named by file and 1-based line.
+//! - [`gpstime`]: GPS week/seconds, calendar and UTC ↔ GPS seconds.
+//! - [`ephemeris`]: IS-GPS-200 broadcast orbits and satellite clocks, at transmit time.
+//! - [`klobuchar`]: the IS-GPS-200 single-frequency ionospheric model.
+//! - [`geometry`]: look angles from an a-priori position, and truths.
+//! - [`rinex`]: RINEX 2.10/2.11 observation and GPS navigation files, and their conversion.
+//! - [`gnsslogger`]: Android GnssLogger `Raw` records with a RINEX navigation file.
+//! - [`gsdc`]: the Google Smartphone Decimeter Challenge 2021 and 2023 CSVs.
+//!
+//! # Why our own RINEX parser
+//!
+//! The `rinex` crate (0.24, MPL-2.0, licence acceptable) was weighed and not taken:
+//! its `nav` feature, needed for ephemerides, pulls `anise` (a SPICE toolkit),
+//! `hifitime`, `hyperdual` and a second `nalgebra` (0.34 beside our 0.33), about 200
+//! crates in `cargo tree`, far over the budget of about a minute of clean build on two
+//! cores; and we need our own IS-GPS-200 orbit and clock code anyway (to document and
+//! test the equations), so the crate would only have saved the fixed-column reading,
+//! about 300 lines here. RINEX 2's columns are simple and the two traps in our data
+//! (event-flag-4 records with blank dates, time tags with receiver-clock offsets) are
+//! handled and tested explicitly.
+
+pub mod ephemeris;
+pub mod error;
+pub mod geometry;
+pub mod gnsslogger;
+pub mod gpstime;
+pub mod gsdc;
+pub mod klobuchar;
+pub mod rinex;
+
+pub use error::FormatError;

@@ -1,0 +1,147 @@
+//! RINEX 2 GPS navigation files (RINEX 2.11 §6.4, Table A4): the header's Klobuchar
+//! coefficients and leap seconds, and 8-line broadcast records with `D` exponents.
+
+use std::path::Path;
+
+use navguard_core::epoch::Constellation;
+
+use super::{cols, date, int, label, real, sat_id};
+use crate::ephemeris::{Ephemerides, Ephemeris};
+use crate::error::{At, FormatError, missing, read_to_string};
+use crate::gpstime::{WEEK_S, wrap_half_week};
+use crate::klobuchar::Klobuchar;
+
+/// A parsed GPS navigation file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NavFile {
+    /// `ION ALPHA` / `ION BETA`, when the header has both.
+    pub klobuchar: Option<Klobuchar>,
+    /// `LEAP SECONDS` (GPST − UTC), s, when given.
+    pub leap_seconds: Option<f64>,
+    /// Every broadcast record.
+    pub ephemerides: Ephemerides,
+}
+
+/// Reads a RINEX 2 GPS navigation file.
+pub fn read_nav(path: &Path) -> Result<NavFile, FormatError> {
+    parse_nav(&read_to_string(path)?, &path.display().to_string())
+}
+
+/// Four header reals after column 2 (`ION ALPHA`/`ION BETA`: 2X,4D12.4).
+fn four(line: &str, at: At<'_>) -> Result<[f64; 4], FormatError> {
+    let mut out = [0.0; 4];
+    for (k, v) in out.iter_mut().enumerate() {
+        *v = real(cols(line, 2 + 12 * k, 14 + 12 * k), at)?
+            .ok_or_else(|| at.err("blank coefficient"))?;
+    }
+    Ok(out)
+}
+
+/// Parses the text of a RINEX 2 GPS navigation file named `file`.
+pub fn parse_nav(text: &str, file: &str) -> Result<NavFile, FormatError> {
+    let lines: Vec<&str> = text.lines().collect();
+    let (mut alpha, mut beta, mut leap) = (None, None, None);
+    let mut k = 0;
+    loop {
+        let line = lines
+            .get(k)
+            .ok_or_else(|| missing(file, "no END OF HEADER"))?;
+        let at = At { file, line: k + 1 };
+        k += 1;
+        match label(line) {
+            "RINEX VERSION / TYPE" if !cols(line, 0, 9).trim().starts_with('2') => {
+                return Err(at.err("only RINEX 2.x navigation files are read"));
+            }
+            "ION ALPHA" => alpha = Some(four(line, at)?),
+            "ION BETA" => beta = Some(four(line, at)?),
+            "LEAP SECONDS" => leap = int(cols(line, 0, 6), at)?.map(|v| v as f64),
+            "END OF HEADER" => break,
+            _ => {}
+        }
+    }
+    let mut all = Vec::new();
+    while k < lines.len() {
+        if lines[k].trim().is_empty() {
+            k += 1;
+            continue;
+        }
+        all.push(record(&lines, k, file)?);
+        k += 8;
+    }
+    let klobuchar = alpha
+        .zip(beta)
+        .map(|(alpha, beta)| Klobuchar { alpha, beta });
+    Ok(NavFile {
+        klobuchar,
+        leap_seconds: leap,
+        ephemerides: Ephemerides::new(all),
+    })
+}
+
+/// The 29 reals of the record starting at line index `k` (missing trailing fields
+/// are 0, as blank fields are: RINEX writers trim the fit interval).
+fn record_values(lines: &[&str], k: usize, file: &str) -> Result<Vec<f64>, FormatError> {
+    let mut v = Vec::with_capacity(32);
+    for j in 0..3 {
+        let at = At { file, line: k + 1 };
+        v.push(real(cols(lines[k], 22 + 19 * j, 41 + 19 * j), at)?.unwrap_or(0.0));
+    }
+    for i in 1..8 {
+        let line = lines.get(k + i).copied().unwrap_or("");
+        let at = At {
+            file,
+            line: k + i + 1,
+        };
+        for j in 0..4 {
+            v.push(real(cols(line, 3 + 19 * j, 22 + 19 * j), at)?.unwrap_or(0.0));
+        }
+    }
+    Ok(v)
+}
+
+/// One 8-line record (Table A4) starting at line index `k`.
+fn record(lines: &[&str], k: usize, file: &str) -> Result<Ephemeris, FormatError> {
+    let at = At { file, line: k + 1 };
+    let sat = sat_id(
+        &format!(" {}", cols(lines[k], 0, 2)),
+        Constellation::Gps,
+        at,
+    )?;
+    let toc = date(cols(lines[k], 2, 22), at)?.to_gps_seconds();
+    let v = record_values(lines, k, file)?;
+    let week = v[21] as i64;
+    // The week field goes with t_oe; t_oe near a week's edge and t_oc across it stay
+    // consistent by the half-week rule.
+    let toe_raw = week as f64 * WEEK_S + v[11];
+    let toe = toc + wrap_half_week(toe_raw - toc);
+    if v[10] <= 0.0 {
+        return Err(at.err("√A must be positive"));
+    }
+    Ok(Ephemeris {
+        sat,
+        toc,
+        af0: v[0],
+        af1: v[1],
+        af2: v[2],
+        iode: v[3],
+        crs: v[4],
+        delta_n: v[5],
+        m0: v[6],
+        cuc: v[7],
+        e: v[8],
+        cus: v[9],
+        sqrt_a: v[10],
+        toe,
+        cic: v[12],
+        omega0: v[13],
+        cis: v[14],
+        i0: v[15],
+        crc: v[16],
+        omega: v[17],
+        omega_dot: v[18],
+        idot: v[19],
+        week: ((toe / WEEK_S).floor()) as i64,
+        health: v[24],
+        tgd: v[25],
+    })
+}
