@@ -14,6 +14,7 @@ use navguard_formats::rinex::{convert::RinexParams, nav::read_nav, obs::read_obs
 use navguard_formats::{gnsslogger, rinex};
 
 use super::thousands;
+use crate::service::wire::epoch_to_wire;
 
 /// The file formats `convert` reads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -165,9 +166,8 @@ pub(crate) fn run(a: ConvertArgs) -> anyhow::Result<()> {
         a.out.is_some(),
     );
     for e in &epochs {
-        // SWITCH TO `navguard::service::wire::epoch_to_wire` once main's ingest.rs writes
-        // `gnss_raw`; until then `wire_frame` mirrors that shape.
-        serde_json::to_writer(&mut out, &wire_frame(e)).context("writing a frame")?;
+        let frame = epoch_to_wire(e).with_context(|| format!("the epoch at t = {} s", e.t))?;
+        out.write_all(frame.as_bytes()).context("writing a frame")?;
         out.write_all(b"\n").context("writing a frame")?;
         bar.inc(1);
     }
@@ -175,79 +175,6 @@ pub(crate) fn run(a: ConvertArgs) -> anyhow::Result<()> {
     bar.finish_and_clear();
     eprintln!("wrote {} epochs", thousands(epochs.len() as u64));
     Ok(())
-}
-
-/// The ingest frame of an epoch with a `gnss_raw` block (the wire shape: degrees for
-/// angles, metres for lengths, optional fields left out).
-#[derive(Debug, serde::Serialize)]
-struct Frame {
-    t: f64,
-    gnss_raw: RawWire,
-}
-
-#[derive(Debug, serde::Serialize)]
-struct RawWire {
-    sats: Vec<SatWire>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    truth: Option<TruthWire>,
-}
-
-#[derive(Debug, serde::Serialize)]
-struct TruthWire {
-    lat: f64,
-    lon: f64,
-    h: f64,
-}
-
-#[derive(Debug, serde::Serialize)]
-struct SatWire {
-    id: String,
-    pr: f64,
-    pos: [f64; 3],
-    clk: f64,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    iono: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    tropo: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    sigma: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    cn0: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    el: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    az: Option<f64>,
-}
-
-fn wire_frame(e: &Epoch) -> Frame {
-    let raw = e.gnss_raw.as_ref();
-    Frame {
-        t: e.t,
-        gnss_raw: RawWire {
-            sats: raw
-                .map(|b| &b.sats[..])
-                .unwrap_or(&[])
-                .iter()
-                .map(|s| SatWire {
-                    id: s.id.to_string(),
-                    pr: s.pr,
-                    pos: s.pos,
-                    clk: s.clk,
-                    iono: s.iono,
-                    tropo: s.tropo,
-                    sigma: s.sigma,
-                    cn0: s.cn0,
-                    el: s.el.map(f64::to_degrees),
-                    az: s.az.map(f64::to_degrees),
-                })
-                .collect(),
-            truth: raw.and_then(|b| b.truth).map(|[lat, lon, h]| TruthWire {
-                lat: lat.to_degrees(),
-                lon: lon.to_degrees(),
-                h,
-            }),
-        },
-    }
 }
 
 #[cfg(test)]

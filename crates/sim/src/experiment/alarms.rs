@@ -92,7 +92,6 @@ impl Default for AlarmsParams {
             seeds: (1..=5).collect(),
             duration_s: crate::SHIP_DURATION_S,
             track: None,
-            gnss: None,
             p_fa: 1e-3,
             policy: PolicyConfig::counters_default(),
             configs: vec![
