@@ -161,8 +161,8 @@ fn render(reports: &[MonitorReport], far: f64, epochs: usize) -> String {
     );
     let _ = writeln!(
         s,
-        "{:<12} {:<14} {:>4} {:>8} {:>12} {:>14} {:>12} {:>12}",
-        "monitor", "test", "dof", "epochs", "χ² thr", "χ² rate/far", "p_fa", "threshold"
+        "{:<12} {:<14} {:>4} {:>8} {:>12} {:>14} {:>12} {:>12} {:>8}",
+        "monitor", "test", "dof", "epochs", "χ² thr", "χ² rate/far", "p_fa", "threshold", "σ scale"
     );
     for m in reports {
         for t in &m.tests {
@@ -172,7 +172,7 @@ fn render(reports: &[MonitorReport], far: f64, epochs: usize) -> String {
             };
             let _ = writeln!(
                 s,
-                "{:<12} {:<14} {:>4} {:>8} {:>12.4} {:>13.2}× {:>12} {:>12}",
+                "{:<12} {:<14} {:>4} {:>8} {:>12.4} {:>13.2}× {:>12} {:>12} {:>8}",
                 m.monitor,
                 t.test,
                 t.dof,
@@ -180,7 +180,8 @@ fn render(reports: &[MonitorReport], far: f64, epochs: usize) -> String {
                 t.chi2_threshold,
                 t.chi2_rate / far,
                 p,
-                th
+                th,
+                t.noise_scale.map_or("—".into(), |k| format!("{k:.3}"))
             );
             if let Some(why) = &t.refused {
                 let _ = writeln!(s, "{:<12} {:<14} refused: {why}", "", "");

@@ -96,7 +96,7 @@ fn need<'a>(p: &'a Option<PathBuf>, flag: &str, format: &str) -> anyhow::Result<
 }
 
 /// Reads the input files into epochs.
-fn read_epochs(a: &ConvertArgs) -> anyhow::Result<Vec<Epoch>> {
+pub(crate) fn read_epochs(a: &ConvertArgs) -> anyhow::Result<Vec<Epoch>> {
     let band = if a.l5 { Band::L5 } else { Band::L1 };
     let obs_name = a.obs.display().to_string();
     Ok(match a.format {

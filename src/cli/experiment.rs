@@ -33,6 +33,8 @@ pub(crate) enum ExperimentCommand {
     Guards(GuardsArgs),
     /// T_a's false-alarm rate on coloured residuals: successive-difference vs batch-means variance.
     Coloured(ColouredArgs),
+    /// The gnss monitor on real receiver data: fault-free and injected faults, three FDE methods.
+    Raim(super::experiment_raim::RaimArgs),
 }
 
 /// `navguard experiment coloured` flags.
@@ -261,7 +263,7 @@ pub(crate) struct RampArgs {
 /// What every experiment command does, so [`run`] drives them all alike:
 /// build the library parameters from the flags, run in-process, print the
 /// table, write the figures, then apply the command's `--check`, if any.
-trait Experiment {
+pub(crate) trait Experiment {
     /// The library's result.
     type Output;
     /// Name for errors and the progress spinner (`seed 004`).
@@ -614,5 +616,6 @@ pub(crate) fn run(command: ExperimentCommand) -> anyhow::Result<()> {
         ExperimentCommand::Coloured(args) => execute(&args),
         ExperimentCommand::Alarms(args) => execute(&args),
         ExperimentCommand::Guards(args) => execute(&args),
+        ExperimentCommand::Raim(args) => execute(&args),
     }
 }

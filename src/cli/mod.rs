@@ -9,6 +9,7 @@
 pub(crate) mod calibrate;
 pub(crate) mod convert;
 pub(crate) mod experiment;
+pub(crate) mod experiment_raim;
 pub(crate) mod http;
 pub(crate) mod loadgen;
 pub(crate) mod replay;

@@ -256,8 +256,9 @@ pub enum AraimError {
         /// Its value.
         value: f64,
     },
-    /// Fewer satellites than unknowns + 1, or more than [`MAX_SATS`].
-    #[error("ARAIM needs between unknowns + 1 and 64 satellites, got {0}")]
+    /// Fewer satellites than unknowns (3 + one clock per constellation), or more than
+    /// [`MAX_SATS`].
+    #[error("ARAIM needs between 3 + one per constellation and 64 satellites, got {0}")]
     SatelliteCount(usize),
     /// A satellite's σ, bias or line of sight is not finite or not valid.
     #[error("satellite {0}: σ must be > 0, b_nom ≥ 0, the line of sight a unit vector")]

@@ -393,15 +393,22 @@ pub fn slope_protection_levels(
     for (j, s) in sol.sats.iter().enumerate() {
         // Column i of S = Q g_iᵀ / σ_i².
         let col = &q * g.row(j).transpose() / (s.sigma_m * s.sigma_m);
-        let per_sqrt_lambda = if s.redundancy > MIN_REDUNDANCY {
-            s.sigma_m / s.redundancy.sqrt()
-        } else {
-            f64::INFINITY
+        // A satellite without redundancy (alone in its constellation) cannot be tested;
+        // its bias moves the position by its gain, which is zero when its own clock
+        // absorbs it (slope 0), and is unbounded otherwise (slope ∞).
+        let slope = |gain: f64| {
+            if s.redundancy > MIN_REDUNDANCY {
+                gain * s.sigma_m / s.redundancy.sqrt()
+            } else if gain < 1e-9 {
+                0.0
+            } else {
+                f64::INFINITY
+            }
         };
         slopes.push(SatSlope {
             id: s.id,
-            horizontal: col[0].hypot(col[1]) * per_sqrt_lambda,
-            vertical: col[2].abs() * per_sqrt_lambda,
+            horizontal: slope(col[0].hypot(col[1])),
+            vertical: slope(col[2].abs()),
         });
     }
     let worst = |f: fn(&SatSlope) -> f64| slopes.iter().map(f).fold(0.0, f64::max);

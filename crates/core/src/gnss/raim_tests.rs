@@ -229,7 +229,7 @@ fn slope_hpl_bounds_the_horizontal_error_of_the_worst_bias_at_detection() {
 }
 
 #[test]
-fn a_satellite_without_redundancy_has_an_infinite_slope() {
+fn a_satellite_alone_in_its_constellation_has_no_slope_its_clock_absorbs_its_bias() {
     let mut sky = random_sky(8, 7);
     for s in &mut sky {
         s.0 = Constellation::Gps;
@@ -238,6 +238,25 @@ fn a_satellite_without_redundancy_has_an_infinite_slope() {
     let obs = synthetic(&truth(), &sky, clock, |_| 1.0);
     let sol = solve(&obs, &params()).unwrap();
     let pl = slope_protection_levels(&sol, 1e-3, 1e-3).unwrap();
-    assert!(pl.hpl_m.is_infinite());
-    assert!(pl.slopes[..7].iter().all(|s| s.horizontal.is_finite()));
+    let alone = &pl.slopes[7];
+    assert_eq!((alone.horizontal, alone.vertical), (0.0, 0.0));
+    assert!(
+        pl.slopes[..7]
+            .iter()
+            .all(|s| s.horizontal.is_finite() && s.horizontal > 0.0)
+    );
+    // The levels are those of the GPS satellites, and a bias on the lone satellite
+    // indeed leaves the position where it was.
+    let gps_only = solve(&obs[..7], &params()).unwrap();
+    let gps_pl = slope_protection_levels(&gps_only, 1e-3, 1e-3).unwrap();
+    assert!(
+        (pl.hpl_m - gps_pl.hpl_m).abs() < 1e-6 * gps_pl.hpl_m,
+        "{} vs {}",
+        pl.hpl_m,
+        gps_pl.hpl_m
+    );
+    let mut biased = obs.clone();
+    biased[7].pr += 500.0;
+    let moved = solve(&biased, &params()).unwrap();
+    assert!((moved.ecef - sol.ecef).norm() < 1e-6);
 }

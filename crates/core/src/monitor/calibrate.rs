@@ -59,6 +59,17 @@ pub struct TestSample {
     pub dof: u32,
     /// Upper-tail probability of each epoch's statistic under its own dof.
     pub tails: Vec<f64>,
+    /// Σ statistic and Σ dof over the epochs, for the noise scale.
+    pub sums: (f64, f64),
+}
+
+impl TestSample {
+    /// `sqrt(Σ statistic / Σ dof)`: the factor on the measurement σ that makes the mean
+    /// χ² statistic equal its dof (1 when the noise model is right). For the `gnss`
+    /// monitor's `raim` test it is the `config.sigma.scale` multiplier the data need.
+    pub fn noise_scale(&self) -> Option<f64> {
+        (self.sums.1 > 0.0).then(|| (self.sums.0 / self.sums.1).sqrt())
+    }
 }
 
 /// What calibration proposes for one test.
@@ -95,6 +106,8 @@ pub struct TestCalibration {
     pub chi2_rate: f64,
     /// The proposal.
     pub proposal: Proposal,
+    /// [`TestSample::noise_scale`].
+    pub noise_scale: Option<f64>,
 }
 
 /// One test's calibration as reported (CLI table, JSON and the REST answer).
@@ -116,6 +129,9 @@ pub struct CalibrationLine {
     pub threshold: Option<f64>,
     /// Why not, when refused.
     pub refused: Option<String>,
+    /// `sqrt(Σ statistic / Σ dof)`: the factor on the measurement σ that makes the mean
+    /// statistic its dof (docs/methods.md §M25).
+    pub noise_scale: Option<f64>,
 }
 
 impl From<&TestCalibration> for CalibrationLine {
@@ -142,6 +158,7 @@ impl From<&TestCalibration> for CalibrationLine {
             p_fa,
             threshold,
             refused,
+            noise_scale: c.noise_scale,
         }
     }
 }
@@ -180,6 +197,7 @@ pub fn sample(
             test: s.name.to_string(),
             dof: s.dof,
             tails: Vec::new(),
+            sums: (0.0, 0.0),
         })
         .collect();
     // A test with its own policy and threshold (a protection level against its alert
@@ -197,7 +215,10 @@ pub fn sample(
             } else {
                 1.0
             };
-            samples[o.index].tails.push(tail);
+            let sample = &mut samples[o.index];
+            sample.tails.push(tail);
+            sample.sums.0 += v;
+            sample.sums.1 += f64::from(o.statistic.dof);
         }
     }
     Ok(samples
@@ -258,6 +279,7 @@ pub fn calibrate(
         chi2_threshold,
         chi2_rate,
         proposal,
+        noise_scale: sample.noise_scale(),
     })
 }
 
@@ -356,6 +378,7 @@ mod tests {
                 test: "t".into(),
                 dof: 1,
                 tails,
+                sums: (0.0, 0.0),
             };
             let Proposal::Calibrated { p_fa, .. } = calibrate(&s, 0.01, 0.95).unwrap().proposal
             else {

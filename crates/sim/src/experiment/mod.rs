@@ -20,6 +20,8 @@
 //!   session (ship seeds and the real track), and every injected fault alarmed.
 //! - [`guards`]: frozen GNSS fixes and small DVL biases, with and without the aids' drift
 //!   and stuck tests.
+//! - [`raim`]: the `gnss` monitor on real receiver data, fault-free and with injected
+//!   pseudorange steps and ramps, the three exclusion methods side by side.
 //! - [`scorecard`]: the per-detector figures every experiment ends with.
 //!
 //! The figures are drawn by [`crate::plot`].
@@ -27,6 +29,7 @@
 pub mod alarms;
 pub mod coloured;
 pub mod guards;
+pub mod raim;
 pub mod ramp;
 pub mod scorecard;
 pub mod seed000;

@@ -22,12 +22,13 @@ pub const DEFAULT_P_MD: f64 = 1e-3;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum SigmaKind {
-    /// The satellite's `sigma` where given, the elevation model otherwise.
+    /// The satellite's `sigma` where given; `sqrt(a² + b²)` for a satellite without one
+    /// (3.02 m with the defaults a = 0.3 m, b = 3 m).
     #[default]
     Given,
     /// σ² = a² + b²/sin²(el) (RTKLIB's code-noise model).
     Elevation,
-    /// σ² = a² + b²·10^(−C/N0 / 10) (C/N0 in dB-Hz), the elevation model without C/N0.
+    /// σ² = a² + b²·10^(−C/N0 / 10) (C/N0 in dB-Hz); 10 m for a satellite without C/N0.
     Cn0,
 }
 

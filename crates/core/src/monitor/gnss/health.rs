@@ -1,9 +1,9 @@
 //! Per-satellite health for the `gnss` monitor (docs/methods.md §M27): each satellite
 //! carries the monitor's decision policy, stepped once per epoch it is seen, so seed
 //! 004's counters apply per satellite. A satellite is *admitted* to the solution while
-//! its policy lets it update (healthy; under `traditional` also while isolated); one
-//! flagged goes `suspect`, then `isolated` under counters, is tested against the others'
-//! solution while out, and is admitted again once its policy is healthy.
+//! it is healthy, under every policy; one flagged goes `suspect`, then `isolated` under
+//! counters, is tested against the others' solution while out, and is admitted again
+//! once its policy is healthy.
 
 use std::collections::BTreeMap;
 
@@ -20,7 +20,7 @@ pub struct SatHealth {
 }
 
 impl SatHealth {
-    /// Whether `id` takes part in this epoch's solution (its policy lets it update).
+    /// Whether `id` takes part in this epoch's solution: it is healthy.
     pub fn admitted(&self, id: SatId) -> bool {
         self.states.get(&id).is_none_or(|s| s.idle().update)
     }

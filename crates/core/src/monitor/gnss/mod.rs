@@ -35,7 +35,7 @@ pub use config::{FdeKind, GnssConfigWire, ProtectionKind, SigmaKind};
 pub use health::SatHealth;
 pub use outputs::GnssOutputs;
 
-/// The `raim` test's dofs whose thresholds are resolved ahead (up to 43 satellites of one
+/// The `raim` test's dofs whose thresholds are resolved ahead (up to 44 satellites of one
 /// constellation); larger dofs are resolved when they occur.
 pub const MAX_CACHED_DOF: u32 = 40;
 

@@ -132,7 +132,9 @@ pub(super) fn step(
     let spec = slot.own_spec.unwrap_or(monitor.bank.spec());
     // The exclusion tests run at the p_fa of the test's threshold for the epoch's dof.
     let dof_guess = admitted.len().saturating_sub(4).max(1) as u32;
-    let p_fa = spec.p_fa(dof_guess)?;
+    // A raw threshold far out (calibration's) gives a p_fa that underflows: keep the
+    // exclusion tests' quantiles finite.
+    let p_fa = spec.p_fa(dof_guess)?.clamp(1e-15, 0.5);
     let outcome = solve(monitor, &admitted, p_fa)?;
     let k = satellite_threshold(p_fa)?;
 

@@ -268,3 +268,27 @@ fn configs_are_refused_naming_the_field() {
     assert_eq!(field(json!({"araim": {"p_hmi": 2}})), "araim");
     assert_eq!(field(json!({"mask": 5})), "mask");
 }
+
+#[test]
+fn calibration_proposes_the_sigma_scale_the_data_need() {
+    // The data's noise is 2.5 × the σ the satellites report.
+    let mut rng = StdRng::seed_from_u64(8);
+    let epochs: Vec<Epoch> = (0..400)
+        .map(|k| {
+            let mut e = epoch(k as f64, &mut rng, None);
+            let b = e.gnss_raw.as_mut().unwrap();
+            for (s, clean) in b.sats.iter_mut().zip(sky()) {
+                s.pr = clean.pr + 2.5 * (s.pr - clean.pr);
+            }
+            e
+        })
+        .collect();
+    let mut m = monitor(
+        serde_json::json!({"elevation_mask_deg": 0}),
+        PolicyConfig::Classic,
+    );
+    let lines =
+        crate::monitor::calibrate::calibrate_monitor(m.as_mut(), &epochs, 0.01, 0.95).unwrap();
+    let k = lines[0].noise_scale.unwrap();
+    assert!((k - 2.5).abs() < 0.1, "σ scale {k}");
+}
