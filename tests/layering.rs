@@ -3,8 +3,8 @@
 //! nor navguard; navguard-sim does not name navguard); this test checks what Cargo
 //! cannot: inside navguard-core each layer of `simd.rs, epoch.rs, geo/, detect/, gnss/, filter/,
 //! learn/, features/, monitor/, session/` imports none after it; navguard-core and
-//! navguard-sim depend on no async, storage or HTTP crate, and navguard-core on no
-//! plotting crate; and only the CLI's `experiment` command reaches into
+//! navguard-sim (and navguard-formats) depend on no async, storage or HTTP crate, and
+//! navguard-core on no plotting crate; and only the CLI's `experiment` commands reach into
 //! `navguard_sim::experiment` (the rest of the CLI and the service use `navguard_sim` and
 //! its `plot`). Test code (after a file's first `#[cfg(test)]`, and files that are whole
 //! test modules) may cross layers.
@@ -34,6 +34,7 @@ const RULES: &[(&[&str], &[&str])] = &[(
         "src/service",
         "src/cli/mod.rs",
         "src/cli/calibrate.rs",
+        "src/cli/convert.rs",
         "src/cli/http.rs",
         "src/cli/loadgen.rs",
         "src/cli/loadgen",
@@ -43,8 +44,9 @@ const RULES: &[(&[&str], &[&str])] = &[(
     &["navguard_sim::experiment"],
 )];
 
-/// The crates (by their `Cargo.toml`) that may not depend on the listed packages: the core
-/// and the simulator stay synchronous and offline, and only the simulator plots.
+/// The crates (by their `Cargo.toml`) that may not depend on the listed packages: the core,
+/// the simulator and the file readers stay synchronous and offline, and only the
+/// simulator plots.
 const DEPENDENCY_RULES: &[(&str, &[&str])] = &[
     (
         "crates/core/Cargo.toml",
@@ -74,6 +76,22 @@ const DEPENDENCY_RULES: &[(&str, &[&str])] = &[
             "hyper",
             "async-nats",
             "navguard",
+        ],
+    ),
+    (
+        "crates/formats/Cargo.toml",
+        &[
+            "tokio",
+            "axum",
+            "sqlx",
+            "tower",
+            "tower-http",
+            "reqwest",
+            "hyper",
+            "async-nats",
+            "navguard",
+            "navguard-sim",
+            "plotters",
         ],
     ),
 ];

@@ -30,6 +30,8 @@ pub(super) struct FileScan {
     pub cns: bool,
     /// Some epoch has `z`.
     pub z: bool,
+    /// Some epoch has a `gnss_raw` block (pseudoranges).
+    pub gnss_raw: bool,
 }
 
 #[derive(Debug, Deserialize)]
@@ -45,6 +47,8 @@ struct Peek {
     cns: Option<IgnoredAny>,
     #[serde(default)]
     z: Option<IgnoredAny>,
+    #[serde(default)]
+    gnss_raw: Option<IgnoredAny>,
 }
 
 fn peek(line: &str, number: usize) -> anyhow::Result<Peek> {
@@ -73,6 +77,7 @@ pub(super) fn scan(path: &Path) -> anyhow::Result<FileScan> {
         out.dvl |= p.dvl.is_some();
         out.cns |= p.cns.is_some();
         out.z |= p.z.is_some();
+        out.gnss_raw |= p.gnss_raw.is_some();
     }
     if out.epochs == 0 {
         bail!("{} holds no epochs", path.display());

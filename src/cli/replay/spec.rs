@@ -112,8 +112,16 @@ fn spec_file(path: &std::path::Path, session: &str) -> anyhow::Result<CreateSess
 }
 
 /// The one monitor's type and config: `federated` for a file with `ins` (over the
-/// aids it holds unless `--monitor-config` says otherwise), `linear` for `z`.
+/// aids it holds unless `--monitor-config` says otherwise), `gnss` for `gnss_raw`
+/// (its defaults unless `--monitor-config`), `linear` for `z`.
 fn monitor_config(args: &ReplayArgs, scan: &FileScan) -> anyhow::Result<(MonitorKind, Value)> {
+    if scan.gnss_raw && !scan.ins {
+        let config = match &args.monitor_config {
+            Some(text) => json_arg(text, "--monitor-config")?,
+            None => Value::Object(Default::default()),
+        };
+        return Ok((MonitorKind::Gnss, config));
+    }
     if scan.ins {
         let config = match &args.monitor_config {
             Some(text) => json_arg(text, "--monitor-config")?,
@@ -142,7 +150,7 @@ fn monitor_config(args: &ReplayArgs, scan: &FileScan) -> anyhow::Result<(Monitor
         Ok((MonitorKind::Linear, json_arg(text, "--monitor-config")?))
     } else {
         bail!(
-            "cannot tell which monitor the file needs (no `ins` and no `z` blocks): give --session-spec"
+            "cannot tell which monitor the file needs (no `ins`, `gnss_raw` or `z` blocks): give --session-spec"
         );
     }
 }
@@ -157,6 +165,19 @@ fn federated_config(aids: Vec<Aid>) -> anyhow::Result<Value> {
 mod tests {
     use super::*;
     use crate::cli::replay::tests::args;
+
+    #[test]
+    fn a_file_with_pseudoranges_gets_a_gnss_monitor() {
+        let scan = FileScan {
+            epochs: 3,
+            gnss_raw: true,
+            ..FileScan::default()
+        };
+        let body = session_body(&args(&["--policy", "classic"]), &scan).unwrap();
+        assert_eq!(body.monitors[0].kind, MonitorKind::Gnss);
+        assert_eq!(body.monitors[0].name, "gnss");
+        assert_eq!(body.monitors[0].config, serde_json::json!({}));
+    }
 
     #[test]
     fn a_file_with_ins_gets_a_federated_monitor_over_its_aids() {
