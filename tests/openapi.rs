@@ -1105,6 +1105,72 @@ fn learned_monitor_outputs_match_the_result_schema() {
     }
 }
 
+#[test]
+fn gnss_outputs_and_snapshot_match_their_schemas() {
+    use navguard_core::detect::Health;
+    use navguard_core::monitor::Outputs;
+    use navguard_core::monitor::gnss::GnssOutputs;
+    use navguard_core::monitor::gnss::outputs::{Dops, GnssPosition, SatOutput};
+    use navguard_core::session::stats::GnssSnapshot;
+    let doc = spec();
+    let c = Checker::new(&doc);
+    let sat = |id: &str, el: Option<f64>, used: bool, health: Health| SatOutput {
+        id: id.to_owned(),
+        el,
+        az: el.map(|e| e + 100.0),
+        residual: el.map(|_| 1.5),
+        w: el.map(|_| -0.5),
+        used,
+        health,
+    };
+    let fix = GnssOutputs {
+        position: Some(GnssPosition {
+            lat: 37.69,
+            lon: -122.09,
+            h: 21.0,
+        }),
+        clocks: [("G".to_owned(), 20.9), ("R".to_owned(), 19.8)].into(),
+        dop: Some(Dops {
+            gdop: 2.0,
+            pdop: 1.7,
+            hdop: 0.9,
+            vdop: 1.4,
+        }),
+        hpl: Some(48.0),
+        vpl: Some(63.4),
+        hal: 40.0,
+        val: Some(50.0),
+        hpe: Some(2.9),
+        vpe: None,
+        satellites: vec![
+            sat("G10", Some(63.8), false, Health::Suspect),
+            sat("R24", Some(30.0), true, Health::Healthy),
+        ],
+        excluded: vec!["G10".to_owned()],
+    };
+    let bare =
+        GnssOutputs::without_solution(40.0, None, vec![sat("E07", None, false, Health::Isolated)]);
+    for o in [fix, bare] {
+        let o = std::sync::Arc::new(o);
+        let mut v = serde_json::to_value(Outputs::Gnss(o.clone())).unwrap();
+        v["tests"] = json!({"raim": {"statistic": 11.4, "threshold": 34.1, "dof": 14,
+                                     "test_ratio": 0.33, "state": "healthy"}});
+        c.assert_valid(c.schema("MonitorResult"), &v, "gnss result");
+        let snapshot = serde_json::to_value(GnssSnapshot {
+            t: 12.0,
+            outputs: o,
+        })
+        .unwrap();
+        c.assert_valid(c.schema("GnssSnapshot"), &snapshot, "gnss snapshot");
+        let mut bad = snapshot.clone();
+        bad["satellites"][0]["health"] = json!("sick");
+        assert!(!c.matches(c.schema("GnssSnapshot"), &bad), "{bad}");
+        bad = snapshot.clone();
+        bad.as_object_mut().unwrap().remove("t");
+        assert!(!c.matches(c.schema("GnssSnapshot"), &bad), "{bad}");
+    }
+}
+
 // Over 80 lines: a table of cases checked one after another.
 #[tokio::test]
 async fn federated_stats_with_a_track_match_their_schemas() {

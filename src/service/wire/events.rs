@@ -249,6 +249,8 @@ mod tests {
     use navguard_core::detect::{Decision, Health, Statistic};
     use navguard_core::monitor::Availability;
     use navguard_core::monitor::Integrity;
+    use navguard_core::monitor::gnss::GnssOutputs;
+    use navguard_core::monitor::gnss::outputs::{Dops, GnssPosition, SatOutput};
 
     // The `result` frame as serde writes it from types: the form the hand-written writer
     // replaced, kept as its reference.
@@ -421,6 +423,72 @@ mod tests {
                 alert_limit: 40.0,
             }),
         };
+        // A fix with awkward numbers, a satellite without geometry, one excluded.
+        let gnss = MonitorReport {
+            tests: vec![outcome(
+                "raim",
+                1007.299425159751,
+                34.09130098231032,
+                14,
+                Health::Suspect,
+            )],
+            outputs: Outputs::Gnss(Arc::new(GnssOutputs {
+                position: Some(GnssPosition {
+                    lat: 37.692237073777186,
+                    lon: -122.08845157993579,
+                    h: -0.0,
+                }),
+                clocks: [("E".to_owned(), 20.31900463431), ("G".to_owned(), -1e-300)].into(),
+                dop: Some(Dops {
+                    gdop: 1.5,
+                    pdop: 0.1 + 0.2,
+                    hdop: 1e21,
+                    vdop: f64::NAN,
+                }),
+                hpl: Some(47.953212863695065),
+                vpl: Some(f64::INFINITY),
+                hal: 40.0,
+                val: None,
+                hpe: Some(2.8742980158685474),
+                vpe: None,
+                satellites: vec![
+                    SatOutput {
+                        id: "G10".to_owned(),
+                        el: Some(63.8000764993965),
+                        az: Some(19.6345796646986),
+                        residual: Some(199.9788277524254),
+                        w: Some(18.2806918485177),
+                        used: false,
+                        health: Health::Suspect,
+                    },
+                    SatOutput {
+                        id: "R24".to_owned(),
+                        el: None,
+                        az: None,
+                        residual: None,
+                        w: None,
+                        used: true,
+                        health: Health::Healthy,
+                    },
+                ],
+                excluded: vec!["G10".to_owned()],
+            })),
+            integrity: Some(Integrity {
+                state: Availability::Unavailable,
+                protection_level: 47.953212863695065,
+                alert_limit: 40.0,
+            }),
+        };
+        // Before the first fix: no position, no satellites.
+        let gnss_bare = MonitorReport {
+            tests: Vec::new(),
+            outputs: Outputs::Gnss(Arc::new(GnssOutputs::without_solution(
+                40.0,
+                Some(50.0),
+                Vec::new(),
+            ))),
+            integrity: None,
+        };
         // Before the first INS epoch, and with two aids isolated.
         let federated_bare = MonitorReport {
             tests: Vec::new(),
@@ -438,6 +506,8 @@ mod tests {
             ("ch \u{1F680}", channel),
             ("gyros", rimu),
             ("tacan", tacan),
+            ("gnss", gnss),
+            ("gnss0", gnss_bare),
         ]
     }
 
@@ -463,6 +533,62 @@ mod tests {
             assert_eq!(hand, by_serde(t, &monitors));
             serde_json::from_str::<serde_json::Value>(&hand).expect("valid JSON");
         }
+    }
+
+    #[test]
+    fn a_gnss_report_is_written_flat_beside_its_tests() {
+        let reports = reports();
+        let gnss: Vec<(&str, &MonitorReport)> = reports
+            .iter()
+            .filter(|(n, _)| n.starts_with("gnss"))
+            .map(|(n, r)| (*n, r))
+            .collect();
+        let frame: serde_json::Value = serde_json::from_str(&by_hand(5.0, &gnss)).unwrap();
+        let m = &frame["monitors"]["gnss"];
+        let keys: Vec<&str> = m.as_object().unwrap().keys().map(String::as_str).collect();
+        assert_eq!(
+            keys,
+            [
+                "clocks",
+                "dop",
+                "excluded",
+                "hal",
+                "hpe",
+                "hpl",
+                "integrity",
+                "position",
+                "satellites",
+                "tests",
+                "val",
+                "vpe",
+                "vpl"
+            ]
+        );
+        assert_eq!(m["tests"]["raim"]["dof"], 14);
+        assert_eq!(m["tests"]["raim"]["state"], "suspect");
+        assert_eq!(m["position"]["lat"], 37.692237073777186);
+        assert_eq!(m["clocks"]["G"], -1e-300);
+        assert_eq!(m["dop"]["vdop"], serde_json::Value::Null, "non-finite");
+        assert_eq!(m["vpl"], serde_json::Value::Null, "non-finite");
+        assert_eq!(
+            (&m["val"], &m["vpe"]),
+            (&serde_json::Value::Null, &serde_json::Value::Null)
+        );
+        assert_eq!(m["excluded"], serde_json::json!(["G10"]));
+        assert_eq!(
+            m["satellites"][0],
+            serde_json::json!({"id": "G10", "el": 63.8000764993965, "az": 19.6345796646986,
+                "residual": 199.9788277524254, "w": 18.2806918485177, "used": false,
+                "health": "suspect"})
+        );
+        assert_eq!(m["satellites"][1]["el"], serde_json::Value::Null);
+        assert_eq!(m["integrity"]["state"], "unavailable");
+        let bare = &frame["monitors"]["gnss0"];
+        assert_eq!(bare["position"], serde_json::Value::Null);
+        assert_eq!(bare["val"], 50.0);
+        assert_eq!(bare["satellites"], serde_json::json!([]));
+        assert_eq!(bare["clocks"], serde_json::json!({}));
+        assert!(bare.get("integrity").is_none());
     }
 
     #[test]
