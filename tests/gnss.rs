@@ -283,7 +283,7 @@ async fn a_bad_gnss_config_is_a_422_naming_its_field() {
         (json!({"val_m": -5}), "val_m"),
         (json!({"p_md": 0.9}), "p_md"),
         (json!({"ism": {"sigma_ura_m": 0}}), "ism.sigma_ura_m"),
-        (json!({"araim": {"p_hmi": 2}}), "araim"),
+        (json!({"araim": {"p_hmi": 2}}), "araim.p_hmi"),
     ];
     for (config, field) in cases {
         let body = json!({"monitors": [{"name": "g", "type": "gnss", "config": config}]});

@@ -28,6 +28,7 @@ use super::{
 };
 use crate::detect::{PolicyConfig, PolicyState, ThresholdSpec};
 use crate::epoch::Epoch;
+use crate::gnss::araim::AraimError;
 use crate::gnss::raim::{FdeMethod, FdeParams, SolutionSeparationParams};
 use crate::gnss::wls::{SigmaModel, WlsParams};
 use config::checked;
@@ -124,9 +125,12 @@ impl TryFrom<GnssConfigWire> for GnssConfig {
             .map(|v| checked("val_m", v, 0.1..=1e6))
             .transpose()?;
         let p_md = checked("p_md", w.p_md, 1e-12..=0.5)?;
-        w.araim
-            .check()
-            .map_err(|e| ConfigError::new("araim", e.to_string()))?;
+        w.araim.check().map_err(|e| match e {
+            AraimError::Param { name, .. } => {
+                ConfigError::new(format!("araim.{name}"), e.to_string())
+            }
+            e => ConfigError::new("araim", e.to_string()),
+        })?;
         let ism = |field: &str, v: f64, low: f64| checked(&format!("ism.{field}"), v, low..=1e3);
         let araim = SolutionSeparationParams {
             sigma_ura_m: ism("sigma_ura_m", w.ism.sigma_ura_m, 1e-6)?,

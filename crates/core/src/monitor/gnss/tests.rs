@@ -265,7 +265,7 @@ fn configs_are_refused_naming_the_field() {
     );
     assert_eq!(field(json!({"hal_m": -1})), "hal_m");
     assert_eq!(field(json!({"ism": {"sigma_ura_m": 0}})), "ism.sigma_ura_m");
-    assert_eq!(field(json!({"araim": {"p_hmi": 2}})), "araim");
+    assert_eq!(field(json!({"araim": {"p_sat": 2}})), "araim.p_sat");
     assert_eq!(field(json!({"mask": 5})), "mask");
 }
 
