@@ -92,11 +92,13 @@ fn protection(monitor: &GnssMonitor, sol: &WlsSolution, p_fa: f64) -> Option<(f6
     }
 }
 
-/// Availability: both levels within their limits (the vertical one when configured).
-fn integrity(monitor: &GnssMonitor, levels: Option<(f64, f64)>) -> Integrity {
+/// Availability: both levels within their limits (the vertical one when configured),
+/// and the final fix consistent: a fix whose own χ² test still fails after exclusion
+/// (a fault detected and not excluded) is not protected by its levels.
+fn integrity(monitor: &GnssMonitor, levels: Option<(f64, f64)>, unresolved: bool) -> Integrity {
     let (hpl, vpl) = levels.unwrap_or((f64::INFINITY, f64::INFINITY));
     let vertical_ok = monitor.config.val_m.is_none_or(|val| vpl <= val);
-    let state = if hpl <= monitor.config.hal_m && vertical_ok {
+    let state = if hpl <= monitor.config.hal_m && vertical_ok && !unresolved {
         Availability::Available
     } else {
         Availability::Unavailable
@@ -190,7 +192,10 @@ pub(super) fn step(
         }
         _ => GnssOutputs::without_solution(monitor.config.hal_m, monitor.config.val_m, satellites),
     };
-    let integrity = integrity(monitor, levels);
+    let unresolved = outcome
+        .as_ref()
+        .is_some_and(|o| o.test.is_some_and(|t| !t.passed));
+    let integrity = integrity(monitor, levels, unresolved);
 
     // Commit.
     if let Some(state) = pending {

@@ -125,7 +125,7 @@ pub struct FaultFree {
 pub struct Faulted {
     /// Draws run.
     pub draws: usize,
-    /// Draws whose satellites were all too few to test (fewer than 6 in view).
+    /// Draws skipped: the fault-free fix at the start used fewer than 6 satellites.
     pub skipped: usize,
     /// Draws detected on the fault's first epoch.
     pub detected_first: usize,
@@ -342,7 +342,7 @@ fn run_dataset(d: &Dataset, p: &RaimParams) -> Result<DatasetResult, ExperimentE
         fault_free_by.insert(method, fault_free(&run.outcomes, run.alarms, hours));
         for (case, fault) in p.faults.iter().enumerate() {
             let seed = p.seed + 1000 * case as u64;
-            let f = run_faulted(d, &s, fault, p, seed, step)?;
+            let f = run_faulted(d, &s, fault, p, seed, step, &run.outcomes)?;
             faulted
                 .entry(fault.label())
                 .or_insert_with(BTreeMap::new)
@@ -364,8 +364,10 @@ fn run_dataset(d: &Dataset, p: &RaimParams) -> Result<DatasetResult, ExperimentE
 }
 
 /// The draws of one fault case under one spec: each picks a start epoch and the faulty
-/// satellites among those in view there (seeded), runs one clean epoch before the start
-/// when there is one, and the window from the start with the fault.
+/// satellites among those the fault-free fix used there (`clean`; seeded), runs one
+/// clean epoch before the start when there is one, and the window from the start with
+/// the fault. A start whose fault-free fix used fewer than 6 satellites is skipped
+/// (counted): with 5 a fault can be detected but not told apart.
 fn run_faulted(
     d: &Dataset,
     s: &MonitorSpec,
@@ -373,6 +375,7 @@ fn run_faulted(
     p: &RaimParams,
     seed: u64,
     step_s: f64,
+    clean: &[EpochOutcome],
 ) -> Result<Faulted, ExperimentError> {
     let mut f = Faulted::default();
     let mut rng = StdRng::seed_from_u64(seed);
@@ -381,11 +384,11 @@ fn run_faulted(
         f.draws += 1;
         let start = rng.random_range(0..n);
         let end = (start + p.window).min(n);
-        let in_view: Vec<SatId> = d.epochs[start]
-            .gnss_raw
-            .as_ref()
-            .map(|b| b.sats.iter().map(|s| s.id).collect())
-            .unwrap_or_default();
+        let in_view: Vec<SatId> = clean[start]
+            .used
+            .iter()
+            .filter_map(|id| SatId::parse(id).ok())
+            .collect();
         if in_view.len() < 6 {
             f.skipped += 1;
             continue;

@@ -58,8 +58,7 @@ pub fn stanford_svg(title: &str, points: &[(f64, f64)], hal_m: f64) -> String {
     let mut s = String::with_capacity(64 * 1024);
     let _ = write!(
         s,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" font-family="sans-serif" font-size="12"><rect width="100%" height="100%" fill="white"/><text x="{}" y="22" text-anchor="middle" font-size="15">{}</text><g transform="translate({LEFT},{TOP})">"#,
-        LEFT + SIZE / 2.0,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" font-family="sans-serif" font-size="12"><rect width="100%" height="100%" fill="white"/><text x="10" y="22" font-size="14">{}</text><g transform="translate({LEFT},{TOP})">"#,
         escape(title)
     );
     let (hal, c) = (px(hal_m), SIZE / n as f64);
@@ -100,7 +99,7 @@ pub fn stanford_svg(title: &str, points: &[(f64, f64)], hal_m: f64) -> String {
         ("epochs", points.len()),
         ("nominal (HPE ≤ HPL ≤ HAL)", nominal),
         ("MI (HPE > HPL)", mi),
-        ("HMI (HPE > HAL, available)", hmi),
+        ("HMI (HPE > HAL, HPL ≤ HAL)", hmi),
         ("unavailable (HPL > HAL)", unavailable),
     ];
     for (k, (label, count)) in legend.iter().enumerate() {
@@ -113,9 +112,12 @@ pub fn stanford_svg(title: &str, points: &[(f64, f64)], hal_m: f64) -> String {
     }
     let _ = write!(
         s,
-        r#"<text x="{}" y="{}">HAL = {hal_m} m</text></g></svg>"#,
-        SIZE + 15.0,
-        20.0 + 18.0 * legend.len() as f64
+        r#"<text x="{x}" y="{}">HAL = {hal_m} m</text><text x="{x}" y="{}">Regions by HPE and HPL alone:</text><text x="{x}" y="{}">an epoch whose test fired is</text><text x="{x}" y="{}">drawn where its errors fall.</text></g></svg>"#,
+        20.0 + 18.0 * legend.len() as f64,
+        56.0 + 18.0 * legend.len() as f64,
+        74.0 + 18.0 * legend.len() as f64,
+        92.0 + 18.0 * legend.len() as f64,
+        x = SIZE + 15.0,
     );
     s
 }
@@ -164,7 +166,7 @@ mod tests {
         let svg = stanford_svg("t", &points, 40.0);
         assert!(svg.contains("nominal (HPE ≤ HPL ≤ HAL): 2"), "{svg}");
         assert!(svg.contains("MI (HPE > HPL): 1"));
-        assert!(svg.contains("HMI (HPE > HAL, available): 1"));
+        assert!(svg.contains("HMI (HPE > HAL, HPL ≤ HAL): 1"));
         assert!(svg.contains("unavailable (HPL > HAL): 1"));
         assert!(svg.starts_with("<svg") && svg.ends_with("</svg>"));
         // Decades 0.1 … 1000 on each axis: 5 ticks, each labelled twice.
