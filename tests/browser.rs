@@ -819,6 +819,13 @@ async fn the_dashboard_draws_a_gnss_monitors_sky_plot_levels_and_stanford_diagra
     let driver = start_driver(&driver_path).await;
     let profile = tempfile::tempdir().unwrap();
     let client = open_browser(&driver, &chromium, profile.path()).await;
+    // As a user would: the overview lists the session, then its view opens.
+    client.goto(&format!("{http}/")).await.unwrap();
+    client
+        .wait()
+        .for_element(Locator::Css(r#"#sessions [data-session="gnss"]"#))
+        .await
+        .expect("the overview lists the gnss session");
     client
         .goto(&format!("{http}/#/session/gnss"))
         .await

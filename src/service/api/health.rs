@@ -78,6 +78,12 @@ const ASSETS: &[(&str, &str, &str)] = &[
         include_str!("../../../static/controls.js"),
     ),
     ("alarms.js", JS, include_str!("../../../static/alarms.js")),
+    ("gnss.js", JS, include_str!("../../../static/gnss.js")),
+    (
+        "gnss-charts.js",
+        JS,
+        include_str!("../../../static/gnss-charts.js"),
+    ),
     ("models.js", JS, include_str!("../../../static/models.js")),
 ];
 
