@@ -279,7 +279,7 @@ pub enum AraimError {
 /// A fitted epoch: fault modes, subset gains, σ's, biases, thresholds and PLs. Built once
 /// per geometry by [`AraimModel::fit`]; [`AraimModel::test`] then runs the solution
 /// separation test on any residual vector of that geometry.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct AraimModel {
     /// The satellites, in input order.
     ids: Vec<SatId>,

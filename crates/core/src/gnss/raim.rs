@@ -3,9 +3,11 @@
 //! ([`FdeMethod`]: RTKLIB's leave-one-out, greedy w-test, and the hook for ARAIM's
 //! solution separation), and slope-based protection levels for weighted RAIM.
 
+use std::cell::RefCell;
+
 use nalgebra::DMatrix;
 
-use super::araim::{self, AraimParams, AraimSat};
+use super::araim::{self, AraimModel, AraimParams, AraimSat};
 use super::wls::{MIN_REDUNDANCY, WlsError, WlsParams, WlsSolution, solve, solve_excluding};
 use crate::detect::chi2::{self, Chi2Error};
 use crate::epoch::{SatId, SatObs};
@@ -46,12 +48,44 @@ pub struct Chi2Test {
     pub passed: bool,
 }
 
+thread_local! {
+    /// χ² quantiles and detection non-centralities already computed on this thread, keyed
+    /// by their arguments' bits: an epoch's fault exclusion tests several subsets at the
+    /// same few dofs, and each quantile costs an incomplete-gamma inversion.
+    static MEMO: RefCell<Vec<([u64; 3], f64)>> = const { RefCell::new(Vec::new()) };
+}
+
+/// Most memoised values kept (a monitor uses a few dofs at one or two p_fa).
+const MEMO_CAP: usize = 256;
+
+/// `f(args)`, memoised per thread by the bits of `args`.
+fn memo<E>(args: [f64; 3], f: impl FnOnce() -> Result<f64, E>) -> Result<f64, E> {
+    let key = args.map(f64::to_bits);
+    if let Some(v) = MEMO.with(|m| m.borrow().iter().find(|(k, _)| *k == key).map(|e| e.1)) {
+        return Ok(v);
+    }
+    let v = f()?;
+    MEMO.with(|m| {
+        let mut m = m.borrow_mut();
+        if m.len() >= MEMO_CAP {
+            m.clear();
+        }
+        m.push((key, v));
+    });
+    Ok(v)
+}
+
+/// `chi2::threshold(dof, p_fa)`, memoised per thread.
+pub fn threshold(dof: u32, p_fa: f64) -> Result<f64, Chi2Error> {
+    memo([f64::from(dof), p_fa, -1.0], || chi2::threshold(dof, p_fa))
+}
+
 /// The χ² test of `sol` at false-alarm probability `p_fa`.
 pub fn chi2_test(sol: &WlsSolution, p_fa: f64) -> Result<Chi2Test, RaimError> {
     if sol.dof == 0 {
         return Err(RaimError::NoRedundancy);
     }
-    let threshold = chi2::threshold(sol.dof, p_fa)?;
+    let threshold = threshold(sol.dof, p_fa)?;
     Ok(Chi2Test {
         wssr: sol.wssr,
         dof: sol.dof,
@@ -187,6 +221,9 @@ pub struct FdeOutcome {
     pub all_in_view: Option<Chi2Test>,
     /// The final fix's test (`None` when dof = 0).
     pub test: Option<Chi2Test>,
+    /// Solution separation only: the ARAIM model of the satellites kept (its protection
+    /// levels are the final fix's, so a caller need not fit it again).
+    pub araim: Option<AraimModel>,
 }
 
 /// Fault detection and exclusion on one epoch by `params.method`.
@@ -216,11 +253,17 @@ pub fn solution_separation_fde(
     let (sats, y) = araim_inputs(&full, params);
     let decided = araim::solution_separation_fde(&sats, &y, &params.araim)
         .map_err(|e| RaimError::Araim(e.to_string()))?;
-    if decided.excluded.is_empty() {
-        return outcome(obs, full, Vec::new(), all_in_view, p_fa);
-    }
-    let sol = solve_excluding(obs, wls, &decided.excluded)?;
-    outcome(obs, sol, decided.excluded, all_in_view, p_fa)
+    let (sol, excluded) = if decided.excluded.is_empty() {
+        (full, Vec::new())
+    } else {
+        (
+            solve_excluding(obs, wls, &decided.excluded)?,
+            decided.excluded,
+        )
+    };
+    let mut out = outcome(obs, sol, excluded, all_in_view, p_fa)?;
+    out.araim = Some(decided.model);
+    Ok(out)
 }
 
 /// The χ² test, `None` when dof = 0.
@@ -264,6 +307,7 @@ fn outcome(
         excluded,
         status,
         test,
+        araim: None,
     })
 }
 
@@ -379,7 +423,9 @@ pub fn slope_protection_levels(
     p_md: f64,
 ) -> Result<SlopeProtection, RaimError> {
     let test = chi2_test(sol, p_fa)?;
-    let lambda_det = chi2::noncentrality_for_missed_detection(sol.dof, test.threshold, p_md)?;
+    let lambda_det = memo([f64::from(sol.dof), test.threshold, p_md], || {
+        chi2::noncentrality_for_missed_detection(sol.dof, test.threshold, p_md)
+    })?;
     let g = &sol.geometry_enu;
     let mut gw: DMatrix<f64> = g.clone();
     for (j, s) in sol.sats.iter().enumerate() {

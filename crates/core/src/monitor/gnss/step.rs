@@ -9,7 +9,6 @@ use nalgebra::Vector3;
 use super::GnssMonitor;
 use super::config::ProtectionKind;
 use super::outputs::{Dops, GnssOutputs, GnssPosition, SatOutput};
-use crate::detect::chi2;
 use crate::epoch::{GnssRawBlock, SatObs};
 use crate::filter::kalman::FilterError;
 use crate::geo::{self, Lla, ecef_to_enu_rotation};
@@ -22,7 +21,7 @@ use crate::monitor::{Availability, Integrity, MonitorReport, Outputs, StepError}
 /// The per-satellite exceedance test of a satellite left out: `|w| > k` with
 /// `k² = χ²₁` threshold at the `raim` test's p_fa for dof 1 (a two-sided normal test).
 fn satellite_threshold(p_fa: f64) -> Result<f64, StepError> {
-    Ok(chi2::threshold(1, p_fa)
+    Ok(raim::threshold(1, p_fa)
         .map_err(|_| FilterError::NonFinite("per-satellite threshold"))?
         .sqrt())
 }
@@ -79,7 +78,11 @@ fn solve(
 
 /// The protection levels of the final fix by the configured method; `None` when they
 /// cannot be computed (no redundancy, a geometry ARAIM refuses).
-fn protection(monitor: &GnssMonitor, sol: &WlsSolution, p_fa: f64) -> Option<(f64, f64)> {
+fn protection(monitor: &GnssMonitor, outcome: &FdeOutcome, p_fa: f64) -> Option<(f64, f64)> {
+    let sol = &outcome.solution;
+    if let (ProtectionKind::Araim, Some(model)) = (monitor.config.protection, &outcome.araim) {
+        return Some((model.hpl(), model.vpl()));
+    }
     match monitor.config.protection {
         ProtectionKind::Slope => raim::slope_protection_levels(sol, p_fa, monitor.config.p_md)
             .ok()
@@ -148,7 +151,7 @@ pub(super) fn step(
         pending = Some(state);
     }
     let sol = outcome.as_ref().map(|o| &o.solution);
-    let levels = sol.and_then(|s| protection(monitor, s, p_fa));
+    let levels = outcome.as_ref().and_then(|o| protection(monitor, o, p_fa));
     let mut health = monitor.health.clone();
     health.follow(policy);
     let satellites = satellite_outputs(
