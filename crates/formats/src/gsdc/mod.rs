@@ -15,7 +15,7 @@ pub mod y2023;
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use navguard_core::epoch::{Constellation, SatId};
+use navguard_core::epoch::{Constellation, Epoch, GnssRawBlock, SatId, SatObs};
 
 use crate::error::{FormatError, read_to_string};
 
@@ -139,5 +139,77 @@ impl Columns<'_> {
             line: row.0,
             msg: format!("column {} is blank", self.headers[i]),
         })
+    }
+}
+
+/// The columns every GSDC file has for one satellite's measurement (the files name them
+/// differently).
+pub(crate) struct SatColumns {
+    /// Raw pseudorange, m.
+    pub(crate) raw: usize,
+    /// Its 1-σ, m.
+    pub(crate) unc: usize,
+    /// Inter-signal range bias, m (subtracted from the raw pseudorange).
+    pub(crate) isrb: usize,
+    /// Satellite clock bias, m.
+    pub(crate) clk: usize,
+    /// Ionospheric delay, m.
+    pub(crate) iono: usize,
+    /// Tropospheric delay, m.
+    pub(crate) tropo: usize,
+    /// Satellite ECEF position at transmit time, m.
+    pub(crate) pos: [usize; 3],
+}
+
+impl SatColumns {
+    /// Satellite `id`'s measurement on `row` (C/N0, elevation, azimuth left absent).
+    pub(crate) fn obs(&self, c: &Columns, row: &Row, id: SatId) -> Result<SatObs, FormatError> {
+        Ok(SatObs {
+            id,
+            pr: c.req(row, self.raw)? - c.num(row, self.isrb)?.unwrap_or(0.0),
+            pos: [
+                c.req(row, self.pos[0])?,
+                c.req(row, self.pos[1])?,
+                c.req(row, self.pos[2])?,
+            ],
+            clk: c.req(row, self.clk)?,
+            iono: c.num(row, self.iono)?,
+            tropo: c.num(row, self.tropo)?,
+            sigma: c.num(row, self.unc)?,
+            cn0: None,
+            el: None,
+            az: None,
+        })
+    }
+}
+
+/// Adds `sat` to the epoch keyed `key`, the last of `epochs` (rows of one epoch are
+/// consecutive); a new key starts an epoch at `t` with `truth`. A satellite's first row
+/// in an epoch is kept, later ones (other signals of its band) are dropped.
+pub(crate) fn push_sat(
+    epochs: &mut Vec<(i64, Epoch)>,
+    key: i64,
+    t: f64,
+    truth: Option<[f64; 3]>,
+    sat: SatObs,
+) {
+    if epochs.last().is_none_or(|(k, _)| *k != key) {
+        let block = GnssRawBlock {
+            sats: Vec::new(),
+            truth,
+        };
+        epochs.push((
+            key,
+            Epoch {
+                t,
+                gnss_raw: Some(block),
+                ..Epoch::default()
+            },
+        ));
+    }
+    if let Some(block) = epochs.last_mut().and_then(|(_, e)| e.gnss_raw.as_mut()) {
+        if block.sats.iter().all(|s| s.id != sat.id) {
+            block.sats.push(sat);
+        }
     }
 }

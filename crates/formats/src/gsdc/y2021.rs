@@ -11,9 +11,9 @@
 
 use std::path::Path;
 
-use navguard_core::epoch::{Epoch, GnssRawBlock, SatObs};
+use navguard_core::epoch::Epoch;
 
-use super::{Band, Columns, Truths, android_sat, read_csv};
+use super::{Band, Columns, SatColumns, Truths, android_sat, push_sat, read_csv};
 use crate::error::{FormatError, missing};
 
 /// The published error of the 2021 truth heights, m (subtracted).
@@ -65,15 +65,15 @@ pub fn read(path: &Path, band: Band, truth: Option<&Truths>) -> Result<Vec<Epoch
         i("svid")?,
         i("receivedSvTimeInGpsNanos")?,
     );
-    let (raw, unc, isrb, clk, iono, tropo) = (
-        i("rawPrM")?,
-        i("rawPrUncM")?,
-        i("isrbM")?,
-        i("satClkBiasM")?,
-        i("ionoDelayM")?,
-        i("tropoDelayM")?,
-    );
-    let pos = [i("xSatPosM")?, i("ySatPosM")?, i("zSatPosM")?];
+    let cols = SatColumns {
+        raw: i("rawPrM")?,
+        unc: i("rawPrUncM")?,
+        isrb: i("isrbM")?,
+        clk: i("satClkBiasM")?,
+        iono: i("ionoDelayM")?,
+        tropo: i("tropoDelayM")?,
+        pos: [i("xSatPosM")?, i("ySatPosM")?, i("zSatPosM")?],
+    };
     // Quirk 1: the distinct times in file order, each mapped to the one before.
     let mut stamps: Vec<i64> = Vec::new();
     for row in &rows {
@@ -101,41 +101,9 @@ pub fn read(path: &Path, band: Band, truth: Option<&Truths>) -> Result<Vec<Epoch
         let Some(id) = android_sat(c.req(row, cons)? as i64, c.req(row, svid)? as i64) else {
             continue;
         };
-        if epochs.last().is_none_or(|(m, _)| *m != mapped) {
-            let truth = truth.and_then(|tr| tr.get(&mapped).copied());
-            let e = Epoch {
-                t: mapped as f64 / 1000.0,
-                gnss_raw: Some(GnssRawBlock {
-                    sats: vec![],
-                    truth,
-                }),
-                ..Epoch::default()
-            };
-            epochs.push((mapped, e));
-        }
-        let block = epochs
-            .last_mut()
-            .and_then(|(_, e)| e.gnss_raw.as_mut())
-            .expect("pushed above");
-        if block.sats.iter().any(|s| s.id == id) {
-            continue;
-        }
-        block.sats.push(SatObs {
-            id,
-            pr: c.req(row, raw)? - c.num(row, isrb)?.unwrap_or(0.0),
-            pos: [
-                c.req(row, pos[0])?,
-                c.req(row, pos[1])?,
-                c.req(row, pos[2])?,
-            ],
-            clk: c.req(row, clk)?,
-            iono: c.num(row, iono)?,
-            tropo: c.num(row, tropo)?,
-            sigma: c.num(row, unc)?,
-            cn0: None,
-            el: None,
-            az: None,
-        });
+        let t = mapped as f64 / 1000.0;
+        let truth = truth.and_then(|tr| tr.get(&mapped).copied());
+        push_sat(&mut epochs, mapped, t, truth, cols.obs(&c, row, id)?);
     }
     if epochs.is_empty() {
         return Err(missing(&file, "no usable rows after the 2021 corrections"));

@@ -10,9 +10,9 @@
 
 use std::path::Path;
 
-use navguard_core::epoch::{Epoch, GnssRawBlock, SatObs};
+use navguard_core::epoch::{Epoch, SatObs};
 
-use super::{Band, Columns, Truths, android_sat, read_csv};
+use super::{Band, Columns, SatColumns, Truths, android_sat, push_sat, read_csv};
 use crate::error::{FormatError, missing};
 use crate::gpstime::unix_ms_utc_to_gps;
 
@@ -63,24 +63,24 @@ pub fn read(path: &Path, band: Band, truth: Option<&Truths>) -> Result<Vec<Epoch
         i("ConstellationType")?,
         i("Svid")?,
     );
-    let (raw, unc, isrb, clk) = (
-        i("RawPseudorangeMeters")?,
-        i("RawPseudorangeUncertaintyMeters")?,
-        i("IsrbMeters")?,
-        i("SvClockBiasMeters")?,
-    );
-    let (iono, tropo, el, az, cn0) = (
-        i("IonosphericDelayMeters")?,
-        i("TroposphericDelayMeters")?,
+    let cols = SatColumns {
+        raw: i("RawPseudorangeMeters")?,
+        unc: i("RawPseudorangeUncertaintyMeters")?,
+        isrb: i("IsrbMeters")?,
+        clk: i("SvClockBiasMeters")?,
+        iono: i("IonosphericDelayMeters")?,
+        tropo: i("TroposphericDelayMeters")?,
+        pos: [
+            i("SvPositionXEcefMeters")?,
+            i("SvPositionYEcefMeters")?,
+            i("SvPositionZEcefMeters")?,
+        ],
+    };
+    let (el, az, cn0) = (
         i("SvElevationDegrees")?,
         i("SvAzimuthDegrees")?,
         i("Cn0DbHz")?,
     );
-    let pos = [
-        i("SvPositionXEcefMeters")?,
-        i("SvPositionYEcefMeters")?,
-        i("SvPositionZEcefMeters")?,
-    ];
     let arrival = i("ArrivalTimeNanosSinceGpsEpoch")?;
     let mut leap: Option<f64> = None;
     let mut epochs: Vec<(i64, Epoch)> = Vec::new();
@@ -97,44 +97,15 @@ pub fn read(path: &Path, band: Band, truth: Option<&Truths>) -> Result<Vec<Epoch
             let gps_s = c.req(row, arrival)? * 1e-9;
             leap = Some((gps_s - (ms as f64 / 1000.0 - GPS_EPOCH_UNIX_S)).round());
         }
-        if epochs.last().is_none_or(|(k, _)| *k != ms) {
-            let t = unix_ms_utc_to_gps(ms, leap.unwrap_or(0.0));
-            let truth = truth.and_then(|tr| tr.get(&ms).copied());
-            epochs.push((
-                ms,
-                Epoch {
-                    t,
-                    gnss_raw: Some(GnssRawBlock {
-                        sats: vec![],
-                        truth,
-                    }),
-                    ..Epoch::default()
-                },
-            ));
-        }
-        let block = epochs
-            .last_mut()
-            .and_then(|(_, e)| e.gnss_raw.as_mut())
-            .expect("pushed above");
-        if block.sats.iter().any(|s| s.id == id) {
-            continue;
-        }
-        block.sats.push(SatObs {
-            id,
-            pr: c.req(row, raw)? - c.num(row, isrb)?.unwrap_or(0.0),
-            pos: [
-                c.req(row, pos[0])?,
-                c.req(row, pos[1])?,
-                c.req(row, pos[2])?,
-            ],
-            clk: c.req(row, clk)?,
-            iono: c.num(row, iono)?,
-            tropo: c.num(row, tropo)?,
-            sigma: c.num(row, unc)?,
+        let t = unix_ms_utc_to_gps(ms, leap.unwrap_or(0.0));
+        let truth = truth.and_then(|tr| tr.get(&ms).copied());
+        let sat = SatObs {
             cn0: c.num(row, cn0)?,
             el: c.num(row, el)?.map(f64::to_radians),
             az: c.num(row, az)?.map(f64::to_radians),
-        });
+            ..cols.obs(&c, row, id)?
+        };
+        push_sat(&mut epochs, ms, t, truth, sat);
     }
     if epochs.is_empty() {
         return Err(missing(&file, "no usable rows"));
