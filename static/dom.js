@@ -40,10 +40,12 @@ export function fmtRatio(x) {
   return Math.abs(x) >= 1000 ? x.toExponential(2) : x.toFixed(2);
 }
 
-/** Epoch time in seconds, up to millisecond resolution. */
+/** Epoch time in seconds: to the millisecond, or to the tenth for times of 1e6 s and more. */
 export function fmtT(x) {
   if (!isNum(x)) return DASH;
-  return Math.abs(x) >= 1e6 ? x.toExponential(4) : String(Number(x.toFixed(3)));
+  // Large times (GNSS sessions stream GPS seconds, ~1.4e9) keep every whole second, so
+  // neighbouring ticks and epochs stay distinct.
+  return Math.abs(x) >= 1e6 ? String(Number(x.toFixed(1))) : String(Number(x.toFixed(3)));
 }
 
 export function fmtAge(ms) {
