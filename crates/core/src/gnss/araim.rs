@@ -22,6 +22,7 @@
 
 mod modes;
 mod pl;
+mod subsets;
 #[cfg(test)]
 mod tests;
 
@@ -32,6 +33,7 @@ use crate::epoch::{Constellation, SatId};
 
 pub use modes::FaultMode;
 pub use pl::{PlTerm, lhs as pl_lhs, q, q_inv, solve as solve_pl};
+use subsets::Nominal;
 
 /// Most satellites one epoch may hold (fault modes are 64-bit masks).
 pub const MAX_SATS: usize = 64;
@@ -338,44 +340,8 @@ impl AraimModel {
     /// ([B15] §III; ADD steps "determine subsets" to "protection levels").
     pub fn fit(sats: &[AraimSat], params: &AraimParams) -> Result<Self, AraimError> {
         params.check()?;
+        let nominal = Nominal::new(sats)?;
         let n = sats.len();
-        let n_clk = sats.iter().map(|s| s.clock + 1).max().unwrap_or(0);
-        if n > MAX_SATS || n < 4 + n_clk.saturating_sub(1) || n_clk > MAX_CLOCKS {
-            return Err(AraimError::SatelliteCount(n));
-        }
-        for s in sats {
-            let norm = s.los_enu.iter().map(|v| v * v).sum::<f64>().sqrt();
-            let ok = s.sigma_ura > 0.0
-                && s.sigma_ure > 0.0
-                && s.b_nom >= 0.0
-                && s.b_nom.is_finite()
-                && s.el.is_finite()
-                && s.sigma_local.is_none_or(|v| v >= 0.0 && v.is_finite())
-                && (norm - 1.0).abs() < 1e-6;
-            if !ok {
-                return Err(AraimError::Satellite(s.id));
-            }
-        }
-        // C_int and C_acc (diagonal), and W = C_int⁻¹ ([B15] eqs. for the nominal model).
-        let var_int: Vec<f64> = sats
-            .iter()
-            .map(|s| s.sigma_ura.powi(2) + s.var_local())
-            .collect();
-        let var_acc: Vec<f64> = sats
-            .iter()
-            .map(|s| s.sigma_ure.powi(2) + s.var_local())
-            .collect();
-        let w: Vec<f64> = var_int.iter().map(|v| 1.0 / v).collect();
-        let g: Vec<[f64; 4]> = sats
-            .iter()
-            .map(|s| [-s.los_enu[0], -s.los_enu[1], -s.los_enu[2], 1.0])
-            .collect();
-        let clocks_of = |mask: u64| -> u32 {
-            sats.iter()
-                .enumerate()
-                .filter(|(i, _)| mask & (1 << i) == 0)
-                .fold(0u32, |c, (_, s)| c | (1 << s.clock))
-        };
         let all: u64 = if n == 64 { u64::MAX } else { (1u64 << n) - 1 };
 
         // Fault modes: events, then enumerate until P_not_monitored ≤ P_THRES.
@@ -384,11 +350,11 @@ impl AraimModel {
         let (events, p_unmon) = modes::events(&constellations, &p_sat, |c| params.p_const_of(c));
         // A subset is a candidate when it keeps at least as many satellites as unknowns:
         // solution separation needs the subset's solution, not its redundancy (a subset
-        // whose geometry is still singular is caught by the Cholesky below and counted
-        // as unmonitored).
+        // whose geometry is still singular is caught by its Cholesky and counted as
+        // unmonitored).
         let solvable = |mask: u64| {
             let kept = (all & !mask).count_ones() as usize;
-            kept >= 3 + clocks_of(mask).count_ones() as usize
+            kept >= 3 + nominal.clocks_of(mask).count_ones() as usize
         };
         let set = modes::determine(
             &events,
@@ -397,99 +363,12 @@ impl AraimModel {
             params.max_fault_order,
             solvable,
         );
-        let mut p_nm = set.p_not_monitored;
-
-        // Normal matrix of the all-in-view, N_0 = Gᵀ W G.
-        let mut n0 = Normal::zeros();
-        for (i, s) in sats.iter().enumerate() {
-            accumulate(&mut n0, &g[i], s.clock, w[i]);
-        }
-        for c in n_clk..MAX_CLOCKS {
-            n0[(3 + c, 3 + c)] = 1.0;
-        }
-
-        let mut masks = vec![0u64];
-        let mut kept_modes = Vec::with_capacity(set.modes.len());
-        let mut gains = Vec::with_capacity((set.modes.len() + 1) * 3 * n);
-        let mut sigma = Vec::with_capacity(set.modes.len() + 1);
-        masks.extend(set.modes.iter().map(|md| md.excluded_mask));
-        for (k, &mask) in masks.iter().enumerate() {
-            // N_k = N_0 − Σ_{excluded} w_i g_i g_iᵀ (the ADD's W_k with zero weights),
-            // then a lost clock column is replaced by the identity so the position block
-            // of N_k⁻¹ is that of the reduced geometry.
-            let mut nk = n0;
-            for i in (0..n).filter(|i| mask & (1 << i) != 0) {
-                accumulate(&mut nk, &g[i], sats[i].clock, -w[i]);
-            }
-            let clk = clocks_of(mask);
-            for c in (0..n_clk).filter(|c| clk & (1 << c) == 0) {
-                for j in 0..M {
-                    nk[(3 + c, j)] = 0.0;
-                    nk[(j, 3 + c)] = 0.0;
-                }
-                nk[(3 + c, 3 + c)] = 1.0;
-            }
-            let Some(chol) = nk.cholesky() else {
-                if k == 0 {
-                    return Err(AraimError::Singular);
-                }
-                p_nm += set.modes[k - 1].p_fault;
-                continue;
-            };
-            // The first three columns of N_k⁻¹ (= its first three rows, N_k symmetric).
-            let x = chol.solve(&SMatrix::<f64, M, 3>::identity());
-            let sig = [x[(0, 0)].sqrt(), x[(1, 1)].sqrt(), x[(2, 2)].sqrt()];
-            if sig.iter().any(|s| !s.is_finite()) {
-                if k == 0 {
-                    return Err(AraimError::Singular);
-                }
-                p_nm += set.modes[k - 1].p_fault;
-                continue;
-            }
-            // S_k(q, i) = w_i (N_k⁻¹ g_i)_q for the satellites the subset keeps.
-            for q in 0..3 {
-                for i in 0..n {
-                    let s = if mask & (1 << i) != 0 {
-                        0.0
-                    } else {
-                        let gi = &g[i];
-                        w[i] * (x[(0, q)] * gi[0]
-                            + x[(1, q)] * gi[1]
-                            + x[(2, q)] * gi[2]
-                            + x[(3 + sats[i].clock, q)])
-                    };
-                    gains.push(s);
-                }
-            }
-            sigma.push(sig);
-            if k > 0 {
-                kept_modes.push(set.modes[k - 1].clone());
-            }
-        }
-
-        let n_sub = sigma.len();
-        let s_of = |k: usize, q: usize| &gains[(k * 3 + q) * n..(k * 3 + q + 1) * n];
-        let mut sigma_ss = vec![[0.0; 3]; n_sub];
-        let mut bias = vec![[0.0; 3]; n_sub];
-        for k in 0..n_sub {
-            for q in 0..3 {
-                let (sk, s0) = (s_of(k, q), s_of(0, q));
-                // σ_ss² = e_qᵀ (S_k − S_0) C_acc (S_k − S_0)ᵀ e_q; b = Σ |S_k| b_nom.
-                let mut v = 0.0;
-                let mut b = 0.0;
-                for i in 0..n {
-                    let d = sk[i] - s0[i];
-                    v += d * d * var_acc[i];
-                    b += sk[i].abs() * sats[i].b_nom;
-                }
-                sigma_ss[k][q] = v.sqrt();
-                bias[k][q] = b;
-            }
-        }
+        let subsets = nominal.solve_subsets(&set.modes, set.p_not_monitored)?;
+        let (sigma_ss, bias) = subsets.separations(&nominal, sats);
 
         // K_fa: the false-alert budget split over the N_ss modes, two-sided; east and
         // north share P_FA,HOR ([B15] and ADD "solution separation threshold tests").
-        let n_ss = kept_modes.len().max(1) as f64;
+        let n_ss = subsets.modes.len().max(1) as f64;
         let k_fa = [
             q_inv(params.p_fa_hor / (4.0 * n_ss)),
             q_inv(params.p_fa_hor / (4.0 * n_ss)),
@@ -499,62 +378,67 @@ impl AraimModel {
             .iter()
             .map(|s| [k_fa[0] * s[0], k_fa[1] * s[1], k_fa[2] * s[2]])
             .collect();
-
-        // Protection levels: the budget left once the unmonitored modes are paid for.
-        let scale = 1.0 - p_nm / (params.p_hmi_vert + params.p_hmi_hor);
-        let terms = |q: usize| -> Vec<PlTerm> {
-            let mut t = Vec::with_capacity(n_sub);
-            t.push(PlTerm {
-                coef: 2.0,
-                offset: bias[0][q],
-                sigma: sigma[0][q],
-            });
-            for (k, md) in kept_modes.iter().enumerate() {
-                t.push(PlTerm {
-                    coef: md.p_fault,
-                    offset: thresholds[k + 1][q] + bias[k + 1][q],
-                    sigma: sigma[k + 1][q],
-                });
-            }
-            t
-        };
-        let vpl = solve_pl(&terms(2), params.p_hmi_vert * scale, params.tol_pl);
-        let hpl_en = [
-            solve_pl(&terms(0), 0.5 * params.p_hmi_hor * scale, params.tol_pl),
-            solve_pl(&terms(1), 0.5 * params.p_hmi_hor * scale, params.tol_pl),
-        ];
-
-        // σ_acc (vertical, C_acc) and EMT = max T_k,3 over modes with p_fault ≥ P_EMT.
-        let sigma_acc = s_of(0, 2)
-            .iter()
-            .zip(&var_acc)
-            .map(|(s, v)| s * s * v)
-            .sum::<f64>()
-            .sqrt();
-        let emt = kept_modes
-            .iter()
-            .enumerate()
-            .filter(|(_, md)| md.p_fault >= params.p_emt)
-            .map(|(k, _)| thresholds[k + 1][2])
-            .fold(0.0, f64::max);
-
-        Ok(Self {
+        let mut model = Self {
             ids: sats.iter().map(|s| s.id).collect(),
-            modes: kept_modes,
-            gains,
-            sigma,
+            modes: subsets.modes,
+            gains: subsets.gains,
+            sigma: subsets.sigma,
             sigma_ss,
             bias,
             thresholds,
             k_fa,
-            p_not_monitored: p_nm,
+            p_not_monitored: subsets.p_not_monitored,
             max_order: set.max_order,
-            hpl_en,
-            vpl,
-            sigma_acc,
-            emt,
+            hpl_en: [0.0; 2],
+            vpl: 0.0,
+            sigma_acc: 0.0,
+            emt: 0.0,
             k_acc_ffd: [params.k_acc, params.k_ffd],
-        })
+        };
+        model.solve_levels(params, &nominal.var_acc);
+        Ok(model)
+    }
+
+    /// The protection levels, σ_acc and EMT of a fitted model.
+    fn solve_levels(&mut self, params: &AraimParams, var_acc: &[f64]) {
+        // The budget left once the unmonitored modes are paid for.
+        let scale = 1.0 - self.p_not_monitored / (params.p_hmi_vert + params.p_hmi_hor);
+        let terms = |q: usize| -> Vec<PlTerm> {
+            let mut t = Vec::with_capacity(self.sigma.len());
+            t.push(PlTerm {
+                coef: 2.0,
+                offset: self.bias[0][q],
+                sigma: self.sigma[0][q],
+            });
+            for (k, md) in self.modes.iter().enumerate() {
+                t.push(PlTerm {
+                    coef: md.p_fault,
+                    offset: self.thresholds[k + 1][q] + self.bias[k + 1][q],
+                    sigma: self.sigma[k + 1][q],
+                });
+            }
+            t
+        };
+        self.vpl = solve_pl(&terms(2), params.p_hmi_vert * scale, params.tol_pl);
+        self.hpl_en = [
+            solve_pl(&terms(0), 0.5 * params.p_hmi_hor * scale, params.tol_pl),
+            solve_pl(&terms(1), 0.5 * params.p_hmi_hor * scale, params.tol_pl),
+        ];
+        // σ_acc (vertical, C_acc) and EMT = max T_k,3 over modes with p_fault ≥ P_EMT.
+        self.sigma_acc = self
+            .gain_row(0, 2)
+            .iter()
+            .zip(var_acc)
+            .map(|(s, v)| s * s * v)
+            .sum::<f64>()
+            .sqrt();
+        self.emt = self
+            .modes
+            .iter()
+            .enumerate()
+            .filter(|(_, md)| md.p_fault >= params.p_emt)
+            .map(|(k, _)| self.thresholds[k + 1][2])
+            .fold(0.0, f64::max);
     }
 
     /// The solution separation test: `|x̂_k,q − x̂_0,q| ≤ T_k,q` for every mode and axis,
@@ -676,16 +560,6 @@ impl AraimModel {
             && self.emt <= limits.emt_m
             && self.k_acc_ffd[0] * self.sigma_acc <= limits.acc95_m
             && self.k_acc_ffd[1] * self.sigma_acc <= limits.ffd_m
-    }
-}
-
-/// `N += w g gᵀ` for a row `g = [g_e, g_n, g_u, 1 at clock]`.
-fn accumulate(n: &mut Normal, g: &[f64; 4], clock: usize, w: f64) {
-    let idx = [0, 1, 2, 3 + clock];
-    for a in 0..4 {
-        for b in 0..4 {
-            n[(idx[a], idx[b])] += w * g[a] * g[b];
-        }
     }
 }
 

@@ -163,38 +163,7 @@ pub(super) fn step(
         k,
         policy,
     );
-    let outputs = match (&outcome, sol) {
-        (Some(o), Some(s)) => {
-            let (hpe, vpe) = errors(s, block.truth);
-            GnssOutputs {
-                position: Some(GnssPosition {
-                    lat: s.lla.lat.to_degrees(),
-                    lon: s.lla.lon.to_degrees(),
-                    h: s.lla.h,
-                }),
-                clocks: s
-                    .clocks
-                    .iter()
-                    .map(|(c, v)| (c.letter().to_string(), *v))
-                    .collect::<BTreeMap<_, _>>(),
-                dop: Some(Dops {
-                    gdop: s.dops.gdop,
-                    pdop: s.dops.pdop,
-                    hdop: s.dops.hdop,
-                    vdop: s.dops.vdop,
-                }),
-                hpl: levels.map(|l| l.0),
-                vpl: levels.map(|l| l.1),
-                hal: monitor.config.hal_m,
-                val: monitor.config.val_m,
-                hpe,
-                vpe,
-                satellites,
-                excluded: o.excluded.iter().map(|id| id.to_string()).collect(),
-            }
-        }
-        _ => GnssOutputs::without_solution(monitor.config.hal_m, monitor.config.val_m, satellites),
-    };
+    let outputs = outputs_of(monitor, outcome.as_ref(), levels, satellites, block.truth);
     let unresolved = outcome
         .as_ref()
         .is_some_and(|o| o.test.is_some_and(|t| !t.passed));
@@ -214,6 +183,48 @@ pub(super) fn step(
         outputs: Outputs::Gnss(monitor.outputs.clone()),
         integrity: Some(integrity),
     })
+}
+
+/// The epoch's outputs: the final fix, its levels and errors, and every satellite.
+fn outputs_of(
+    monitor: &GnssMonitor,
+    outcome: Option<&FdeOutcome>,
+    levels: Option<(f64, f64)>,
+    satellites: Vec<SatOutput>,
+    truth: Option<[f64; 3]>,
+) -> GnssOutputs {
+    let (hal, val) = (monitor.config.hal_m, monitor.config.val_m);
+    let Some(o) = outcome else {
+        return GnssOutputs::without_solution(hal, val, satellites);
+    };
+    let s = &o.solution;
+    let (hpe, vpe) = errors(s, truth);
+    GnssOutputs {
+        position: Some(GnssPosition {
+            lat: s.lla.lat.to_degrees(),
+            lon: s.lla.lon.to_degrees(),
+            h: s.lla.h,
+        }),
+        clocks: s
+            .clocks
+            .iter()
+            .map(|(c, v)| (c.letter().to_string(), *v))
+            .collect::<BTreeMap<_, _>>(),
+        dop: Some(Dops {
+            gdop: s.dops.gdop,
+            pdop: s.dops.pdop,
+            hdop: s.dops.hdop,
+            vdop: s.dops.vdop,
+        }),
+        hpl: levels.map(|l| l.0),
+        vpl: levels.map(|l| l.1),
+        hal,
+        val,
+        hpe,
+        vpe,
+        satellites,
+        excluded: o.excluded.iter().map(|id| id.to_string()).collect(),
+    }
 }
 
 /// Steps every satellite's policy and describes it: a used satellite by its post-fit
