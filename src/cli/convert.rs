@@ -19,9 +19,9 @@ use crate::service::wire::epoch_to_wire;
 /// The file formats `convert` reads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub(crate) enum Format {
-    /// RINEX 2.10/2.11 observation (`--obs`) + GPS navigation (`--nav`).
+    /// RINEX 2.10/2.11 or 3.0x observation (`--obs`) + navigation (`--nav`); GPS only.
     Rinex,
-    /// Android GnssLogger log (`--obs`) + RINEX 2 GPS navigation (`--nav`).
+    /// Android GnssLogger log (`--obs`) + RINEX 2 or 3 GPS navigation (`--nav`).
     Gnsslogger,
     /// GSDC 2021 `*_derived.csv` (`--obs`), optional `*_ground_truth.csv` (`--truth-file`).
     Gsdc2021,
@@ -39,7 +39,7 @@ pub(crate) struct ConvertArgs {
     /// The observation file (RINEX obs, GnssLogger log, GSDC CSV).
     #[arg(long)]
     pub obs: PathBuf,
-    /// The RINEX 2 GPS navigation file (rinex, gnsslogger).
+    /// The RINEX 2.x or 3.x navigation file, GPS records used (rinex, gnsslogger).
     #[arg(long)]
     pub nav: Option<PathBuf>,
     /// The GSDC ground-truth CSV (gsdc2021: heights corrected by −61 m).
@@ -51,7 +51,7 @@ pub(crate) struct ConvertArgs {
     /// Use the RINEX header's APPROX POSITION XYZ as the truth (rinex).
     #[arg(long)]
     pub truth_approx_position: bool,
-    /// Iono-free C1/P2 combination instead of C1 + Klobuchar (rinex).
+    /// Iono-free C1/P2 combination (RINEX 3: C1W, else C1C, with C2W) instead of C1 (C1C) + Klobuchar (rinex).
     #[arg(long)]
     pub iono_free: bool,
     /// Keep the L5/E5a signal instead of L1/E1/G1 (gsdc).
@@ -63,6 +63,9 @@ pub(crate) struct ConvertArgs {
 }
 
 const CONVERT_HELP: &str = "\
+--format rinex reads RINEX 2.x and 3.x (the version on the first line decides); of RINEX 3
+only GPS satellites and records are used, the other systems' are skipped.
+
 Examples:
   navguard convert --format rinex --obs tests/data/gnss/rtklib/07590920.05o --nav tests/data/gnss/rtklib/07590920.05n --iono-free --truth-approx-position -o geonet.jsonl
   navguard convert --format gnsslogger --obs tests/data/gnss/gnsslogger/pseudoranges_log_2016_06_30_21_26_07.txt --nav tests/data/gnss/gnsslogger/hour1820.16n --truth 37.422578,-122.081678,-28 -o logger.jsonl

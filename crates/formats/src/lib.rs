@@ -12,7 +12,8 @@
 //! - [`ephemeris`]: IS-GPS-200 broadcast orbits and satellite clocks, at transmit time.
 //! - [`klobuchar`]: the IS-GPS-200 single-frequency ionospheric model.
 //! - [`geometry`]: look angles from an a-priori position, and truths.
-//! - [`rinex`]: RINEX 2.10/2.11 observation and GPS navigation files, and their conversion.
+//! - [`rinex`]: RINEX 2.10/2.11 and 3.0x observation and navigation files (GPS; the
+//!   version on the first line decides), and their conversion.
 //! - [`gnsslogger`]: Android GnssLogger `Raw` records with a RINEX navigation file.
 //! - [`gsdc`]: the Google Smartphone Decimeter Challenge 2021 and 2023 CSVs.
 //!
@@ -24,9 +25,10 @@
 //! crates in `cargo tree`, far over the budget of about a minute of clean build on two
 //! cores; and we need our own IS-GPS-200 orbit and clock code anyway (to document and
 //! test the equations), so the crate would only have saved the fixed-column reading,
-//! about 300 lines here. RINEX 2's columns are simple and the two traps in our data
-//! (event-flag-4 records with blank dates, time tags with receiver-clock offsets) are
-//! handled and tested explicitly.
+//! about 300 lines here (about 250 more for RINEX 3). RINEX 2's columns are simple and
+//! the two traps in our data (event-flag-4 records with blank dates, time tags with
+//! receiver-clock offsets) are handled and tested explicitly; RINEX 3 is tested against
+//! the same real files rewritten as 3.04 (tests/rinex3.rs).
 
 pub mod ephemeris;
 pub mod error;

@@ -1,11 +1,12 @@
 //! RINEX 2 GPS navigation files (RINEX 2.11 §6.4, Table A4): the header's Klobuchar
 //! coefficients and leap seconds, and 8-line broadcast records with `D` exponents.
+//! RINEX 3.0x files are read by [`super::nav3`] into the same [`NavFile`].
 
 use std::path::Path;
 
-use navguard_core::epoch::Constellation;
+use navguard_core::epoch::{Constellation, SatId};
 
-use super::{cols, date, int, label, real, sat_id};
+use super::{cols, date, int, label, major_version, real, sat_id};
 use crate::ephemeris::{Ephemerides, Ephemeris};
 use crate::error::{At, FormatError, missing, read_to_string};
 use crate::gpstime::{WEEK_S, wrap_half_week};
@@ -20,9 +21,12 @@ pub struct NavFile {
     pub leap_seconds: Option<f64>,
     /// Every broadcast record.
     pub ephemerides: Ephemerides,
+    /// RINEX 3: records of systems other than GPS, skipped. Always 0 for RINEX 2.
+    pub other_systems_skipped: usize,
 }
 
-/// Reads a RINEX 2 GPS navigation file.
+/// Reads a RINEX 2.x GPS or 3.x navigation file (the version on its first line
+/// decides; of RINEX 3 only the GPS records are kept).
 pub fn read_nav(path: &Path) -> Result<NavFile, FormatError> {
     parse_nav(&read_to_string(path)?, &path.display().to_string())
 }
@@ -37,9 +41,12 @@ fn four(line: &str, at: At<'_>) -> Result<[f64; 4], FormatError> {
     Ok(out)
 }
 
-/// Parses the text of a RINEX 2 GPS navigation file named `file`.
+/// Parses the text of a RINEX 2.x GPS or 3.x navigation file named `file`.
 pub fn parse_nav(text: &str, file: &str) -> Result<NavFile, FormatError> {
     let lines: Vec<&str> = text.lines().collect();
+    if major_version(&lines, file)? == 3 {
+        return super::nav3::parse(&lines, file);
+    }
     let (mut alpha, mut beta, mut leap) = (None, None, None);
     let mut k = 0;
     loop {
@@ -75,16 +82,25 @@ pub fn parse_nav(text: &str, file: &str) -> Result<NavFile, FormatError> {
         klobuchar,
         leap_seconds: leap,
         ephemerides: Ephemerides::new(all),
+        other_systems_skipped: 0,
     })
 }
 
-/// The 29 reals of the record starting at line index `k` (missing trailing fields
-/// are 0, as blank fields are: RINEX writers trim the fit interval).
-fn record_values(lines: &[&str], k: usize, file: &str) -> Result<Vec<f64>, FormatError> {
+/// The 31 reals of the 8-line record starting at line index `k`, whose first line's
+/// three reals start at column `first` and the other lines' four at `indent` (RINEX 2:
+/// 22 and 3; RINEX 3: 23 and 4). Missing trailing fields are 0, as blank fields are:
+/// RINEX writers trim the fit interval.
+pub(crate) fn record_values(
+    lines: &[&str],
+    k: usize,
+    file: &str,
+    first: usize,
+    indent: usize,
+) -> Result<Vec<f64>, FormatError> {
     let mut v = Vec::with_capacity(32);
     for j in 0..3 {
         let at = At { file, line: k + 1 };
-        v.push(real(cols(lines[k], 22 + 19 * j, 41 + 19 * j), at)?.unwrap_or(0.0));
+        v.push(real(cols(lines[k], first + 19 * j, first + 19 + 19 * j), at)?.unwrap_or(0.0));
     }
     for i in 1..8 {
         let line = lines.get(k + i).copied().unwrap_or("");
@@ -93,7 +109,7 @@ fn record_values(lines: &[&str], k: usize, file: &str) -> Result<Vec<f64>, Forma
             line: k + i + 1,
         };
         for j in 0..4 {
-            v.push(real(cols(line, 3 + 19 * j, 22 + 19 * j), at)?.unwrap_or(0.0));
+            v.push(real(cols(line, indent + 19 * j, indent + 19 + 19 * j), at)?.unwrap_or(0.0));
         }
     }
     Ok(v)
@@ -108,7 +124,18 @@ fn record(lines: &[&str], k: usize, file: &str) -> Result<Ephemeris, FormatError
         at,
     )?;
     let toc = date(cols(lines[k], 2, 22), at)?.to_gps_seconds();
-    let v = record_values(lines, k, file)?;
+    let v = record_values(lines, k, file, 22, 3)?;
+    ephemeris(sat, toc, &v, at)
+}
+
+/// The broadcast values of Table A4 (RINEX 3.04 Table A8 has the same order for GPS)
+/// with the clock reference time `toc`, as an [`Ephemeris`].
+pub(crate) fn ephemeris(
+    sat: SatId,
+    toc: f64,
+    v: &[f64],
+    at: At<'_>,
+) -> Result<Ephemeris, FormatError> {
     let week = v[21] as i64;
     // The week field goes with t_oe; t_oe near a week's edge and t_oc across it stay
     // consistent by the half-week rule.

@@ -1,5 +1,6 @@
 //! RINEX 2.10/2.11 observation files (RINEX 2.11 §5.1, Tables A1–A2): the header's
-//! observation types and approximate position, and the epoch records.
+//! observation types and approximate position, and the epoch records. RINEX 3.0x files
+//! are read by [`super::obs3`] into the same [`ObsFile`].
 //!
 //! An epoch line holds the date (columns 2–26), the event flag (column 29), the
 //! satellite count (30–32) and up to 12 satellites (33–68), continued on lines that
@@ -13,7 +14,7 @@ use std::path::Path;
 
 use navguard_core::epoch::{Constellation, SatId};
 
-use super::{cols, date, int, label, real, sat_id};
+use super::{approx_position, cols, date, int, label, major_version, real, sat_id};
 use crate::error::{At, FormatError, missing, read_to_string};
 
 /// One observed value.
@@ -34,14 +35,15 @@ pub struct ObsEpoch {
     pub t: f64,
     /// The event flag: 0 OK, 1 power failure before this epoch.
     pub flag: u8,
-    /// Each satellite's values, in the header's type order.
+    /// Each satellite's values, in the order of [`ObsFile::types`].
     pub sats: Vec<(SatId, Vec<Option<ObsValue>>)>,
 }
 
 /// A parsed observation file.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ObsFile {
-    /// `# / TYPES OF OBSERV`, e.g. `["L1", "C1", "L2", "P2"]`.
+    /// RINEX 2 `# / TYPES OF OBSERV`, e.g. `["L1", "C1", "L2", "P2"]`; RINEX 3 the
+    /// GPS list of `SYS / # / OBS TYPES`, e.g. `["C1C", "L1C", "C2W", "L2W"]`.
     pub types: Vec<String>,
     /// `APPROX POSITION XYZ`, ECEF m, when given and not zero.
     pub approx_position: Option<[f64; 3]>,
@@ -51,9 +53,12 @@ pub struct ObsFile {
     pub epochs: Vec<ObsEpoch>,
     /// How many event records (flags 2–6) were skipped.
     pub events_skipped: usize,
+    /// RINEX 3: satellite observations of systems other than GPS, not kept (only GPS
+    /// is converted). Always 0 for RINEX 2, whose mixed files keep every satellite.
+    pub other_systems_skipped: usize,
 }
 
-/// Reads a RINEX 2 observation file.
+/// Reads a RINEX 2.x or 3.x observation file (the version on its first line decides).
 pub fn read_obs(path: &Path) -> Result<ObsFile, FormatError> {
     parse_obs(&read_to_string(path)?, &path.display().to_string())
 }
@@ -90,15 +95,7 @@ fn header(lines: &[&str], file: &str) -> Result<(Header, usize), FormatError> {
                 h.types
                     .extend(cols(line, 6, 60).split_whitespace().map(str::to_string));
             }
-            "APPROX POSITION XYZ" => {
-                let v: Result<Vec<_>, _> = (0..3)
-                    .map(|j| real(cols(line, 14 * j, 14 * j + 14), at))
-                    .collect();
-                let v: Vec<f64> = v?.into_iter().map(|x| x.unwrap_or(0.0)).collect();
-                if v.iter().any(|x| *x != 0.0) {
-                    h.approx = Some([v[0], v[1], v[2]]);
-                }
-            }
+            "APPROX POSITION XYZ" => h.approx = approx_position(line, at)?,
             "END OF HEADER" => {
                 if h.types.len() != h.n_types || h.n_types == 0 {
                     return Err(missing(
@@ -114,9 +111,12 @@ fn header(lines: &[&str], file: &str) -> Result<(Header, usize), FormatError> {
     Err(missing(file, "no END OF HEADER"))
 }
 
-/// Parses the text of a RINEX 2 observation file named `file`.
+/// Parses the text of a RINEX 2.x or 3.x observation file named `file`.
 pub fn parse_obs(text: &str, file: &str) -> Result<ObsFile, FormatError> {
     let lines: Vec<&str> = text.lines().collect();
+    if major_version(&lines, file)? == 3 {
+        return super::obs3::parse(&lines, file);
+    }
     let (h, mut k) = header(&lines, file)?;
     let mut epochs = Vec::new();
     let mut events_skipped = 0;
@@ -157,6 +157,7 @@ pub fn parse_obs(text: &str, file: &str) -> Result<ObsFile, FormatError> {
         system: h.system,
         epochs,
         events_skipped,
+        other_systems_skipped: 0,
     })
 }
 
@@ -206,7 +207,7 @@ fn epoch_record(
 }
 
 /// A 16-column field: F14.3, LLI (I1), SSI (I1); blank value is `None`.
-fn obs_value(field: &str, at: At<'_>) -> Result<Option<ObsValue>, FormatError> {
+pub(crate) fn obs_value(field: &str, at: At<'_>) -> Result<Option<ObsValue>, FormatError> {
     let Some(value) = real(cols(field, 0, 14), at)? else {
         return Ok(None);
     };
