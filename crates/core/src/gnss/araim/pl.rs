@@ -1,4 +1,4 @@
-//! The ARAIM protection-level equation and its half-interval solver (Blanch et al. 2015,
+//! The ARAIM protection-level equation and its bracketing solver (Blanch et al. 2015,
 //! Appendix "Computation of the protection levels"; ADD "Protection levels"): for one
 //! axis q, the PL is the L that satisfies
 //!
@@ -38,42 +38,96 @@ pub fn lhs(terms: &[PlTerm], l: f64) -> f64 {
         .sum()
 }
 
-/// Solves `lhs(L) = rhs` by halving the bracket until it is at most `tol` wide and
-/// returns its upper end (so `lhs(PL) ≤ rhs`: the conservative side). The bracket is
-/// Blanch et al. 2015's: no term may exceed `rhs` (lower bound), and all terms at most
-/// `rhs / n` suffice (upper bound). `rhs ≤ 0` (the unmonitored modes use up the whole
-/// budget) gives an infinite PL.
+/// Solves `lhs(L) = rhs` inside a bracket until it is at most `tol` wide and returns its
+/// upper end (so `lhs(PL) ≤ rhs`: the conservative side). The bracket is Blanch et al.
+/// 2015's: no term may exceed `rhs` (lower bound), and all terms at most `rhs / n`
+/// suffice (upper bound). Inside it, the Illinois variant of regula falsi on
+/// `ln lhs(L) − ln rhs` (nearly linear over the bracket, the tails being Gaussian) keeps
+/// the bracket and shrinks it in a few evaluations where halving takes ten; a step that
+/// does not shrink it by half falls back to halving. `rhs ≤ 0` (the unmonitored modes
+/// use up the whole budget) gives an infinite PL.
 pub fn solve(terms: &[PlTerm], rhs: f64, tol: f64) -> f64 {
     if rhs <= 0.0 || terms.is_empty() {
         return f64::INFINITY;
     }
-    let n = terms.len() as f64;
-    let mut lo = 0.0_f64;
-    let mut hi = 0.0_f64;
-    for t in terms {
-        if t.coef > rhs {
-            lo = lo.max(t.offset + q_inv(rhs / t.coef) * t.sigma);
-        }
-        let share = rhs / (n * t.coef);
-        let k = if share < 1.0 {
-            q_inv(share).max(0.0)
-        } else {
-            0.0
-        };
-        hi = hi.max(t.offset + k * t.sigma);
-    }
+    let (mut lo, mut hi) = bracket(terms, rhs);
     if lo >= hi {
         return hi;
     }
+    let f = |l: f64| lhs(terms, l).ln() - rhs.ln();
+    let (mut f_lo, mut f_hi) = (f(lo), f(hi));
+    if !(f_lo > 0.0 && f_hi <= 0.0) {
+        return hi;
+    }
+    // Illinois: halve the retained end's value when the same end is kept twice.
+    let mut kept = 0i8;
     while hi - lo > tol {
-        let mid = 0.5 * (lo + hi);
-        if lhs(terms, mid) > rhs {
+        let width = hi - lo;
+        let mut mid = hi - f_hi * (hi - lo) / (f_hi - f_lo);
+        if !(mid > lo && mid < hi) || !mid.is_finite() {
+            mid = 0.5 * (lo + hi);
+        }
+        let f_mid = f(mid);
+        if f_mid > 0.0 {
             lo = mid;
+            f_lo = f_mid;
+            if kept == 1 {
+                f_hi *= 0.5;
+            }
+            kept = 1;
         } else {
             hi = mid;
+            f_hi = f_mid;
+            if kept == -1 {
+                f_lo *= 0.5;
+            }
+            kept = -1;
+        }
+        if hi - lo > 0.5 * width {
+            // Slow progress: one halving step.
+            let half = 0.5 * (lo + hi);
+            let f_half = f(half);
+            if f_half > 0.0 {
+                (lo, f_lo) = (half, f_half);
+            } else {
+                (hi, f_hi) = (half, f_half);
+            }
         }
     }
     hi
+}
+
+/// Blanch et al. 2015's bracket of the PL: `Q⁻¹` is taken once per distinct coefficient
+/// (the fault modes share a few: 2, P_sat, P_const and their products).
+fn bracket(terms: &[PlTerm], rhs: f64) -> (f64, f64) {
+    let n = terms.len() as f64;
+    let mut seen: Vec<(f64, f64, f64)> = Vec::with_capacity(4);
+    let (mut lo, mut hi) = (0.0_f64, 0.0_f64);
+    for t in terms {
+        let (k_lo, k_hi) = match seen.iter().find(|s| s.0 == t.coef) {
+            Some(&(_, a, b)) => (a, b),
+            None => {
+                let k_lo = if t.coef > rhs {
+                    q_inv(rhs / t.coef)
+                } else {
+                    f64::NEG_INFINITY
+                };
+                let share = rhs / (n * t.coef);
+                let k_hi = if share < 1.0 {
+                    q_inv(share).max(0.0)
+                } else {
+                    0.0
+                };
+                seen.push((t.coef, k_lo, k_hi));
+                (k_lo, k_hi)
+            }
+        };
+        if k_lo.is_finite() {
+            lo = lo.max(t.offset + k_lo * t.sigma);
+        }
+        hi = hi.max(t.offset + k_hi * t.sigma);
+    }
+    (lo, hi)
 }
 
 #[cfg(test)]
@@ -91,5 +145,36 @@ mod tests {
         let l = solve(&t, 1e-7, 1e-9);
         assert!((l - 1.5 * q_inv(5e-8)).abs() < 1e-8, "{l}");
         assert!((q_inv(5e-8) - 5.326_723_886).abs() < 1e-6);
+    }
+}
+
+#[cfg(test)]
+mod solver_tests {
+    use super::*;
+
+    #[test]
+    fn the_solver_lands_within_tol_above_the_root_on_many_terms() {
+        // A fault-free term and 30 modes of varied offsets and σ, as a 30-satellite epoch.
+        let mut terms = vec![PlTerm {
+            coef: 2.0,
+            offset: 0.3,
+            sigma: 1.1,
+        }];
+        for k in 0..30 {
+            let k = f64::from(k);
+            terms.push(PlTerm {
+                coef: 1e-5,
+                offset: 4.0 + 0.37 * k,
+                sigma: 1.2 + 0.05 * k,
+            });
+        }
+        for rhs in [9.8e-8, 1e-9, 1e-5] {
+            let l = solve(&terms, rhs, 0.05);
+            assert!(lhs(&terms, l) <= rhs, "conservative side at {rhs}");
+            assert!(
+                lhs(&terms, l - 0.05) > rhs,
+                "within tol of the root at {rhs}"
+            );
+        }
     }
 }
