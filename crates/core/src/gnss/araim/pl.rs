@@ -64,7 +64,7 @@ pub fn solve(terms: &[PlTerm], rhs: f64, tol: f64) -> f64 {
     while hi - lo > tol {
         let width = hi - lo;
         let mut mid = hi - f_hi * (hi - lo) / (f_hi - f_lo);
-        if !(mid > lo && mid < hi) || !mid.is_finite() {
+        if !(mid > lo && mid < hi && mid.is_finite()) {
             mid = 0.5 * (lo + hi);
         }
         let f_mid = f(mid);
