@@ -83,7 +83,7 @@ impl Nominal {
     }
 
     /// The all-in-view normal matrix `N_0 = Gᵀ W G`, unused clock columns the identity.
-    fn normal(&self) -> Normal {
+    pub(super) fn normal(&self) -> Normal {
         let mut n0 = Normal::zeros();
         for (i, g) in self.g.iter().enumerate() {
             accumulate(&mut n0, g, self.clock[i], self.w[i]);
@@ -109,9 +109,17 @@ impl Nominal {
             modes: Vec::with_capacity(modes.len()),
             p_not_monitored: 0.0,
         };
+        let inverse = n0.cholesky().map(|c| c.inverse());
+        let all_clocks = self.clocks_of(0);
         let masks = std::iter::once(0u64).chain(modes.iter().map(|md| md.excluded_mask));
         for (k, mask) in masks.enumerate() {
-            match self.subset(&n0, mask) {
+            // One satellite out and no clock lost: a rank-one downdate of N_0⁻¹.
+            let one = mask.count_ones() == 1 && self.clocks_of(mask) == all_clocks;
+            let solved = match (&inverse, one) {
+                (Some(inv), true) => self.downdate(inv, mask.trailing_zeros() as usize),
+                _ => None,
+            };
+            match solved.or_else(|| self.subset(&n0, mask)) {
                 Some((x, sig)) => {
                     self.push_gains(&mut out.gains, &x, mask);
                     out.sigma.push(sig);
@@ -127,11 +135,40 @@ impl Nominal {
         Ok(out)
     }
 
+    /// The first three columns of `N_k⁻¹` for the subset without satellite `i`, by
+    /// Sherman–Morrison from `N_0⁻¹`: with `u = N_0⁻¹ g_i`,
+    /// `N_k⁻¹ = N_0⁻¹ + w_i u uᵀ / (1 − w_i g_iᵀ u)`. `None` when the denominator is
+    /// not safely positive (the satellite carries the geometry): the caller then
+    /// factorises `N_k` itself.
+    pub(super) fn downdate(
+        &self,
+        inv: &Normal,
+        i: usize,
+    ) -> Option<(SMatrix<f64, M, 3>, [f64; 3])> {
+        let (g, c) = (&self.g[i], 3 + self.clock[i]);
+        let u: nalgebra::SVector<f64, M> =
+            inv.column(0) * g[0] + inv.column(1) * g[1] + inv.column(2) * g[2] + inv.column(c);
+        let denom = 1.0 - self.w[i] * (g[0] * u[0] + g[1] * u[1] + g[2] * u[2] + u[c]);
+        if denom.is_nan() || denom <= 1e-9 {
+            return None;
+        }
+        let scale = self.w[i] / denom;
+        let mut x: SMatrix<f64, M, 3> = inv.fixed_columns::<3>(0).into_owned();
+        for q in 0..3 {
+            let f = scale * u[q];
+            for r in 0..M {
+                x[(r, q)] += f * u[r];
+            }
+        }
+        let sig = [x[(0, 0)].sqrt(), x[(1, 1)].sqrt(), x[(2, 2)].sqrt()];
+        sig.iter().all(|s| s.is_finite()).then_some((x, sig))
+    }
+
     /// The first three columns of `N_k⁻¹` and the subset's σ, `None` when singular.
     /// `N_k = N_0 − Σ_excluded w_i g_i g_iᵀ` (the ADD's `W_k` with zero weights), a lost
     /// clock column replaced by the identity so the position block of `N_k⁻¹` is that of
     /// the reduced geometry.
-    fn subset(&self, n0: &Normal, mask: u64) -> Option<(SMatrix<f64, M, 3>, [f64; 3])> {
+    pub(super) fn subset(&self, n0: &Normal, mask: u64) -> Option<(SMatrix<f64, M, 3>, [f64; 3])> {
         let mut nk = *n0;
         for i in (0..self.g.len()).filter(|i| mask & (1 << i) != 0) {
             accumulate(&mut nk, &self.g[i], self.clock[i], -self.w[i]);

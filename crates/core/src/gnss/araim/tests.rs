@@ -439,3 +439,30 @@ fn araim_timing() {
         );
     }
 }
+
+#[test]
+fn the_rank_one_downdate_equals_refactorising_each_single_satellite_subset() {
+    let sats = gsdc_geometry(&[Constellation::Gps, Constellation::Galileo]);
+    let nominal = subsets::Nominal::new(&sats).unwrap();
+    let n0 = nominal.normal();
+    let inverse = n0.cholesky().unwrap().inverse();
+    let mut compared = 0;
+    for i in 0..sats.len() {
+        let mask = 1u64 << i;
+        if nominal.clocks_of(mask) != nominal.clocks_of(0) {
+            continue;
+        }
+        let (a, sa) = nominal
+            .downdate(&inverse, i)
+            .expect("a redundant satellite");
+        let (b, sb) = nominal.subset(&n0, mask).unwrap();
+        for (x, y) in a.iter().zip(b.iter()) {
+            assert!((x - y).abs() <= 1e-9 * y.abs().max(1e-3), "{x} vs {y}");
+        }
+        for q in 0..3 {
+            assert!((sa[q] - sb[q]).abs() <= 1e-9 * sb[q]);
+        }
+        compared += 1;
+    }
+    assert!(compared >= 10, "{compared} subsets compared");
+}
