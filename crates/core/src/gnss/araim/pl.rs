@@ -1,4 +1,4 @@
-//! The ARAIM protection-level equation and its bracketing solver (Blanch et al. 2015,
+//! The ARAIM protection-level equation and its half-interval solver (Blanch et al. 2015,
 //! Appendix "Computation of the protection levels"; ADD "Protection levels"): for one
 //! axis q, the PL is the L that satisfies
 //!
@@ -38,14 +38,12 @@ pub fn lhs(terms: &[PlTerm], l: f64) -> f64 {
         .sum()
 }
 
-/// Solves `lhs(L) = rhs` inside a bracket until it is at most `tol` wide and returns its
-/// upper end (so `lhs(PL) ≤ rhs`: the conservative side). The bracket is Blanch et al.
-/// 2015's: no term may exceed `rhs` (lower bound), and all terms at most `rhs / n`
-/// suffice (upper bound). Inside it, the Illinois variant of regula falsi on
-/// `ln lhs(L) − ln rhs` (nearly linear over the bracket, the tails being Gaussian) keeps
-/// the bracket and shrinks it in a few evaluations where halving takes ten; a step that
-/// does not shrink it by half falls back to halving. `rhs ≤ 0` (the unmonitored modes
-/// use up the whole budget) gives an infinite PL.
+/// Solves `lhs(L) = rhs` by halving the bracket until it is at most `tol` wide and
+/// returns its upper end (so `lhs(PL) ≤ rhs`: the conservative side). The bracket is
+/// Blanch et al. 2015's: no term may exceed `rhs` (lower bound), and all terms at most
+/// `rhs / n` suffice (upper bound). `rhs ≤ 0` (the unmonitored modes use up the whole
+/// budget) gives an infinite PL. (Regula falsi on `ln lhs` was tried: it moves one end
+/// close to the root but seldom narrows the bracket below `tol`, and was no faster.)
 pub fn solve(terms: &[PlTerm], rhs: f64, tol: f64) -> f64 {
     if rhs <= 0.0 || terms.is_empty() {
         return f64::INFINITY;
@@ -54,44 +52,12 @@ pub fn solve(terms: &[PlTerm], rhs: f64, tol: f64) -> f64 {
     if lo >= hi {
         return hi;
     }
-    let f = |l: f64| lhs(terms, l).ln() - rhs.ln();
-    let (mut f_lo, mut f_hi) = (f(lo), f(hi));
-    if !(f_lo > 0.0 && f_hi <= 0.0) {
-        return hi;
-    }
-    // Illinois: halve the retained end's value when the same end is kept twice.
-    let mut kept = 0i8;
     while hi - lo > tol {
-        let width = hi - lo;
-        let mut mid = hi - f_hi * (hi - lo) / (f_hi - f_lo);
-        if !(mid > lo && mid < hi && mid.is_finite()) {
-            mid = 0.5 * (lo + hi);
-        }
-        let f_mid = f(mid);
-        if f_mid > 0.0 {
+        let mid = 0.5 * (lo + hi);
+        if lhs(terms, mid) > rhs {
             lo = mid;
-            f_lo = f_mid;
-            if kept == 1 {
-                f_hi *= 0.5;
-            }
-            kept = 1;
         } else {
             hi = mid;
-            f_hi = f_mid;
-            if kept == -1 {
-                f_lo *= 0.5;
-            }
-            kept = -1;
-        }
-        if hi - lo > 0.5 * width {
-            // Slow progress: one halving step.
-            let half = 0.5 * (lo + hi);
-            let f_half = f(half);
-            if f_half > 0.0 {
-                (lo, f_lo) = (half, f_half);
-            } else {
-                (hi, f_hi) = (half, f_half);
-            }
         }
     }
     hi
