@@ -213,3 +213,36 @@ pub(crate) fn push_sat(
         }
     }
 }
+
+/// Reads a ground-truth CSV: the column named `names[0]` (a time key in ms) → latitude,
+/// longitude (columns `names[1]`, `names[2]`, degrees, stored in radians) and height
+/// (`names[3]`, m) minus `height_error_m`.
+pub(crate) fn read_truths(
+    path: &Path,
+    names: [&str; 4],
+    height_error_m: f64,
+) -> Result<Truths, FormatError> {
+    let file = path.display().to_string();
+    let (headers, rows) = read_csv(path)?;
+    let c = Columns {
+        file: &file,
+        headers: &headers,
+    };
+    let [t, lat, lon, h] = [
+        c.idx(names[0])?,
+        c.idx(names[1])?,
+        c.idx(names[2])?,
+        c.idx(names[3])?,
+    ];
+    let mut out = Truths::new();
+    for row in &rows {
+        let key = c.req(row, t)? as i64;
+        let truth = [
+            c.req(row, lat)?.to_radians(),
+            c.req(row, lon)?.to_radians(),
+            c.req(row, h)? - height_error_m,
+        ];
+        out.insert(key, truth);
+    }
+    Ok(out)
+}

@@ -13,7 +13,7 @@ use std::path::Path;
 
 use navguard_core::epoch::Epoch;
 
-use super::{Band, Columns, SatColumns, Truths, android_sat, push_sat, read_csv};
+use super::{Band, Columns, SatColumns, Truths, android_sat, push_sat, read_csv, read_truths};
 use crate::error::{FormatError, missing};
 
 /// The published error of the 2021 truth heights, m (subtracted).
@@ -21,32 +21,16 @@ pub const TRUTH_HEIGHT_ERROR_M: f64 = 61.0;
 
 /// Reads `*_ground_truth.csv`: `millisSinceGpsEpoch` → lat, lon (rad), height − 61 m.
 pub fn read_truth(path: &Path) -> Result<Truths, FormatError> {
-    let file = path.display().to_string();
-    let (headers, rows) = read_csv(path)?;
-    let c = Columns {
-        file: &file,
-        headers: &headers,
-    };
-    let (t, lat, lon, h) = (
-        c.idx("millisSinceGpsEpoch")?,
-        c.idx("latDeg")?,
-        c.idx("lngDeg")?,
-        c.idx("heightAboveWgs84EllipsoidM")?,
-    );
-    let mut out = Truths::new();
-    for row in &rows {
-        let key = c.req(row, t)? as i64;
-        let hgt = c.req(row, h)? - TRUTH_HEIGHT_ERROR_M;
-        out.insert(
-            key,
-            [
-                c.req(row, lat)?.to_radians(),
-                c.req(row, lon)?.to_radians(),
-                hgt,
-            ],
-        );
-    }
-    Ok(out)
+    read_truths(
+        path,
+        [
+            "millisSinceGpsEpoch",
+            "latDeg",
+            "lngDeg",
+            "heightAboveWgs84EllipsoidM",
+        ],
+        TRUTH_HEIGHT_ERROR_M,
+    )
 }
 
 /// Reads a `*_derived.csv` into epochs, keeping `band`, with truths by the mapped time.

@@ -12,7 +12,7 @@ use std::path::Path;
 
 use navguard_core::epoch::{Epoch, SatObs};
 
-use super::{Band, Columns, SatColumns, Truths, android_sat, push_sat, read_csv};
+use super::{Band, Columns, SatColumns, Truths, android_sat, push_sat, read_csv, read_truths};
 use crate::error::{FormatError, missing};
 use crate::gpstime::unix_ms_utc_to_gps;
 
@@ -21,31 +21,16 @@ const GPS_EPOCH_UNIX_S: f64 = 315_964_800.0;
 
 /// Reads `ground_truth.csv`: `UnixTimeMillis` → lat, lon (rad), `AltitudeMeters`.
 pub fn read_truth(path: &Path) -> Result<Truths, FormatError> {
-    let file = path.display().to_string();
-    let (headers, rows) = read_csv(path)?;
-    let c = Columns {
-        file: &file,
-        headers: &headers,
-    };
-    let (t, lat, lon, h) = (
-        c.idx("UnixTimeMillis")?,
-        c.idx("LatitudeDegrees")?,
-        c.idx("LongitudeDegrees")?,
-        c.idx("AltitudeMeters")?,
-    );
-    let mut out = Truths::new();
-    for row in &rows {
-        let key = c.req(row, t)? as i64;
-        out.insert(
-            key,
-            [
-                c.req(row, lat)?.to_radians(),
-                c.req(row, lon)?.to_radians(),
-                c.req(row, h)?,
-            ],
-        );
-    }
-    Ok(out)
+    read_truths(
+        path,
+        [
+            "UnixTimeMillis",
+            "LatitudeDegrees",
+            "LongitudeDegrees",
+            "AltitudeMeters",
+        ],
+        0.0,
+    )
 }
 
 /// Reads `device_gnss.csv` into epochs, keeping `band`, with truths by `utcTimeMillis`.
