@@ -68,6 +68,8 @@ fn epoch(start: &Lla, k: u64) -> Epoch {
             lon: fix.lon,
             h: fix.h,
             vel: Some([v + 0.01 * wiggle, v, 0.0]),
+            pos_sigma: None,
+            vel_sigma: None,
         }),
         dvl_vel_b: Some([0.01 * wiggle, 5.0, 0.0]),
         cns: Some(CnsBlock {

@@ -31,6 +31,23 @@ pub struct GnssBlock {
     pub h: f64,
     /// Velocity east, north, up, m/s, when reported.
     pub vel: Option<[f64; 3]>,
+    /// Position 1-σ east, north, up, m, when the receiver reports it (an RTKLIB `.pos`
+    /// file's sdn/sde/sdu, NMEA GST); absent means the monitor's configured σ.
+    pub pos_sigma: Option<[f64; 3]>,
+    /// Velocity 1-σ east, north, up, m/s, when reported; absent means the configured σ.
+    pub vel_sigma: Option<[f64; 3]>,
+}
+
+/// One raw IMU sample in the sensor frame (docs/methods.md §M30): rates sampled at the
+/// epoch's time, or increments over the interval that ends at it.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ImuBlock {
+    /// Specific force, m/s² (rates), or the velocity increment Δv, m/s (increments).
+    pub accel: [f64; 3],
+    /// Angular rate, rad/s (rates), or the angle increment Δθ, rad (increments).
+    pub gyro: [f64; 3],
+    /// `Some(Δt)`: `accel` and `gyro` are increments over `(t − Δt, t]`, s; `None`: rates.
+    pub dt: Option<f64>,
 }
 
 /// Celestial fix: latitude and longitude, rad.
@@ -78,6 +95,8 @@ pub struct Epoch {
     pub u: Option<Vec<f64>>,
     /// GNSS pseudoranges for the `gnss` monitor.
     pub gnss_raw: Option<GnssRawBlock>,
+    /// Raw IMU sample for a `federated` monitor with `input: imu`.
+    pub imu: Option<ImuBlock>,
 }
 
 /// A GNSS constellation, by its RINEX letter.

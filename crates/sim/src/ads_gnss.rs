@@ -130,6 +130,8 @@ impl AdsGnssRun {
                     lon: self.lat_lon[k].1,
                     h: self.gnss_h[k],
                     vel: None,
+                    pos_sigma: None,
+                    vel_sigma: None,
                 }),
                 ads: Some(AdsBlock {
                     baro_h: self.baro_h[k],

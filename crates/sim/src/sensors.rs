@@ -268,6 +268,8 @@ impl AidSensors {
                     lon: pos[0],
                     h: pos[2],
                     vel: (spec.velocity && vel_ok).then_some(vel),
+                    pos_sigma: None,
+                    vel_sigma: None,
                 });
             }
         }

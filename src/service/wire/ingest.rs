@@ -10,9 +10,10 @@ use serde::de::{self, DeserializeSeed, Deserializer, IgnoredAny, SeqAccess, Visi
 use serde::{Deserialize, Serialize};
 
 use navguard_core::epoch::Epoch;
-use navguard_core::epoch::{AdsBlock, CnsBlock, GnssBlock, GnssRawBlock, InsBlock};
+use navguard_core::epoch::{AdsBlock, CnsBlock, GnssBlock, GnssRawBlock, ImuBlock, InsBlock};
 
 use super::gnss::{OutGnssRaw, WireGnssRaw};
+use super::imu::{OutImu, WireImu};
 
 // ---------------------------------------------------------------- ingest frames
 
@@ -36,6 +37,10 @@ struct WireGnss {
     h: f64,
     #[serde(default)]
     vel: Option<[f64; 3]>,
+    #[serde(default)]
+    pos_sigma: Option<[f64; 3]>,
+    #[serde(default)]
+    vel_sigma: Option<[f64; 3]>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -99,6 +104,8 @@ struct WireEpoch {
     u: Option<Vec<f64>>,
     #[serde(default)]
     gnss_raw: Option<WireGnssRaw>,
+    #[serde(default)]
+    imu: Option<WireImu>,
 }
 
 /// The stable machine-readable code of a refused frame, as sent in `error` events.
@@ -291,11 +298,27 @@ impl TryFrom<WireGnss> for GnssBlock {
         if let Some(v) = &g.vel {
             finite("gnss.vel", v)?;
         }
+        for (what, sigma) in [
+            ("gnss.pos_sigma", &g.pos_sigma),
+            ("gnss.vel_sigma", &g.vel_sigma),
+        ] {
+            if let Some(s) = sigma {
+                finite(what, s)?;
+                if s.iter().any(|&x| x <= 0.0) {
+                    return Err(FrameError::new(
+                        FrameErrorCode::InvalidEpoch,
+                        format!("{what} components must be > 0"),
+                    ));
+                }
+            }
+        }
         Ok(GnssBlock {
             lat: latitude("gnss.lat", g.lat)?,
             lon: longitude("gnss.lon", g.lon)?,
             h: g.h,
             vel: g.vel,
+            pos_sigma: g.pos_sigma,
+            vel_sigma: g.vel_sigma,
         })
     }
 }
@@ -383,6 +406,7 @@ impl TryFrom<WireEpoch> for Epoch {
             z: w.z,
             u: w.u,
             gnss_raw: w.gnss_raw.map(GnssRawBlock::try_from).transpose()?,
+            imu: w.imu.map(ImuBlock::try_from).transpose()?,
         })
     }
 }
@@ -544,6 +568,10 @@ struct OutGnss {
     h: f64,
     #[serde(skip_serializing_if = "Option::is_none")]
     vel: Option<[f64; 3]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pos_sigma: Option<[f64; 3]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    vel_sigma: Option<[f64; 3]>,
 }
 
 #[derive(Debug, Serialize)]
@@ -602,6 +630,8 @@ struct OutEpoch<'a> {
     u: Option<&'a [f64]>,
     #[serde(skip_serializing_if = "Option::is_none")]
     gnss_raw: Option<OutGnssRaw>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    imu: Option<OutImu>,
 }
 
 /// Serialises a domain `Epoch` to one ingest frame (a JSON object, degrees on
@@ -618,6 +648,7 @@ pub fn epoch_to_wire(epoch: &Epoch) -> Result<String, FrameError> {
     if let Some(g) = &epoch.gnss {
         numbers.extend([g.lat, g.lon, g.h]);
         numbers.extend(g.vel.iter().flatten());
+        numbers.extend(g.pos_sigma.iter().chain(&g.vel_sigma).flatten());
     }
     numbers.extend(epoch.dvl_vel_b.iter().flatten());
     if let Some(c) = &epoch.cns {
@@ -637,6 +668,9 @@ pub fn epoch_to_wire(epoch: &Epoch) -> Result<String, FrameError> {
     if let Some(b) = &epoch.gnss_raw {
         super::gnss::numbers(b, &mut numbers);
     }
+    if let Some(b) = &epoch.imu {
+        super::imu::numbers(b, &mut numbers);
+    }
     finite("epoch", &numbers)?;
     let out = OutEpoch {
         t: epoch.t,
@@ -653,6 +687,8 @@ pub fn epoch_to_wire(epoch: &Epoch) -> Result<String, FrameError> {
             lon: g.lon.to_degrees(),
             h: g.h,
             vel: g.vel,
+            pos_sigma: g.pos_sigma,
+            vel_sigma: g.vel_sigma,
         }),
         dvl: epoch.dvl_vel_b.map(|vel_b| OutDvl { vel_b }),
         cns: epoch.cns.as_ref().map(|c| OutCns {
@@ -680,6 +716,7 @@ pub fn epoch_to_wire(epoch: &Epoch) -> Result<String, FrameError> {
         z: epoch.z.as_deref(),
         u: epoch.u.as_deref(),
         gnss_raw: epoch.gnss_raw.as_ref().map(OutGnssRaw::from),
+        imu: epoch.imu.as_ref().map(OutImu::from),
     };
     serde_json::to_string(&out)
         .map_err(|e| FrameError::new(FrameErrorCode::InvalidEpoch, e.to_string()))
@@ -815,6 +852,8 @@ mod epoch_to_wire_tests {
                 lon: 114.25f64.to_radians(),
                 h: 11.0,
                 vel: Some([3.1, -3.9, 0.0]),
+                pos_sigma: Some([0.5, 0.6, 1.2]),
+                vel_sigma: None,
             }),
             dvl_vel_b: Some([0.0, 5.0, 0.0]),
             cns: Some(CnsBlock {
@@ -848,6 +887,11 @@ mod epoch_to_wire_tests {
                 }],
                 truth: Some([0.6, -2.1, -28.0]),
             }),
+            imu: Some(ImuBlock {
+                accel: [0.125, -0.25, 9.75],
+                gyro: [0.01, -0.02, 0.5],
+                dt: None,
+            }),
         }
     }
 
@@ -870,7 +914,13 @@ mod epoch_to_wire_tests {
         assert_eq!((a.vel, a.f_b), (b.vel, b.f_b));
         let (a, b) = (back.gnss.as_ref().unwrap(), epoch.gnss.as_ref().unwrap());
         assert_close(&[a.lat, a.lon, a.h], &[b.lat, b.lon, b.h]);
-        assert_eq!(a.vel, b.vel);
+        assert_eq!(
+            (a.vel, a.pos_sigma, a.vel_sigma),
+            (b.vel, b.pos_sigma, b.vel_sigma)
+        );
+        let (a, b) = (back.imu.unwrap(), epoch.imu.unwrap());
+        assert_eq!((a.accel, a.dt), (b.accel, b.dt));
+        assert_close(&a.gyro, &b.gyro);
         let (a, b) = (back.cns.as_ref().unwrap(), epoch.cns.as_ref().unwrap());
         assert_close(&[a.lat, a.lon], &[b.lat, b.lon]);
         assert_eq!(back.dvl_vel_b, epoch.dvl_vel_b);

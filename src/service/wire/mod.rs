@@ -5,6 +5,7 @@
 //! - [`rest`]: REST request and response bodies (sessions, thresholds).
 //! - [`ingest`]: ingest frames (epochs in, their error codes) and epochs back to frames.
 //! - [`gnss`]: the `gnss_raw` block (pseudoranges) of an ingest epoch.
+//! - [`imu`]: the `imu` block (one raw IMU sample) of an ingest epoch.
 //! - [`events`]: what the server sends out (results, alarms, state changes, errors).
 //!
 //! Every item is re-exported here by name, so `wire::X` names it wherever it lives. The
@@ -13,6 +14,7 @@
 
 pub mod events;
 pub mod gnss;
+pub mod imu;
 pub mod ingest;
 pub mod rest;
 

@@ -391,6 +391,8 @@ impl Ship {
                 lon: fix.lon,
                 h: fix.h,
                 vel: Some([gv.x, gv.y, gv.z]),
+                pos_sigma: None,
+                vel_sigma: None,
             }),
             dvl_vel_b: Some([dvl.x, dvl.y, dvl.z]),
             cns: Some(CnsBlock {
