@@ -10,7 +10,9 @@
 //!
 //! - `φ̇ = −ω_in × φ − C_bⁿ ε − C_bⁿ w_g`, with `ω_in = ω_ie + ω_en`;
 //! - `δv̇ = fⁿ × φ − (2ω_ie + ω_en) × δv + C_bⁿ ∇ + C_bⁿ w_a`;
-//! - `δṗ = δv`; `ε̇ = 0`, `∇̇ = 0` (random constants).
+//! - `δṗ = δv`; `ε̇ = −ε/τ + w_ε`, `∇̇ = −∇/τ + w_∇`: first-order Gauss–Markov with the
+//!   correlation time τ of [`ImuErrors::bias_tau_s`] and steady-state σ the bias figures,
+//!   plus an optional bias random walk; with neither (the default) random constants.
 //!
 //! `fⁿ × φ` follows from `f̃ⁿ = C̃_bⁿ f_b = fⁿ − φ × fⁿ`. The terms of `δω_in` and of
 //! gravity in `δp` are left out, as docs/methods.md §M4 states the model (over the
@@ -83,21 +85,33 @@ impl NavSolution {
     }
 }
 
-/// IMU error parameters (docs/methods.md §M4 and §M19, seed 004 §3).
+/// IMU error parameters (docs/methods.md §M4, §M19 and §M31, seed 004 §3).
 ///
 /// Defaults: gyro bias 0.002 °/h and accelerometer bias 10 µg (seed 004), and — the seed gives
 /// no white-noise figures — angle random walk 0.001 °/√h and velocity random walk
-/// 0.001 m/s/√h, typical of the navigation-grade marine INS the seed's biases describe.
+/// 0.001 m/s/√h, typical of the navigation-grade marine INS the seed's biases describe;
+/// biases are random constants (no correlation time, no bias random walk). A MEMS IMU
+/// needs its own figures (docs/methods.md §M31 gives the shared car drive's).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ImuErrors {
-    /// Gyro bias (1σ of the random constant), °/h.
+    /// Gyro bias (1σ: of the random constant, or the Gauss–Markov steady state), °/h.
     pub gyro_bias_dph: f64,
-    /// Accelerometer bias (1σ of the random constant), µg.
+    /// Accelerometer bias (1σ, as the gyro's), µg.
     pub accel_bias_ug: f64,
     /// Gyro angle random walk, °/√h.
     pub arw_deg_rthr: f64,
     /// Accelerometer velocity random walk, m/s/√h.
     pub vrw_mps_rthr: f64,
+    /// Bias correlation time τ, s: the biases are first-order Gauss–Markov processes with
+    /// steady-state σ the bias figures above; absent: no decay.
+    #[serde(default)]
+    pub bias_tau_s: Option<f64>,
+    /// Gyro bias random walk, °/h/√h (0: none).
+    #[serde(default)]
+    pub gyro_bias_walk_dph_rthr: f64,
+    /// Accelerometer bias random walk, µg/√h (0: none).
+    #[serde(default)]
+    pub accel_bias_walk_ug_rthr: f64,
 }
 
 impl Default for ImuErrors {
@@ -107,6 +121,9 @@ impl Default for ImuErrors {
             accel_bias_ug: 10.0,
             arw_deg_rthr: 0.001,
             vrw_mps_rthr: 0.001,
+            bias_tau_s: None,
+            gyro_bias_walk_dph_rthr: 0.0,
+            accel_bias_walk_ug_rthr: 0.0,
         }
     }
 }
@@ -135,6 +152,25 @@ impl ImuErrors {
         let vrw = self.vrw_mps_rthr / 60.0;
         vrw * vrw
     }
+
+    /// `1/τ` of the bias Gauss–Markov processes, 1/s (0 without a correlation time).
+    pub fn bias_decay(&self) -> f64 {
+        self.bias_tau_s.map_or(0.0, |tau| 1.0 / tau)
+    }
+
+    /// The bias blocks of `Q_d` over `dt` (gyro, accelerometer; per axis): the bias random
+    /// walk's `q dt` plus, with a correlation time, the Gauss–Markov driving noise
+    /// `2σ²/τ · dt` that keeps the steady-state σ.
+    pub fn bias_noise(&self, dt: f64) -> (f64, f64) {
+        let walk_g = self.gyro_bias_walk_dph_rthr * DPH_TO_RPS / 60.0;
+        let walk_a = self.accel_bias_walk_ug_rthr * MICRO_G / 60.0;
+        let decay = self.bias_decay();
+        let gm = |sigma: f64| 2.0 * sigma * sigma * decay;
+        (
+            (walk_g * walk_g + gm(self.gyro_bias_rps())) * dt,
+            (walk_a * walk_a + gm(self.accel_bias_mps2())) * dt,
+        )
+    }
 }
 
 /// The continuous error dynamics F of docs/methods.md §M4 (see the module doc), linearised about `nav`.
@@ -158,6 +194,17 @@ pub fn error_dynamics(nav: &NavSolution) -> ErrorMatrix {
     f
 }
 
+/// [`error_dynamics`] with the biases' Gauss–Markov decay of `imu`: `ε̇ = −ε/τ`, `∇̇ = −∇/τ`
+/// (the same F when `imu` has no correlation time).
+pub fn error_dynamics_imu(nav: &NavSolution, imu: &ImuErrors) -> ErrorMatrix {
+    let mut f = error_dynamics(nav);
+    let decay = imu.bias_decay();
+    for i in GYRO..N {
+        f[(i, i)] = -decay;
+    }
+    f
+}
+
 /// The noise input G: gyro white noise drives φ through `−C_bⁿ`, accelerometer white noise
 /// drives δv through `C_bⁿ` (columns 0..3 gyro, 3..6 accelerometer).
 pub fn noise_input(nav: &NavSolution) -> NoiseInput {
@@ -168,7 +215,8 @@ pub fn noise_input(nav: &NavSolution) -> NoiseInput {
 }
 
 /// Discretises over `dt` seconds: `Φ = I + FΔt + (FΔt)²/2` and `Q_d = G Q Gᵀ Δt` with
-/// `Q = diag(gyro PSD ×3, accelerometer PSD ×3)` (docs/methods.md §M4). `Q_d` is exactly symmetric.
+/// `Q = diag(gyro PSD ×3, accelerometer PSD ×3)` (docs/methods.md §M4), plus the bias noise
+/// of [`ImuErrors::bias_noise`] on the bias diagonal. `Q_d` is exactly symmetric.
 pub fn discretize(
     f: &ErrorMatrix,
     g: &NoiseInput,
@@ -187,7 +235,12 @@ pub fn discretize(
     // G Q Gᵀ with diagonal Q: scale G's columns by Q, then multiply by Gᵀ.
     let gq = SMatrix::<f64, N, 6>::from_fn(|r, c| g[(r, c)] * q[c] * dt);
     let qd = gq * g.transpose();
-    let qd = (qd + qd.transpose()) * 0.5;
+    let mut qd = (qd + qd.transpose()) * 0.5;
+    let (qg, qa) = imu.bias_noise(dt);
+    for i in 0..3 {
+        qd[(GYRO + i, GYRO + i)] += qg;
+        qd[(ACC + i, ACC + i)] += qa;
+    }
     (phi, qd)
 }
 
@@ -213,6 +266,7 @@ pub fn transition_into(
     let v = -geo::skew(&(2.0 * w_ie + w_en));
     let b = geo::skew(&nav.f_n);
     let c = nav.c_bn;
+    let decay = imu.bias_decay();
     let (h1, h2) = (dt, 0.5 * dt * dt);
     // Through the slice: nalgebra's `fill` walks its strided iterator, ~10 instructions
     // an entry.
@@ -225,11 +279,20 @@ pub fn transition_into(
         blk += m;
     };
     put(ATT, ATT, a * h1 + a * a * h2);
-    put(ATT, GYRO, -c * h1 - a * c * h2);
     put(VEL, ATT, b * h1 + (b * a + v * b) * h2);
     put(VEL, VEL, v * h1 + v * v * h2);
     put(VEL, GYRO, -(b * c) * h2);
-    put(VEL, ACC, c * h1 + v * c * h2);
+    if decay == 0.0 {
+        put(ATT, GYRO, -c * h1 - a * c * h2);
+        put(VEL, ACC, c * h1 + v * c * h2);
+    } else {
+        // F's bias blocks −I/τ add `C/τ` terms to F²'s (φ,ε) and (δv,∇) blocks.
+        put(ATT, GYRO, -c * h1 + (c * decay - a * c) * h2);
+        put(VEL, ACC, c * h1 + (v * c - c * decay) * h2);
+        let d = Matrix3::identity() * (-decay * h1 + decay * decay * h2);
+        put(GYRO, GYRO, d);
+        put(ACC, ACC, d);
+    }
     put(POS, ATT, b * h2);
     put(POS, VEL, Matrix3::identity() * h1 + v * h2);
     put(POS, ACC, c * h2);
@@ -242,6 +305,11 @@ pub fn transition_into(
         .copy_from(&block(imu.gyro_noise_psd()));
     q.fixed_view_mut::<3, 3>(VEL, VEL)
         .copy_from(&block(imu.accel_noise_psd()));
+    let (qg, qa) = imu.bias_noise(dt);
+    for i in 0..3 {
+        q[(GYRO + i, GYRO + i)] = qg;
+        q[(ACC + i, ACC + i)] = qa;
+    }
 }
 
 #[cfg(test)]
@@ -353,6 +421,57 @@ mod tests {
             assert_relative_eq!(q_b, q, epsilon = 1e-13 * q.amax(), max_relative = 1e-13);
             assert_eq!(q_b, q_b.transpose());
         }
+    }
+
+    #[test]
+    fn gauss_markov_biases_decay_and_keep_their_steady_state() {
+        let ins = InsBlock {
+            lat: 0.7,
+            lon: -1.8,
+            h: 1600.0,
+            vel: [3.0, 4.0, 0.0],
+            att: [0.02, -0.01, 1.0],
+            f_b: Some([0.5, 1.0, 9.8]),
+        };
+        let nav = NavSolution::from_ins(&ins);
+        let imu = ImuErrors {
+            gyro_bias_dph: 10.0,
+            accel_bias_ug: 500.0,
+            bias_tau_s: Some(300.0),
+            gyro_bias_walk_dph_rthr: 0.5,
+            accel_bias_walk_ug_rthr: 60.0,
+            ..ImuErrors::default()
+        };
+        for dt in [0.01, 0.1, 1.0] {
+            let f = error_dynamics_imu(&nav, &imu);
+            let (phi, q) = discretize(&f, &noise_input(&nav), &imu, dt);
+            let (mut phi_b, mut q_b) = (ErrorMatrix::repeat(7.0), ErrorMatrix::repeat(7.0));
+            transition_into(&nav, &imu, dt, &mut phi_b, &mut q_b);
+            assert_relative_eq!(phi_b, phi, epsilon = 1e-15, max_relative = 1e-13);
+            assert_relative_eq!(q_b, q, epsilon = 1e-13 * q.amax(), max_relative = 1e-13);
+            // The bias diagonal is the series of exp(−dt/τ).
+            let x = dt / 300.0;
+            assert_relative_eq!(phi[(GYRO, GYRO)], 1.0 - x + x * x / 2.0, max_relative = 1e-15);
+        }
+        // Without the walk, the Gauss–Markov noise holds the steady state:
+        // σ² = Φ² σ² + q  ⇔  q = σ² (1 − Φ²) ≈ 2σ² dt/τ to first order.
+        let gm = ImuErrors {
+            gyro_bias_walk_dph_rthr: 0.0,
+            accel_bias_walk_ug_rthr: 0.0,
+            ..imu
+        };
+        let (qg, qa) = gm.bias_noise(0.01);
+        let s2 = gm.gyro_bias_rps().powi(2);
+        assert_relative_eq!(qg, s2 * (1.0 - (-0.02f64 / 300.0).exp()), max_relative = 1e-4);
+        let s2 = gm.accel_bias_mps2().powi(2);
+        assert_relative_eq!(qa, s2 * (1.0 - (-0.02f64 / 300.0).exp()), max_relative = 1e-4);
+        // A walk alone: 60 µg/√h → (60e-6 g / 60)² per second.
+        let walk = ImuErrors {
+            bias_tau_s: None,
+            ..imu
+        };
+        let (_, qa) = walk.bias_noise(1.0);
+        assert_relative_eq!(qa, (60.0 * MICRO_G / 60.0).powi(2), max_relative = 1e-12);
     }
 
     #[test]

@@ -179,6 +179,13 @@ pub struct ImuSection {
     pub arw_deg_rthr: f64,
     /// Velocity random walk, m/s/√h.
     pub vrw_mps_rthr: f64,
+    /// Bias correlation time (first-order Gauss–Markov), s; absent: random constants.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bias_tau_s: Option<f64>,
+    /// Gyro bias random walk, °/h/√h.
+    pub gyro_bias_walk_dph_rthr: f64,
+    /// Accelerometer bias random walk, µg/√h.
+    pub accel_bias_walk_ug_rthr: f64,
 }
 
 impl Default for ImuSection {
@@ -194,8 +201,43 @@ impl From<ImuErrors> for ImuSection {
             accel_bias_ug: e.accel_bias_ug,
             arw_deg_rthr: e.arw_deg_rthr,
             vrw_mps_rthr: e.vrw_mps_rthr,
+            bias_tau_s: e.bias_tau_s,
+            gyro_bias_walk_dph_rthr: e.gyro_bias_walk_dph_rthr,
+            accel_bias_walk_ug_rthr: e.accel_bias_walk_ug_rthr,
         }
     }
+}
+
+/// A finite number ≥ 0 at `field`.
+fn non_negative(field: &str, x: f64) -> Result<f64, ConfigError> {
+    if x.is_finite() && x >= 0.0 {
+        Ok(x)
+    } else {
+        Err(ConfigError::new(field, "must be a finite number >= 0"))
+    }
+}
+
+/// The `imu` section validated into [`ImuErrors`].
+fn imu_errors(s: &ImuSection) -> Result<ImuErrors, ConfigError> {
+    let f = |name: &'static str| move || name.to_owned();
+    Ok(ImuErrors {
+        gyro_bias_dph: positive(f("imu.gyro_bias_dph"), s.gyro_bias_dph)?,
+        accel_bias_ug: positive(f("imu.accel_bias_ug"), s.accel_bias_ug)?,
+        arw_deg_rthr: positive(f("imu.arw_deg_rthr"), s.arw_deg_rthr)?,
+        vrw_mps_rthr: positive(f("imu.vrw_mps_rthr"), s.vrw_mps_rthr)?,
+        bias_tau_s: s
+            .bias_tau_s
+            .map(|tau| positive(f("imu.bias_tau_s"), tau))
+            .transpose()?,
+        gyro_bias_walk_dph_rthr: non_negative(
+            "imu.gyro_bias_walk_dph_rthr",
+            s.gyro_bias_walk_dph_rthr,
+        )?,
+        accel_bias_walk_ug_rthr: non_negative(
+            "imu.accel_bias_walk_ug_rthr",
+            s.accel_bias_walk_ug_rthr,
+        )?,
+    })
 }
 
 /// The `init` section: the initial error uncertainty; seed 004's values by default.
@@ -425,12 +467,7 @@ impl TryFrom<FederatedConfigWire> for FederatedConfig {
             })
             .collect::<Result<Vec<_>, _>>()?;
         let f = |s: &'static str| move || s.to_owned();
-        let imu = ImuErrors {
-            gyro_bias_dph: positive(f("imu.gyro_bias_dph"), w.imu.gyro_bias_dph)?,
-            accel_bias_ug: positive(f("imu.accel_bias_ug"), w.imu.accel_bias_ug)?,
-            arw_deg_rthr: positive(f("imu.arw_deg_rthr"), w.imu.arw_deg_rthr)?,
-            vrw_mps_rthr: positive(f("imu.vrw_mps_rthr"), w.imu.vrw_mps_rthr)?,
-        };
+        let imu = imu_errors(&w.imu)?;
         let mut att = [0.0; 3];
         for (i, a) in w.init.att_sigma_arcsec.iter().enumerate() {
             att[i] = positive(|| format!("init.att_sigma_arcsec[{i}]"), *a)?;
