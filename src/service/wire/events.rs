@@ -105,14 +105,19 @@ fn write_test(out: &mut Vec<u8>, first: bool, o: &TestOutcome) {
 /// in serde's field order; others as serde writes them as an object, whose braces are
 /// taken off (an empty one leaves nothing).
 fn write_outputs(out: &mut Vec<u8>, outputs: &Outputs) {
+    // The hand-written path covers a client-INS monitor; with `input: imu` (an alignment
+    // state, an attitude) serde writes the outputs.
     if let Outputs::Federated {
         solution,
         hpl,
         isolated,
+        alignment: None,
     } = outputs
     {
-        write_federated_outputs(out, solution.as_ref(), *hpl, isolated);
-        return;
+        if solution.is_none_or(|s| s.att.is_none()) {
+            write_federated_outputs(out, solution.as_ref(), *hpl, isolated);
+            return;
+        }
     }
     let at = out.len();
     // Numbers, strings, sequences and maps with string keys serialise without error.
@@ -371,9 +376,11 @@ mod tests {
                     lon: -120.5,
                     h: -0.0,
                     vel: [1.0, -2.5e-12, f64::NEG_INFINITY],
+                    att: None,
                 }),
                 hpl: Some(24.531182482419574),
                 isolated: vec!["gnss"],
+                alignment: None,
             },
             integrity: Some(Integrity {
                 state: Availability::Converging,
@@ -496,12 +503,31 @@ mod tests {
                 solution: None,
                 hpl: None,
                 isolated: vec!["dvl", "gnss"],
+                alignment: None,
+            },
+            integrity: None,
+        };
+        // A mechanized solution (`input: imu`): attitude and alignment state.
+        let federated_imu = MonitorReport {
+            tests: Vec::new(),
+            outputs: Outputs::Federated {
+                solution: Some(FederatedSolution {
+                    lat: 40.0966268,
+                    lon: -105.1474483,
+                    h: 1601.25,
+                    vel: [0.5, 3.0, -0.01],
+                    att: Some([1.5, -6.75, 359.5]),
+                }),
+                hpl: Some(3.5),
+                isolated: Vec::new(),
+                alignment: Some(navguard_core::monitor::federated::Alignment::Aligned),
             },
             integrity: None,
         };
         vec![
             ("nav", federated),
             ("nav0", federated_bare),
+            ("strap", federated_imu),
             ("lin", linear),
             ("ch \u{1F680}", channel),
             ("gyros", rimu),

@@ -34,6 +34,14 @@ impl<const M: usize> AidMeasurement<M> {
     pub fn predicted(&self, x: &SVector<f64, N>) -> SVector<f64, M> {
         self.obs.h * x
     }
+
+    /// Replaces the 1-σ of components `from..from + sigmas.len()` (R stays diagonal): the
+    /// σ an aid reports with its fix instead of the configured one.
+    pub fn set_sigmas(&mut self, from: usize, sigmas: &[f64]) {
+        for (k, s) in sigmas.iter().enumerate() {
+            self.obs.r[(from + k, from + k)] = s * s;
+        }
+    }
 }
 
 /// `R = σ² I` of dimension `M`.

@@ -57,7 +57,7 @@ use nalgebra::{SVector, U15};
 use serde::{Deserialize, Serialize};
 
 use super::aiding::AidMeasurement;
-use super::ins::{self, ErrorMatrix, ImuErrors, NavSolution};
+use super::ins::{self, ErrorMatrix, ErrorVector, ImuErrors, NavSolution};
 use super::kalman::{FilterError, LinearTransition, StateEstimate};
 use crate::detect::Decision;
 
@@ -359,6 +359,25 @@ impl FederatedFilter {
             own: [None, None, None],
         };
         self.pending_ready = false;
+    }
+
+    /// Closed-loop feedback of the pending state (docs/methods.md §M31): returns the fused
+    /// error estimate `x_g` the caller removes from its navigation solution and IMU bias
+    /// estimates, and subtracts it from the master and from every local filter's own
+    /// estimate, so each stays the error of the corrected solution. Covariances are
+    /// unchanged (the correction is a known shift of the linearisation point). `None`
+    /// without a pending state.
+    pub fn feed_back_pending(&mut self) -> Option<ErrorVector> {
+        if !self.pending_ready {
+            return None;
+        }
+        let next = &mut self.states[1 - self.current];
+        let dx = next.master.x;
+        next.master.x = ErrorVector::zeros();
+        for own in next.own.iter_mut().flatten() {
+            own.x -= dx;
+        }
+        Some(dx)
     }
 
     /// Makes the pending state of the last successful step current; without one it does

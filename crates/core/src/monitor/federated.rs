@@ -47,6 +47,7 @@
 //! health `isolated`).
 
 mod config;
+mod imu;
 mod integrity;
 mod saved;
 
@@ -54,6 +55,9 @@ pub use config::{
     BetaSection, CNS_DRIFT_DEFAULT_ON, CnsNoise, DEFAULT_CONVERGE_MAX_S, DEFAULT_HAL_M,
     DVL_DRIFT_DEFAULT_ON, DvlNoise, FederatedConfig, FederatedConfigWire, GNSS_DRIFT_DEFAULT_ON,
     GnssNoise, ImuSection, InitSigma, MAX_GAP_S, STUCK_DEFAULT_ON,
+};
+pub use imu::{
+    AlignSection, Alignment, FrontState, InputKind, StrapdownConfig, StrapdownSection,
 };
 
 use nalgebra::{Matrix2, Vector3};
@@ -66,7 +70,8 @@ use super::{
 };
 use crate::detect::hpl::{self, DetectionNoncentrality, HplError};
 use crate::detect::{Decision, Health, PolicyConfig, PolicyState, ThresholdError, ThresholdSpec};
-use crate::epoch::{Aid, Epoch};
+use crate::monitor::{Availability, Integrity as IntegrityReport};
+use crate::epoch::{Aid, Epoch, GnssBlock};
 use crate::filter::aiding;
 use crate::filter::federated::{
     self, ErrorEstimate, FederatedFilter, LocalTest, MAX_AIDS, Observation,
@@ -112,6 +117,9 @@ pub struct FederatedSolution {
     pub h: f64,
     /// Velocity east, north, up, m/s.
     pub vel: [f64; 3],
+    /// Roll, pitch, yaw of the mechanized solution, degrees (`input: imu` only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub att: Option<[f64; 3]>,
 }
 
 /// The `federated` monitor.
@@ -135,6 +143,8 @@ pub struct FederatedMonitor {
     /// save it). A field rather than a local because a local would be zero-filled every
     /// epoch (3.6 kB) before being overwritten, and a returned one copied.
     trans: LinearTransition<nalgebra::U15>,
+    /// With `input: imu`, the strapdown front end's state (module [`imu`]).
+    front: Option<FrontState>,
 }
 
 impl FederatedMonitor {
@@ -174,7 +184,6 @@ impl FederatedMonitor {
             .map_err(|e| ConfigError::new("p_md", e.to_string()))?;
         let convergence = Convergence::new(config.converge_max_s);
         Ok(FederatedMonitor {
-            config,
             filter,
             bank,
             guards,
@@ -187,11 +196,14 @@ impl FederatedMonitor {
                 solution: None,
                 hpl: None,
                 isolated: Vec::new(),
+                alignment: config.strapdown.as_ref().map(|_| Alignment::Levelling),
             },
             trans: LinearTransition {
                 f: ErrorMatrix::identity(),
                 q: ErrorMatrix::zeros(),
             },
+            front: config.strapdown.as_ref().map(FrontState::new),
+            config,
         })
     }
 
@@ -205,26 +217,51 @@ impl FederatedMonitor {
         &self.filter
     }
 
-    /// This epoch's measurement for `aid`, when the epoch carries it.
+    /// The epoch's GNSS fix where the INS is: with `input: imu` moved from the antenna by
+    /// the lever arm, else as given.
+    fn gnss_fix(&self, nav: &NavSolution, epoch: &Epoch) -> Option<GnssBlock> {
+        let g = epoch.gnss.as_ref()?;
+        Some(match (&self.config.strapdown, &self.front) {
+            (Some(cfg), Some(front)) => imu::fix_at_imu(g, nav, &front.last_rate(), &cfg.lever_b),
+            _ => g.clone(),
+        })
+    }
+
+    /// This epoch's measurement for `aid`, when the epoch carries it. A GNSS fix's own σ
+    /// (`pos_sigma`, `vel_sigma`) replaces the configured one.
     fn observation(&self, aid: Aid, nav: &NavSolution, epoch: &Epoch) -> Option<Observation> {
         let c = &self.config;
         match aid {
-            Aid::Gnss => epoch.gnss.as_ref().map(|g| {
+            Aid::Gnss => self.gnss_fix(nav, epoch).map(|g| {
                 let fix = Lla {
                     lat: g.lat,
                     lon: g.lon,
                     h: g.h,
                 };
                 match g.vel {
-                    Some(v) => aiding::gnss_velocity_position(
-                        nav,
-                        &fix,
-                        &Vector3::from(v),
-                        c.gnss_pos_sigma_m,
-                        c.gnss_vel_sigma_mps,
-                    )
-                    .into(),
-                    None => aiding::gnss_position(nav, &fix, c.gnss_pos_sigma_m).into(),
+                    Some(v) => {
+                        let mut m = aiding::gnss_velocity_position(
+                            nav,
+                            &fix,
+                            &Vector3::from(v),
+                            c.gnss_pos_sigma_m,
+                            c.gnss_vel_sigma_mps,
+                        );
+                        if let Some(s) = &g.vel_sigma {
+                            m.set_sigmas(0, s);
+                        }
+                        if let Some(s) = &g.pos_sigma {
+                            m.set_sigmas(3, s);
+                        }
+                        m.into()
+                    }
+                    None => {
+                        let mut m = aiding::gnss_position(nav, &fix, c.gnss_pos_sigma_m);
+                        if let Some(s) = &g.pos_sigma {
+                            m.set_sigmas(0, s);
+                        }
+                        m.into()
+                    }
                 }
             }),
             Aid::Dvl => epoch
@@ -260,16 +297,23 @@ impl FederatedMonitor {
     /// back restarts with `Φ = I`, `Q = 0`; otherwise [`federated::ins_transition`] over `dt`.
     fn transition(&mut self, nav: &NavSolution, t: f64) -> Result<bool, StepError> {
         let dt = self.last_t.map(|last| t - last);
-        let restart = !matches!(dt, Some(d) if (0.0..=MAX_GAP_S).contains(&d));
+        let dt = dt.filter(|d| (0.0..=MAX_GAP_S).contains(d));
+        self.transition_over(nav, dt)?;
+        Ok(dt.is_none())
+    }
+
+    /// The transition over `dt` seconds into `self.trans`; `None`: a restart (`Φ = I`, `Q = 0`).
+    fn transition_over(&mut self, nav: &NavSolution, dt: Option<f64>) -> Result<(), StepError> {
         let trans = &mut self.trans;
-        if restart {
-            trans.f = ErrorMatrix::identity();
-            trans.q = ErrorMatrix::zeros();
-        } else {
-            federated::ins_transition_into(nav, &self.config.imu, dt.unwrap_or(0.0), trans)
-                .map_err(|_| FilterError::NonFinite("prediction interval"))?;
+        match dt {
+            None => {
+                trans.f = ErrorMatrix::identity();
+                trans.q = ErrorMatrix::zeros();
+            }
+            Some(dt) => federated::ins_transition_into(nav, &self.config.imu, dt, trans)
+                .map_err(|_| FilterError::NonFinite("prediction interval"))?,
         }
-        Ok(restart)
+        Ok(())
     }
 
     /// The federated filter's epoch over `self.trans`, its state left pending. Each aid's tests
@@ -390,6 +434,7 @@ impl FederatedMonitor {
         pending: &mut Previews,
         hpl: HplStep,
         solution: FederatedSolution,
+        front: Option<FrontState>,
     ) -> Vec<TestOutcome> {
         let n = self.config.aids.len();
         let mut tests = Vec::with_capacity(3 * n);
@@ -408,12 +453,116 @@ impl FederatedMonitor {
         self.hpl2 = hpl.terms;
         self.convergence = hpl.convergence;
         self.last_t = Some(t);
+        if front.is_some() {
+            self.front = front;
+        }
         self.outputs = Outputs::Federated {
             solution: Some(solution),
             hpl: Some(hpl.value),
             isolated: self.isolated(),
+            alignment: self.front.as_ref().map(FrontState::alignment),
         };
         tests
+    }
+
+    /// The last outputs again, no tests: an epoch without the monitor's input.
+    fn repeat(&self) -> MonitorReport {
+        MonitorReport {
+            tests: Vec::new(),
+            outputs: self.outputs.clone(),
+            integrity: None,
+        }
+    }
+
+    /// One epoch of the filter about `nav` over `self.trans` (the transition is set):
+    /// the aids' measurements, the filter with the policies, the protection level and
+    /// integrity, the solution, then the commit (module doc). With `front` (`input: imu`)
+    /// the fused error is fed back into the mechanization before the commit and the
+    /// solution is the corrected mechanization. Any failure leaves the monitor as it was.
+    fn filter_epoch(
+        &mut self,
+        epoch: &Epoch,
+        nav: &NavSolution,
+        restart: bool,
+        mut front: Option<FrontState>,
+    ) -> Result<MonitorReport, StepError> {
+        // The aids' previews are written in place and passed by reference: three ~340-byte
+        // previews would otherwise be copied through the step.
+        let mut pending: Previews = [None, None, None];
+        let n = self.config.aids.len();
+        let mut obs: [Option<Observation>; MAX_AIDS] = [None, None, None];
+        for (i, &aid) in self.config.aids.iter().enumerate() {
+            obs[i] = self.observation(aid, nav, epoch);
+        }
+        let step = self.filter_step(&obs[..n], restart, &mut pending)?;
+        let Some(next) = self.filter.pending() else {
+            return Err(FilterError::NonFinite("federated step").into());
+        };
+        let terms = Self::hpl2_terms(
+            &mut self.lambda_det,
+            self.hpl2,
+            &step.aids[..n],
+            &pending,
+            restart,
+        )?;
+        let hpl = self.protection_level(&next.master, terms, epoch.t, restart);
+        let solution = match &mut front {
+            None => corrected_solution(nav, &next.master)?,
+            Some(f) => {
+                let dx = self
+                    .filter
+                    .feed_back_pending()
+                    .ok_or(FilterError::NonFinite("federated step"))?;
+                f.feed_back(&dx);
+                mechanized_solution(f)?
+            }
+        };
+        let integrity = hpl.integrity;
+        let tests = self.commit(epoch.t, &mut pending, hpl, solution, front);
+        Ok(MonitorReport {
+            tests,
+            outputs: self.outputs.clone(),
+            integrity: Some(integrity),
+        })
+    }
+
+    /// One epoch with `input: imu` (module [`imu`]): the front end advances; while it
+    /// aligns, no test runs and integrity is `converging`; once aligned, the filter runs
+    /// on the mechanized solution and feeds its estimate back.
+    fn step_imu(&mut self, epoch: &Epoch) -> Result<MonitorReport, StepError> {
+        let (Some(imu), Some(cfg)) = (&epoch.imu, &self.config.strapdown) else {
+            return Ok(self.repeat());
+        };
+        let mut front = match &self.front {
+            Some(f) => f.clone(),
+            None => FrontState::new(cfg),
+        };
+        match front.advance(cfg, epoch, imu) {
+            imu::Advance::Aligning => {
+                let alignment = front.alignment();
+                self.front = Some(front);
+                self.last_t = None;
+                self.outputs = Outputs::Federated {
+                    solution: None,
+                    hpl: None,
+                    isolated: self.isolated(),
+                    alignment: Some(alignment),
+                };
+                Ok(MonitorReport {
+                    tests: Vec::new(),
+                    outputs: self.outputs.clone(),
+                    integrity: Some(IntegrityReport {
+                        state: Availability::Converging,
+                        protection_level: f64::NAN,
+                        alert_limit: self.config.hal_m,
+                    }),
+                })
+            }
+            imu::Advance::Nav { nav, restart, dt } => {
+                self.transition_over(&nav, (!restart).then_some(dt))?;
+                self.filter_epoch(epoch, &nav, restart, Some(front))
+            }
+        }
     }
 }
 
@@ -484,6 +633,27 @@ fn corrected_solution(
         lon: fixed.lon.to_degrees(),
         h: fixed.h,
         vel: [vel.x, vel.y, vel.z],
+        att: None,
+    })
+}
+
+/// The corrected mechanization (`input: imu`, after the feedback) on the wire; a
+/// non-finite one fails the step.
+fn mechanized_solution(front: &FrontState) -> Result<FederatedSolution, StepError> {
+    let Some(mech) = front.mech() else {
+        return Err(FilterError::NonFinite("mechanization").into());
+    };
+    let (p, v, att) = (mech.lla(), mech.vel(), mech.att());
+    let all = [p.lat, p.lon, p.h, v.x, v.y, v.z, att[0], att[1], att[2]];
+    if !all.iter().all(|x| x.is_finite()) {
+        return Err(FilterError::NonFinite("mechanized solution").into());
+    }
+    Ok(FederatedSolution {
+        lat: p.lat.to_degrees(),
+        lon: p.lon.to_degrees(),
+        h: p.h,
+        vel: [v.x, v.y, v.z],
+        att: Some(att.map(f64::to_degrees)),
     })
 }
 
@@ -512,43 +682,15 @@ impl Monitor for FederatedMonitor {
     /// the protection level and integrity, the corrected solution, then the commit (module
     /// doc). Any failure leaves the monitor as it was.
     fn step(&mut self, epoch: &Epoch) -> Result<MonitorReport, StepError> {
+        if self.config.strapdown.is_some() {
+            return self.step_imu(epoch);
+        }
         let Some(ins) = &epoch.ins else {
-            return Ok(MonitorReport {
-                tests: Vec::new(),
-                outputs: self.outputs.clone(),
-                integrity: None,
-            });
+            return Ok(self.repeat());
         };
         let nav = NavSolution::from_ins(ins);
-        // The aids' previews are written in place and passed by reference: three ~340-byte
-        // previews would otherwise be copied through the step.
-        let mut pending: Previews = [None, None, None];
         let restart = self.transition(&nav, epoch.t)?;
-        let n = self.config.aids.len();
-        let mut obs: [Option<Observation>; MAX_AIDS] = [None, None, None];
-        for (i, &aid) in self.config.aids.iter().enumerate() {
-            obs[i] = self.observation(aid, &nav, epoch);
-        }
-        let step = self.filter_step(&obs[..n], restart, &mut pending)?;
-        let Some(next) = self.filter.pending() else {
-            return Err(FilterError::NonFinite("federated step").into());
-        };
-        let terms = Self::hpl2_terms(
-            &mut self.lambda_det,
-            self.hpl2,
-            &step.aids[..n],
-            &pending,
-            restart,
-        )?;
-        let hpl = self.protection_level(&next.master, terms, epoch.t, restart);
-        let solution = corrected_solution(&nav, &next.master)?;
-        let integrity = hpl.integrity;
-        let tests = self.commit(epoch.t, &mut pending, hpl, solution);
-        Ok(MonitorReport {
-            tests,
-            outputs: self.outputs.clone(),
-            integrity: Some(integrity),
-        })
+        self.filter_epoch(epoch, &nav, restart, None)
     }
 
     fn checkpoint(&self) -> Result<Vec<u8>, CheckpointError> {
@@ -575,7 +717,9 @@ impl Monitor for FederatedMonitor {
             solution: None,
             hpl: None,
             isolated: Vec::new(),
+            alignment: self.config.strapdown.as_ref().map(|_| Alignment::Levelling),
         };
+        self.front = self.config.strapdown.as_ref().map(FrontState::new);
     }
 }
 

@@ -130,6 +130,9 @@ pub enum Outputs {
         hpl: Option<f64>,
         /// Names of the aids currently isolated.
         isolated: Vec<&'static str>,
+        /// With `input: imu`, the strapdown alignment state (docs/methods.md §M31).
+        #[serde(skip_serializing_if = "Option::is_none")]
+        alignment: Option<federated::Alignment>,
     },
     /// `channel`: per channel, the prediction ŷ_k and the residual r_k = y_k − ŷ_k
     /// (a channel appears once its predictor has enough history).

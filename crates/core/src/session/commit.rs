@@ -267,13 +267,35 @@ fn record_track(stats: &mut MonitorStats, t: f64, report: &MonitorReport, epoch:
         });
         return;
     }
-    if let (
-        Outputs::Federated {
-            solution: Some(s), ..
+    let Outputs::Federated {
+        solution,
+        alignment,
+        ..
+    } = &report.outputs
+    else {
+        return;
+    };
+    let ins = match (&epoch.ins, &epoch.imu, solution) {
+        (Some(ins), _, Some(_)) => Position {
+            lat: ins.lat.to_degrees(),
+            lon: ins.lon.to_degrees(),
+            h: ins.h,
         },
-        Some(ins),
-    ) = (&report.outputs, &epoch.ins)
-    {
+        (None, Some(_), Some(s)) => Position {
+            lat: s.lat,
+            lon: s.lon,
+            h: s.h,
+        },
+        // Aligning: the alignment state moves, the position stays the last one.
+        (None, Some(_), None) => {
+            if let Some(track) = &mut stats.track {
+                track.alignment = *alignment;
+            }
+            return;
+        }
+        _ => return,
+    };
+    if let Some(s) = solution {
         stats.track = Some(Track {
             t,
             solution: Position {
@@ -281,11 +303,8 @@ fn record_track(stats: &mut MonitorStats, t: f64, report: &MonitorReport, epoch:
                 lon: s.lon,
                 h: s.h,
             },
-            ins: Position {
-                lat: ins.lat.to_degrees(),
-                lon: ins.lon.to_degrees(),
-                h: ins.h,
-            },
+            ins,
+            alignment: *alignment,
         });
     }
 }

@@ -325,8 +325,12 @@ pub struct Track {
     pub t: f64,
     /// Corrected solution (the `result` frame's `solution`, without velocity).
     pub solution: Position,
-    /// The epoch's INS position as received.
+    /// The epoch's INS position as received (with `input: imu`, the mechanized one, which
+    /// after the feedback is the solution).
     pub ins: Position,
+    /// With `input: imu`, the strapdown alignment state.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alignment: Option<crate::monitor::federated::Alignment>,
 }
 
 /// The latest epoch of a `gnss` monitor: its outputs (the `result` frame's) and time.
@@ -477,6 +481,7 @@ mod tests {
                     t: 1.5,
                     solution: position,
                     ins: position,
+                    alignment: None,
                 }),
                 gnss: None,
                 integrity: None,

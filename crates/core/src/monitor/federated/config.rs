@@ -14,6 +14,8 @@ use crate::filter::kalman::StateEstimate;
 use crate::monitor::ConfigError;
 use crate::monitor::guards::{self, DriftConfigWire, GuardConfig, StuckConfigWire};
 
+use super::imu::{InputKind, StrapdownConfig, StrapdownSection};
+
 /// The longest gap between INS epochs that is predicted across, s; longer ones restart.
 pub const MAX_GAP_S: f64 = 3600.0;
 
@@ -54,6 +56,9 @@ pub struct FederatedConfig {
     pub converge_max_s: f64,
     /// Per aid in `aids` order: its drift and stuck tests (docs/methods.md §M23).
     pub guards: Vec<GuardConfig>,
+    /// With `input: imu`, the strapdown front end (docs/methods.md §M31); `None`: a
+    /// client's `ins` solution.
+    pub strapdown: Option<StrapdownConfig>,
 }
 
 /// The `gnss` section of a `federated` config: noise (seed 004's values by default) and
@@ -323,6 +328,16 @@ pub struct FederatedConfigWire {
     /// (docs/methods.md §M24).
     #[serde(default = "default_converge_max_s")]
     pub converge_max_s: f64,
+    /// Where the INS solution comes from: `ins` (default) or `imu`.
+    #[serde(default, skip_serializing_if = "is_ins")]
+    pub input: InputKind,
+    /// The strapdown front end (only with `input: imu`; defaults when absent).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub strapdown: Option<StrapdownSection>,
+}
+
+fn is_ins(k: &InputKind) -> bool {
+    *k == InputKind::Ins
 }
 
 /// Default longest convergence, s: seed 004's filter converges from its initial errors in
@@ -356,6 +371,8 @@ impl FederatedConfigWire {
             hal_m: DEFAULT_HAL_M,
             p_md: hpl::DEFAULT_P_MD,
             converge_max_s: DEFAULT_CONVERGE_MAX_S,
+            input: InputKind::Ins,
+            strapdown: None,
         }
     }
 }
@@ -476,7 +493,15 @@ impl TryFrom<FederatedConfigWire> for FederatedConfig {
             return Err(ConfigError::new("p_md", "must be in (0, 1)"));
         }
         let converge_max_s = positive(f("converge_max_s"), w.converge_max_s)?;
+        let strapdown = match (w.input, w.strapdown) {
+            (InputKind::Imu, section) => Some(StrapdownConfig::new(section.unwrap_or_default())?),
+            (InputKind::Ins, None) => None,
+            (InputKind::Ins, Some(_)) => {
+                return Err(ConfigError::new("strapdown", "only with \"input\": \"imu\""));
+            }
+        };
         Ok(FederatedConfig {
+            strapdown,
             gnss_pos_sigma_m: positive(f("gnss.pos_sigma_m"), g.pos_sigma_m)?,
             gnss_vel_sigma_mps: positive(f("gnss.vel_sigma_mps"), g.vel_sigma_mps)?,
             dvl_vel_sigma_mps: positive(f("dvl.vel_sigma_mps"), d.vel_sigma_mps)?,
@@ -502,12 +527,17 @@ impl FederatedConfig {
     }
 
     /// The initial error estimate: zero error, `P₀ = diag(att², vel², pos², ε², ∇²)` with the
-    /// bias uncertainties of `imu`.
+    /// bias uncertainties of `imu`; the attitude σ is `init`'s, or with `input: imu` the
+    /// alignment's (`strapdown.align.att_sigma_deg`).
     pub fn initial_estimate(&self) -> ErrorEstimate {
         let arcsec = (1.0f64 / 3600.0).to_radians();
+        let att_rad = |i: usize| match &self.strapdown {
+            Some(s) => s.section.align.att_sigma_deg[i].to_radians(),
+            None => self.init_att_sigma_arcsec[i] * arcsec,
+        };
         let mut d = ErrorVector::zeros();
         for i in 0..3 {
-            d[ATT + i] = (self.init_att_sigma_arcsec[i] * arcsec).powi(2);
+            d[ATT + i] = att_rad(i).powi(2);
             d[VEL + i] = self.init_vel_sigma_mps.powi(2);
             d[POS + i] = self.init_pos_sigma_m.powi(2);
             d[GYRO + i] = self.imu.gyro_bias_rps().powi(2);

@@ -5,7 +5,7 @@ use std::borrow::Cow;
 
 use serde::{Deserialize, Serialize};
 
-use super::{Convergence, FederatedMonitor, FederatedSolution};
+use super::{Convergence, FederatedMonitor, FederatedSolution, FrontState};
 use crate::epoch::Aid;
 use crate::filter::federated::{FederatedState, MAX_AIDS};
 use crate::monitor::guards::InnovationGuards;
@@ -14,7 +14,9 @@ use crate::monitor::{CheckpointError, MonitorKind, Outputs, TestBank, checkpoint
 /// What a checkpoint of a `federated` monitor holds (borrowed to write, owned when read):
 /// the filter's current state, the tests and guards, the convergence, the HPL terms, the
 /// time of the last INS epoch and the outputs repeated on epochs without INS (`isolated`
-/// as aids). Not the λ_det cache: its values are recomputed bit for bit when needed.
+/// as aids); with `input: imu` the strapdown front end (absent from checkpoints of
+/// monitors without it, which still load). Not the λ_det cache: its values are
+/// recomputed bit for bit when needed.
 #[derive(Serialize, Deserialize)]
 struct FederatedSaved<'a> {
     filter: Cow<'a, FederatedState>,
@@ -26,6 +28,8 @@ struct FederatedSaved<'a> {
     solution: Option<FederatedSolution>,
     hpl: Option<f64>,
     isolated: Vec<Aid>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    front: Option<Cow<'a, FrontState>>,
 }
 
 impl FederatedMonitor {
@@ -35,6 +39,7 @@ impl FederatedMonitor {
             solution,
             hpl,
             isolated,
+            ..
         } = &self.outputs
         else {
             return Err(CheckpointError::Encode(
@@ -57,6 +62,7 @@ impl FederatedMonitor {
                 solution: *solution,
                 hpl: *hpl,
                 isolated,
+                front: self.front.as_ref().map(Cow::Borrowed),
             },
         )
     }
@@ -113,6 +119,20 @@ impl FederatedMonitor {
                     })
             })
             .collect::<Result<Vec<_>, _>>()?;
+        let front = match (saved.front, self.config.strapdown.is_some()) {
+            (Some(f), true) => Some(f.into_owned()),
+            (None, false) => None,
+            (Some(_), false) => {
+                return Err(CheckpointError::mismatch(
+                    "a strapdown state, the monitor's input is ins",
+                ));
+            }
+            (None, true) => {
+                return Err(CheckpointError::mismatch(
+                    "no strapdown state, the monitor's input is imu",
+                ));
+            }
+        };
         self.filter = filter;
         self.bank = bank;
         self.guards = guards;
@@ -123,7 +143,9 @@ impl FederatedMonitor {
             solution: saved.solution,
             hpl: saved.hpl,
             isolated,
+            alignment: front.as_ref().map(FrontState::alignment),
         };
+        self.front = front;
         Ok(())
     }
 }
