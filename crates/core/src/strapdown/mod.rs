@@ -25,11 +25,14 @@
 //!    with ζ at the midpoint of the updated position and velocity; exact exponentials
 //!    (unit quaternions, renormalised each step).
 //!
-//! Precision: the rotation-vector and velocity updates are exact to second order in
-//! the increments; the truncation left is the coning and sculling series beyond the
-//! two-sample terms. Under classical coning of half-angle α at frequency Ω the
-//! two-sample correction leaves an attitude drift of `α² Ω (ΩΔt)⁴ / 60` rad/s, against
-//! `α² Ω (ΩΔt)² / 12` without it (the tests measure both). The corrections assume
+//! Precision: the attitude update is exact for rotation about a fixed axis; what it
+//! truncates is the coning series beyond the two-sample term. Under classical coning of
+//! half-angle α at frequency Ω it leaves an attitude drift of `α² Ω (ΩΔt)⁴ / 60` rad/s,
+//! against `α² Ω (ΩΔt)² / 12` without the coning term. The velocity update keeps the
+//! rotation compensation to first order (`½ Δθ × Δv`; the `Δθ × (Δθ × Δv) / 6` term is
+//! left out) and the sculling series to its two-sample term: a body-fixed specific force
+//! f under angular oscillation of amplitude A at Ω is rectified wrongly by about
+//! `|f| A² (ΩΔt)² / 12` m/s². The tests measure these laws. The two-sample terms assume
 //! equal consecutive intervals.
 
 pub mod align;
