@@ -1,13 +1,13 @@
 //! Guards the one-way layering that `src/lib.rs` and `crates/core/src/lib.rs` document.
 //! Across crates Cargo enforces the direction (navguard-core names neither navguard-sim
 //! nor navguard; navguard-sim does not name navguard); this test checks what Cargo
-//! cannot: inside navguard-core each layer of `simd.rs, epoch.rs, geo/, detect/, gnss/, filter/,
-//! learn/, features/, monitor/, session/` imports none after it; navguard-core and
-//! navguard-sim (and navguard-formats) depend on no async, storage or HTTP crate, and
-//! navguard-core on no plotting crate; and only the CLI's `experiment` commands reach into
-//! `navguard_sim::experiment` (the rest of the CLI and the service use `navguard_sim` and
-//! its `plot`). Test code (after a file's first `#[cfg(test)]`, and files that are whole
-//! test modules) may cross layers.
+//! cannot: inside navguard-core each layer of `simd.rs, epoch.rs, geo/, detect/, gnss/,
+//! strapdown/, filter/, learn/, features/, monitor/, session/` imports none after it;
+//! navguard-core and navguard-sim (and navguard-formats) depend on no async, storage or
+//! HTTP crate, and navguard-core on no plotting crate; and only the CLI's `experiment`
+//! commands reach into `navguard_sim::experiment` (the rest of the CLI and the service
+//! use `navguard_sim` and its `plot`). Test code (after a file's first `#[cfg(test)]`, and
+//! files that are whole test modules) may cross layers.
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -20,6 +20,7 @@ const LAYERS: &[(&str, &str)] = &[
     ("crates/core/src/geo", "geo"),
     ("crates/core/src/detect", "detect"),
     ("crates/core/src/gnss", "gnss"),
+    ("crates/core/src/strapdown", "strapdown"),
     ("crates/core/src/filter", "filter"),
     ("crates/core/src/learn", "learn"),
     ("crates/core/src/features", "features"),

@@ -17,6 +17,8 @@
 //!   decision policies (`classic`, `counters`) that turn statistics into health.
 //! - [`gnss`]: pseudorange corrections, weighted least squares, RAIM fault detection
 //!   and exclusion, and protection levels (slope RAIM, ARAIM) for one epoch.
+//! - [`strapdown`]: the strapdown inertial mechanization (attitude, velocity, position
+//!   from IMU increments) and coarse alignment.
 //! - [`filter`]: the generic Kalman filter (fixed- and dynamic-size), and the
 //!   INS error model and federated fusion built on it.
 //! - [`learn`]: kernels, LS-SVM and SVM models (for the learned detectors).
@@ -40,3 +42,4 @@ pub mod learn;
 pub mod monitor;
 pub mod session;
 pub mod simd;
+pub mod strapdown;
