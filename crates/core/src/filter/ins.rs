@@ -451,7 +451,11 @@ mod tests {
             assert_relative_eq!(q_b, q, epsilon = 1e-13 * q.amax(), max_relative = 1e-13);
             // The bias diagonal is the series of exp(−dt/τ).
             let x = dt / 300.0;
-            assert_relative_eq!(phi[(GYRO, GYRO)], 1.0 - x + x * x / 2.0, max_relative = 1e-15);
+            assert_relative_eq!(
+                phi[(GYRO, GYRO)],
+                1.0 - x + x * x / 2.0,
+                max_relative = 1e-15
+            );
         }
         // Without the walk, the Gauss–Markov noise holds the steady state:
         // σ² = Φ² σ² + q  ⇔  q = σ² (1 − Φ²) ≈ 2σ² dt/τ to first order.
@@ -462,9 +466,17 @@ mod tests {
         };
         let (qg, qa) = gm.bias_noise(0.01);
         let s2 = gm.gyro_bias_rps().powi(2);
-        assert_relative_eq!(qg, s2 * (1.0 - (-0.02f64 / 300.0).exp()), max_relative = 1e-4);
+        assert_relative_eq!(
+            qg,
+            s2 * (1.0 - (-0.02f64 / 300.0).exp()),
+            max_relative = 1e-4
+        );
         let s2 = gm.accel_bias_mps2().powi(2);
-        assert_relative_eq!(qa, s2 * (1.0 - (-0.02f64 / 300.0).exp()), max_relative = 1e-4);
+        assert_relative_eq!(
+            qa,
+            s2 * (1.0 - (-0.02f64 / 300.0).exp()),
+            max_relative = 1e-4
+        );
         // A walk alone: 60 µg/√h → (60e-6 g / 60)² per second.
         let walk = ImuErrors {
             bias_tau_s: None,

@@ -56,9 +56,7 @@ pub use config::{
     DVL_DRIFT_DEFAULT_ON, DvlNoise, FederatedConfig, FederatedConfigWire, GNSS_DRIFT_DEFAULT_ON,
     GnssNoise, ImuSection, InitSigma, MAX_GAP_S, STUCK_DEFAULT_ON,
 };
-pub use imu::{
-    AlignSection, Alignment, FrontState, InputKind, StrapdownConfig, StrapdownSection,
-};
+pub use imu::{AlignSection, Alignment, FrontState, InputKind, StrapdownConfig, StrapdownSection};
 
 use nalgebra::{Matrix2, Vector3};
 use serde::{Deserialize, Serialize};
@@ -70,7 +68,6 @@ use super::{
 };
 use crate::detect::hpl::{self, DetectionNoncentrality, HplError};
 use crate::detect::{Decision, Health, PolicyConfig, PolicyState, ThresholdError, ThresholdSpec};
-use crate::monitor::{Availability, Integrity as IntegrityReport};
 use crate::epoch::{Aid, Epoch, GnssBlock};
 use crate::filter::aiding;
 use crate::filter::federated::{
@@ -79,6 +76,7 @@ use crate::filter::federated::{
 use crate::filter::ins::{ErrorMatrix, NavSolution, POS, VEL};
 use crate::filter::kalman::{FilterError, LinearTransition};
 use crate::geo::{self, Lla};
+use crate::monitor::{Availability, Integrity as IntegrityReport};
 use integrity::Convergence;
 
 /// The part of an aid's normalised innovation its drift and stuck tests watch: GNSS its
@@ -723,5 +721,7 @@ impl Monitor for FederatedMonitor {
     }
 }
 
+#[cfg(test)]
+mod imu_tests;
 #[cfg(test)]
 mod tests;

@@ -70,10 +70,15 @@ impl Levelling {
             self.sum_f += f_b * dt;
             self.sum_w += w_b * dt;
         } else {
-            self.static_s = 0.0;
-            self.sum_f = Vector3::zeros();
-            self.sum_w = Vector3::zeros();
+            self.restart();
         }
+    }
+
+    /// Ends the current static run (the vehicle is known to move, e.g. from GNSS).
+    pub fn restart(&mut self) {
+        self.static_s = 0.0;
+        self.sum_f = Vector3::zeros();
+        self.sum_w = Vector3::zeros();
     }
 
     /// Roll and pitch (rad) from the current static run's mean specific force, once it

@@ -497,7 +497,10 @@ impl TryFrom<FederatedConfigWire> for FederatedConfig {
             (InputKind::Imu, section) => Some(StrapdownConfig::new(section.unwrap_or_default())?),
             (InputKind::Ins, None) => None,
             (InputKind::Ins, Some(_)) => {
-                return Err(ConfigError::new("strapdown", "only with \"input\": \"imu\""));
+                return Err(ConfigError::new(
+                    "strapdown",
+                    "only with \"input\": \"imu\"",
+                ));
             }
         };
         Ok(FederatedConfig {

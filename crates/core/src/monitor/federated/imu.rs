@@ -115,18 +115,54 @@ impl StrapdownConfig {
         let s = &section;
         let finite3 = |v: &[f64; 3]| v.iter().all(|x| x.is_finite());
         check("mounting_deg", finite3(&s.mounting_deg), "must be finite")?;
-        check("gnss_lever_arm_m", finite3(&s.gnss_lever_arm_m), "must be finite")?;
-        check("gnss_lever_arm_m", s.gnss_lever_arm_m.iter().all(|x| x.abs() <= 100.0), "must be within ±100 m")?;
-        check("max_gap_s", s.max_gap_s.is_finite() && s.max_gap_s > 0.0 && s.max_gap_s <= 10.0, "must be in (0, 10] s")?;
+        check(
+            "gnss_lever_arm_m",
+            finite3(&s.gnss_lever_arm_m),
+            "must be finite",
+        )?;
+        check(
+            "gnss_lever_arm_m",
+            s.gnss_lever_arm_m.iter().all(|x| x.abs() <= 100.0),
+            "must be within ±100 m",
+        )?;
+        check(
+            "max_gap_s",
+            s.max_gap_s.is_finite() && s.max_gap_s > 0.0 && s.max_gap_s <= 10.0,
+            "must be in (0, 10] s",
+        )?;
         let a = &s.align;
         let positive = |x: f64| x.is_finite() && x > 0.0;
-        check("align.static_s", positive(a.static_s), "must be a finite number > 0")?;
-        check("align.max_accel_dev_mps2", positive(a.max_accel_dev_mps2), "must be a finite number > 0")?;
-        check("align.max_rate_dps", positive(a.max_rate_dps), "must be a finite number > 0")?;
-        check("align.min_speed_mps", positive(a.min_speed_mps), "must be a finite number > 0")?;
-        check("align.att_sigma_deg", a.att_sigma_deg.iter().all(|&x| positive(x) && x <= 180.0), "each must be in (0, 180]")?;
+        check(
+            "align.static_s",
+            positive(a.static_s),
+            "must be a finite number > 0",
+        )?;
+        check(
+            "align.max_accel_dev_mps2",
+            positive(a.max_accel_dev_mps2),
+            "must be a finite number > 0",
+        )?;
+        check(
+            "align.max_rate_dps",
+            positive(a.max_rate_dps),
+            "must be a finite number > 0",
+        )?;
+        check(
+            "align.min_speed_mps",
+            positive(a.min_speed_mps),
+            "must be a finite number > 0",
+        )?;
+        check(
+            "align.att_sigma_deg",
+            a.att_sigma_deg.iter().all(|&x| positive(x) && x <= 180.0),
+            "each must be in (0, 180]",
+        )?;
         if let Some(h) = a.heading_deg {
-            check("align.heading_deg", h.is_finite() && (-360.0..=360.0).contains(&h), "must be in [-360, 360]")?;
+            check(
+                "align.heading_deg",
+                h.is_finite() && (-360.0..=360.0).contains(&h),
+                "must be in [-360, 360]",
+            )?;
         }
         let [r, p, y] = s.mounting_deg.map(f64::to_radians);
         Ok(StrapdownConfig {
@@ -216,7 +252,7 @@ impl From<&GnssBlock> for Fix {
 }
 
 /// What one IMU epoch did to the front end.
-pub enum Advance {
+pub(super) enum Advance {
     /// Still aligning: no navigation solution yet.
     Aligning,
     /// A navigation solution for the filter; `restart`: the first after alignment.
@@ -272,9 +308,17 @@ impl FrontState {
 
     /// The epoch's sample in the body frame as rates, bias-corrected, and its increments
     /// over `dt` (rates: the trapezoid with the previous sample; increments as given).
-    fn body_sample(&self, cfg: &StrapdownConfig, imu: &ImuBlock, dt: f64) -> (BodyRates, Increments) {
+    fn body_sample(
+        &self,
+        cfg: &StrapdownConfig,
+        imu: &ImuBlock,
+        dt: f64,
+    ) -> (BodyRates, Increments) {
         let rot = |v: [f64; 3]| cfg.c_sb * Vector3::from(v);
-        let (bg, ba) = (Vector3::from(self.gyro_bias), Vector3::from(self.accel_bias));
+        let (bg, ba) = (
+            Vector3::from(self.gyro_bias),
+            Vector3::from(self.accel_bias),
+        );
         let (f, w, dv, dtheta) = match imu.dt {
             Some(span) => {
                 let dv = rot(imu.accel) - ba * span;
@@ -291,12 +335,27 @@ impl FrontState {
                 (f, w, (f + pf) * (0.5 * dt), (w + pw) * (0.5 * dt))
             }
         };
-        let rates = BodyRates { f: f.into(), w: w.into() };
-        (rates, Increments { dtheta: dtheta.into(), dv: dv.into(), dt })
+        let rates = BodyRates {
+            f: f.into(),
+            w: w.into(),
+        };
+        (
+            rates,
+            Increments {
+                dtheta: dtheta.into(),
+                dv: dv.into(),
+                dt,
+            },
+        )
     }
 
     /// Moves the front end by one epoch that carries `imu`.
-    pub fn advance(&mut self, cfg: &StrapdownConfig, epoch: &Epoch, imu: &ImuBlock) -> Advance {
+    pub(super) fn advance(
+        &mut self,
+        cfg: &StrapdownConfig,
+        epoch: &Epoch,
+        imu: &ImuBlock,
+    ) -> Advance {
         let dt = self.last_t.map(|last| epoch.t - last);
         if let Some(g) = &epoch.gnss {
             self.last_fix = Some((epoch.t, Fix::from(g)));
@@ -353,7 +412,10 @@ impl FrontState {
         self.lowpass = Some((lf.into(), lw.into()));
         let fix = self.last_fix;
         let moving = fix.is_some_and(|(fix_t, fix)| {
-            t - fix_t <= 2.0 && fix.vel.is_some_and(|v| v[0].hypot(v[1]) >= STATIC_SPEED_MPS)
+            t - fix_t <= 2.0
+                && fix
+                    .vel
+                    .is_some_and(|v| v[0].hypot(v[1]) >= STATIC_SPEED_MPS)
         });
         if moving {
             self.levelling.restart();
@@ -449,12 +511,13 @@ impl FrontState {
 
     /// The body angular rate of the last sample, rad/s (bias-corrected).
     pub fn last_rate(&self) -> Vector3<f64> {
-        self.last_rates.map_or_else(Vector3::zeros, |r| Vector3::from(r.w))
+        self.last_rates
+            .map_or_else(Vector3::zeros, |r| Vector3::from(r.w))
     }
 }
 
 /// The mechanization as the error model's linearisation point.
-pub fn nav_solution(mech: &Strapdown) -> NavSolution {
+pub(super) fn nav_solution(mech: &Strapdown) -> NavSolution {
     NavSolution {
         lla: mech.lla(),
         vel: mech.vel(),
@@ -471,7 +534,12 @@ fn antenna_to_imu(ant: Lla, c_bn: &Matrix3<f64>, lever_b: &Vector3<f64>) -> Lla 
 /// A GNSS fix moved from the antenna to the IMU with the mechanized attitude and body rate:
 /// `p_imu = p_ant − C_bⁿ l_b`, `v_imu = v_ant − C_bⁿ (ω_b × l_b)` (Earth rate left out:
 /// ~5e-5 m/s for a metre of lever arm).
-pub fn fix_at_imu(fix: &GnssBlock, nav: &NavSolution, w_b: &Vector3<f64>, lever_b: &Vector3<f64>) -> GnssBlock {
+pub(super) fn fix_at_imu(
+    fix: &GnssBlock,
+    nav: &NavSolution,
+    w_b: &Vector3<f64>,
+    lever_b: &Vector3<f64>,
+) -> GnssBlock {
     if *lever_b == Vector3::zeros() {
         return fix.clone();
     }

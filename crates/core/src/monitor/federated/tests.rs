@@ -410,6 +410,7 @@ fn outputs(r: &MonitorReport) -> (FederatedSolution, f64, Vec<&'static str>) {
             solution: Some(s),
             hpl: Some(h),
             isolated,
+            alignment: None,
         } => (*s, *h, isolated.clone()),
         other => panic!("unexpected outputs {other:?}"),
     }
@@ -724,7 +725,8 @@ fn epochs_without_ins_are_ignored_and_gnss_without_velocity_has_dof_3() {
         Outputs::Federated {
             solution: None,
             hpl: None,
-            isolated: vec![]
+            isolated: vec![],
+            alignment: None,
         }
     );
     assert!(m.check_epoch("fed", &aid_only).is_ok());
