@@ -135,14 +135,11 @@ pub fn parse_nmea(text: &str, file: &str, p: NmeaParams) -> Result<NmeaLog, Form
         match sentence(line, &mut counts) {
             Ok(Some(s)) => add(&mut groups, s, at.line),
             Ok(None) => {}
-            Err(msg) if p.skip_bad => {
-                let _ = msg;
-                counts.bad += 1;
-            }
+            Err(_) if p.skip_bad => counts.bad += 1,
             Err(msg) => return Err(at.err(msg)),
         }
     }
-    let fixes = fixes(groups, p.leap_s, &mut counts)?;
+    let fixes = fixes(groups, p.leap_s, &mut counts);
     if fixes.is_empty() {
         return Err(missing(file, "no GGA fix with a position"));
     }
@@ -230,11 +227,7 @@ fn group_velocity(g: &Group) -> Option<[f64; 3]> {
 }
 
 /// The groups with a usable GGA as fixes, dated (module docs).
-fn fixes(
-    groups: Vec<Group>,
-    leap_s: f64,
-    counts: &mut NmeaCounts,
-) -> Result<Vec<GnssFix>, FormatError> {
+fn fixes(groups: Vec<Group>, leap_s: f64, counts: &mut NmeaCounts) -> Vec<GnssFix> {
     let mut date: Option<NaiveDate> = groups
         .iter()
         .find_map(|g| g.rmc.as_ref().and_then(|r| r.fix_date));
@@ -255,7 +248,7 @@ fn fixes(
             None => counts.no_fix += 1,
         }
     }
-    Ok(out)
+    out
 }
 
 fn fix_of(g: &Group, date: Option<NaiveDate>, leap_s: f64) -> Option<GnssFix> {
