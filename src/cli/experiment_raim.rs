@@ -39,7 +39,7 @@ pub(crate) struct RaimArgs {
 fn args(format: Format, obs: PathBuf) -> ConvertArgs {
     ConvertArgs {
         format,
-        obs,
+        obs: Some(obs),
         nav: None,
         truth_file: None,
         truth: None,
@@ -47,6 +47,7 @@ fn args(format: Format, obs: PathBuf) -> ConvertArgs {
         iono_free: false,
         l5: false,
         out: None,
+        drive: Default::default(),
     }
 }
 

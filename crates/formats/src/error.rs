@@ -22,6 +22,16 @@ pub enum FormatError {
         /// What was wrong.
         msg: String,
     },
+    /// A binary file's bytes at `offset` do not hold what its format says.
+    #[error("{file}: byte {offset}: {msg}")]
+    Corrupt {
+        /// The file's name as given.
+        file: String,
+        /// Byte offset from the file's start.
+        offset: usize,
+        /// What was wrong.
+        msg: String,
+    },
     /// The file as a whole lacks something (a header line, a column, any data).
     #[error("{file}: {msg}")]
     Missing {
@@ -55,6 +65,14 @@ impl At<'_> {
 /// Reads a whole file, the error naming it.
 pub(crate) fn read_to_string(path: &std::path::Path) -> Result<String, FormatError> {
     std::fs::read_to_string(path).map_err(|source| FormatError::Io {
+        file: path.display().to_string(),
+        source,
+    })
+}
+
+/// Reads a whole binary file, the error naming it.
+pub(crate) fn read_bytes(path: &std::path::Path) -> Result<Vec<u8>, FormatError> {
+    std::fs::read(path).map_err(|source| FormatError::Io {
         file: path.display().to_string(),
         source,
     })

@@ -1,5 +1,6 @@
 //! navguard-formats: real receiver files → domain [`Epoch`](navguard_core::epoch::Epoch)s
-//! with raw pseudoranges (`gnss_raw`), at the edge of navguard like the wire: files are
+//! with raw pseudoranges (`gnss_raw`), GNSS fixes with σ (`gnss`) and raw IMU samples
+//! (`imu`), at the edge of navguard like the wire: files are
 //! parsed and validated once here, and the core only sees SI units and radians.
 //! Every epoch's `t` is seconds since the GPS epoch 1980-01-06 00:00:00 GPST, so
 //! files of one drive merge in time.
@@ -16,6 +17,14 @@
 //!   version on the first line decides), and their conversion.
 //! - [`gnsslogger`]: Android GnssLogger `Raw` records with a RINEX navigation file.
 //! - [`gsdc`]: the Google Smartphone Decimeter Challenge 2021 and 2023 CSVs.
+//! - [`fix`]: GNSS fixes (the solution readers' output) and the σ policy that makes
+//!   them `gnss` blocks: reported σ or σ by solution quality.
+//! - [`rtklib_pos`]: RTKLIB `.pos` solutions.
+//! - [`nmea`]: NMEA 0183 GGA, RMC, VTG and GST sentences.
+//! - [`kfgins`]: KF-GINS GNSS and IMU text files.
+//! - [`imu_csv`]: IMU CSVs by a column and unit map, rates in SI, sensor frame.
+//! - [`timetag`]: RTKLIB `.tag` files, which put a logger's counter on GPS time.
+//! - [`merge`]: IMU samples and GNSS fixes into one time-ordered epoch stream.
 //!
 //! # Why our own RINEX parser
 //!
@@ -32,11 +41,18 @@
 
 pub mod ephemeris;
 pub mod error;
+pub mod fix;
 pub mod geometry;
 pub mod gnsslogger;
 pub mod gpstime;
 pub mod gsdc;
+pub mod imu_csv;
+pub mod kfgins;
 pub mod klobuchar;
+pub mod merge;
+pub mod nmea;
 pub mod rinex;
+pub mod rtklib_pos;
+pub mod timetag;
 
 pub use error::FormatError;
