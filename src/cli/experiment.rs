@@ -35,6 +35,8 @@ pub(crate) enum ExperimentCommand {
     Coloured(ColouredArgs),
     /// The gnss monitor on real receiver data: fault-free and injected faults, three FDE methods.
     Raim(super::experiment_raim::RaimArgs),
+    /// The federated monitor on the real car drive: raw 100 Hz IMU, 1 Hz degraded GNSS, outages, faults.
+    Drive(super::experiment_drive::DriveArgs),
 }
 
 /// `navguard experiment coloured` flags.
@@ -617,5 +619,6 @@ pub(crate) fn run(command: ExperimentCommand) -> anyhow::Result<()> {
         ExperimentCommand::Alarms(args) => execute(&args),
         ExperimentCommand::Guards(args) => execute(&args),
         ExperimentCommand::Raim(args) => execute(&args),
+        ExperimentCommand::Drive(args) => execute(&args),
     }
 }

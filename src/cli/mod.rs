@@ -10,6 +10,7 @@ pub(crate) mod calibrate;
 pub(crate) mod convert;
 pub(crate) mod convert_drive;
 pub(crate) mod experiment;
+pub(crate) mod experiment_drive;
 pub(crate) mod experiment_raim;
 pub(crate) mod http;
 pub(crate) mod loadgen;

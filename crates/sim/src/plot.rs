@@ -82,6 +82,8 @@ pub struct Chart {
     pub log_y: bool,
     /// Fixed y range; `None` fits the data (and the threshold).
     pub y_range: Option<(f64, f64)>,
+    /// Shaded x intervals `(from, to)` behind the series (e.g. GNSS outages).
+    pub bands: Vec<(f64, f64)>,
     /// Width in pixels.
     pub width: f64,
     /// Height in pixels.
@@ -106,6 +108,7 @@ impl Chart {
             threshold: None,
             log_y: false,
             y_range: None,
+            bands: Vec::new(),
             width: 800.0,
             height: 400.0,
         }
@@ -129,6 +132,12 @@ impl Chart {
     /// Switches the y axis to log scale.
     pub fn with_log_y(mut self, log_y: bool) -> Self {
         self.log_y = log_y;
+        self
+    }
+
+    /// Shades the x intervals `bands` behind the series.
+    pub fn with_bands(mut self, bands: Vec<(f64, f64)>) -> Self {
+        self.bands = bands;
         self
     }
 
@@ -279,6 +288,18 @@ impl Chart {
             .draw()
             .map_err(|e| e.to_string())?;
         self.draw_ticks(&root, &mut chart, &f, &axes)?;
+        let band = RGBColor(0xee, 0xee, 0xee).filled();
+        for &(from, to) in &self.bands {
+            let (from, to) = (from.max(axes.x.0), to.min(axes.x.1));
+            if from < to {
+                chart
+                    .draw_series(std::iter::once(Rectangle::new(
+                        [(from, axes.y.0), (to, axes.y.1)],
+                        band,
+                    )))
+                    .map_err(|e| e.to_string())?;
+            }
+        }
         self.draw_series(&mut chart, &f, &axes)?;
         self.draw_threshold(&root, &mut chart, &f, &axes)?;
         if self.series.len() >= 2 {
@@ -673,6 +694,27 @@ mod tests {
                 "{expected}: {labels:?}"
             );
         }
+    }
+
+    #[test]
+    fn a_band_is_a_shaded_rectangle_over_its_x_interval() {
+        let c = chart().with_bands(vec![(20.0, 40.0), (200.0, 300.0)]);
+        let svg = c.to_svg();
+        assert!(balanced(&svg));
+        let rects: Vec<&str> = svg
+            .match_indices("<rect")
+            .map(|(i, _)| &svg[i..i + svg[i..].find("/>").unwrap_or(0)])
+            .filter(|r| r.contains("#EEEEEE") || r.contains("#eeeeee"))
+            .collect();
+        // The second band lies beyond the data (x ≤ 99): not drawn.
+        assert_eq!(rects.len(), 1, "{rects:?}");
+        let attr = |name: &str| -> f64 {
+            let r = rects[0];
+            let at = r.find(&format!(" {name}=\"")).unwrap() + name.len() + 3;
+            r[at..at + r[at..].find('"').unwrap()].parse().unwrap()
+        };
+        assert!((attr("x") - c.x_to_px(20.0)).abs() <= 2.0);
+        assert!((attr("x") + attr("width") - c.x_to_px(40.0)).abs() <= 2.0);
     }
 
     #[test]

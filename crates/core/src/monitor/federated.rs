@@ -517,6 +517,10 @@ impl FederatedMonitor {
         };
         let integrity = hpl.integrity;
         let tests = self.commit(epoch.t, &mut pending, hpl, solution, front);
+        let all_isolated = (0..n).all(|i| self.aid_health(i) == Health::Isolated);
+        if let Some(f) = &mut self.front {
+            f.note_isolation(epoch.t, all_isolated);
+        }
         Ok(MonitorReport {
             tests,
             outputs: self.outputs.clone(),
@@ -558,7 +562,20 @@ impl FederatedMonitor {
             }
             imu::Advance::Nav { nav, restart, dt } => {
                 self.transition_over(&nav, (!restart).then_some(dt))?;
-                self.filter_epoch(epoch, &nav, restart, Some(front))
+                if !restart {
+                    return self.filter_epoch(epoch, &nav, false, Some(front));
+                }
+                // A (re)start of the mechanization is a new stream for the tests too: a
+                // re-placed INS is tested afresh, not under the policies of the one that
+                // drifted (restored if the step fails).
+                let saved = (self.bank.clone(), self.guards.clone());
+                self.bank.reset();
+                self.guards.iter_mut().for_each(InnovationGuards::reset);
+                let stepped = self.filter_epoch(epoch, &nav, true, Some(front));
+                if stepped.is_err() {
+                    (self.bank, self.guards) = saved;
+                }
+                stepped
             }
         }
     }

@@ -22,12 +22,15 @@
 //!   and stuck tests.
 //! - [`raim`]: the `gnss` monitor on real receiver data, fault-free and with injected
 //!   pseudorange steps and ramps, the three exclusion methods side by side.
+//! - [`drive`]: the federated monitor on the real car drive with its raw IMU (the
+//!   service's strapdown mechanization), 1 Hz degraded GNSS, outages and injected faults.
 //! - [`scorecard`]: the per-detector figures every experiment ends with.
 //!
 //! The figures are drawn by [`crate::plot`].
 
 pub mod alarms;
 pub mod coloured;
+pub mod drive;
 pub mod guards;
 pub mod raim;
 pub mod ramp;

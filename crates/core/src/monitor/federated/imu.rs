@@ -75,6 +75,11 @@ pub struct StrapdownSection {
     /// Longest gap between IMU samples integrated across, s; a longer one restarts the
     /// alignment.
     pub max_gap_s: f64,
+    /// Seconds every aid may stay isolated before the mechanization is re-placed on the
+    /// next GNSS fix (position and velocity; the filter restarts, integrity converges
+    /// again); `null`: never. A MEMS INS coasting longer is no reference to test GNSS
+    /// against.
+    pub reinit_after_s: Option<f64>,
     /// Alignment.
     pub align: AlignSection,
 }
@@ -85,10 +90,15 @@ impl Default for StrapdownSection {
             mounting_deg: [0.0; 3],
             gnss_lever_arm_m: [0.0; 3],
             max_gap_s: 1.0,
+            reinit_after_s: Some(DEFAULT_REINIT_AFTER_S),
             align: AlignSection::default(),
         }
     }
 }
+
+/// Default `reinit_after_s`, s: a MEMS INS coasting 20 s is tens of metres off, more
+/// than any GNSS fix it would be tested against.
+pub const DEFAULT_REINIT_AFTER_S: f64 = 20.0;
 
 /// The validated `strapdown` section.
 #[derive(Debug, Clone, PartialEq)]
@@ -132,6 +142,13 @@ impl StrapdownConfig {
         )?;
         let a = &s.align;
         let positive = |x: f64| x.is_finite() && x > 0.0;
+        if let Some(r) = s.reinit_after_s {
+            check(
+                "reinit_after_s",
+                positive(r),
+                "must be a finite number > 0 (or null)",
+            )?;
+        }
         check(
             "align.static_s",
             positive(a.static_s),
@@ -212,6 +229,9 @@ pub struct FrontState {
     last_fix: Option<(f64, Fix)>,
     /// Levelling's low-passed specific force and rate (body), against vibration.
     lowpass: Option<([f64; 3], [f64; 3])>,
+    /// Since when every aid has been isolated (s), while aligned.
+    #[serde(default)]
+    isolated_since: Option<f64>,
 }
 
 /// Time constant of the low-pass before the static detector, s: an idling car's vibration
@@ -284,7 +304,17 @@ impl FrontState {
             accel_bias: [0.0; 3],
             last_fix: None,
             lowpass: None,
+            isolated_since: None,
         }
+    }
+
+    /// Notes whether every aid is isolated after the epoch at `t` (for `reinit_after_s`).
+    pub(super) fn note_isolation(&mut self, t: f64, all_isolated: bool) {
+        self.isolated_since = match (all_isolated, self.isolated_since) {
+            (true, Some(since)) => Some(since),
+            (true, None) => Some(t),
+            (false, _) => None,
+        };
     }
 
     /// The alignment state.
@@ -375,9 +405,21 @@ impl FrontState {
         if dt == 0.0 {
             return Advance::Aligning;
         }
+        let reinit = match (cfg.section.reinit_after_s, self.isolated_since) {
+            (Some(after), Some(since)) => epoch.t - since >= after,
+            _ => false,
+        };
         match (&mut self.mech, self.aligned) {
             (Some(mech), true) => {
                 mech.step(&inc);
+                if let (true, Some(g)) = (reinit, &epoch.gnss) {
+                    // Re-placed on the fix, attitude kept: the filter restarts.
+                    let lla = antenna_to_imu(Fix::from(g).lla(), &mech.c_bn(), &cfg.lever_b);
+                    let vel = g.vel.map_or_else(|| mech.vel(), Vector3::from);
+                    mech.set_position_velocity(lla, vel);
+                    self.isolated_since = None;
+                    return self.started();
+                }
                 Advance::Nav {
                     nav: nav_solution(mech),
                     restart: false,

@@ -1,0 +1,358 @@
+//! The federated monitor on a real car drive (docs/experiments.md, "The real car drive";
+//! docs/methods.md §M30, §M31): the shared drive's 100 Hz MEMS IMU streamed raw into a
+//! `federated` monitor with `input: imu` (the service's own strapdown mechanization,
+//! alignment and closed loop), aided by GNSS derived from the drive's RTK solution —
+//! decimated to 1 Hz, with single-point noise (seeded), 15 s outages — and measured
+//! against the RTK solution itself:
+//!
+//! - fault-free, per seed: position and velocity errors outside outages, the error at the
+//!   end of each outage, the attitude beside the GNSS course, alarms and warnings per hour
+//!   as the session core logs them, and the integrity;
+//! - with injected GNSS faults (a 10 m jump, 0.5–2 m/s ramps, a frozen receiver) at
+//!   several start times and seeds: detection and exclusion delays, the injected error at
+//!   exclusion, and the worst solution error while the fault lasts.
+//!
+//! The CLI reads the files (`navguard experiment drive`); this module takes the IMU
+//! epochs and the reference as data, so tests can run it on a slice.
+
+mod aid;
+mod render;
+mod run;
+
+pub use aid::{AidPlan, FaultWindow, reference_at, with_aid};
+pub use render::{FreeStats, SETTLE_S, free_stats, outage_growth, plots, render};
+pub use run::{DriveRun, ErrSample, TestRow};
+
+use nalgebra::Vector3;
+use serde_json::{Value, json};
+
+use navguard_core::detect::{PolicyConfig, ThresholdSpec};
+use navguard_core::epoch::Epoch;
+use navguard_core::geo::Lla;
+use navguard_core::monitor::{MonitorConfig, MonitorKind, MonitorSpec};
+use navguard_core::session::Severity;
+
+use super::ExperimentError;
+
+/// One reference fix (the RTK solution at the antenna).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RefFix {
+    /// GPS seconds.
+    pub t: f64,
+    /// Position.
+    pub lla: Lla,
+    /// Velocity east, north, up, m/s.
+    pub vel: Vector3<f64>,
+}
+
+/// The aid's noise and rate: a single-point receiver's.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AidNoise {
+    /// Fixes per second.
+    pub rate_hz: f64,
+    /// Horizontal position σ per axis, m.
+    pub pos_sigma_h_m: f64,
+    /// Vertical position σ, m.
+    pub pos_sigma_v_m: f64,
+    /// Velocity σ per axis, m/s.
+    pub vel_sigma_mps: f64,
+}
+
+impl Default for AidNoise {
+    /// 1 Hz; 1.5 m horizontal and 3 m vertical per axis, 0.1 m/s (a single-point
+    /// receiver's code and Doppler solution in open sky).
+    fn default() -> Self {
+        AidNoise {
+            rate_hz: 1.0,
+            pos_sigma_h_m: 1.5,
+            pos_sigma_v_m: 3.0,
+            vel_sigma_mps: 0.1,
+        }
+    }
+}
+
+/// An injected GNSS fault.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FaultKind {
+    /// A position step east, m.
+    Jump(f64),
+    /// A position ramp east, m/s.
+    Ramp(f64),
+    /// The receiver repeats its last fix (position and velocity).
+    Frozen,
+}
+
+impl FaultKind {
+    /// The row label.
+    pub fn label(&self) -> String {
+        match self {
+            FaultKind::Jump(m) => format!("{m} m jump"),
+            FaultKind::Ramp(v) => format!("{v} m/s ramp"),
+            FaultKind::Frozen => "frozen receiver".into(),
+        }
+    }
+}
+
+/// The drive's data: the IMU epochs (sensor frame, GPS time) and the RTK reference.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DriveData {
+    /// One epoch per IMU sample, with `imu` only.
+    pub imu: Vec<Epoch>,
+    /// The reference fixes, in time order.
+    pub reference: Vec<RefFix>,
+}
+
+/// What to run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DriveParams {
+    /// Noise seeds of the fault-free runs; the fault runs use the first two.
+    pub seeds: Vec<u64>,
+    /// The aid.
+    pub noise: AidNoise,
+    /// Outage starts, s from the drive's start.
+    pub outages: Vec<f64>,
+    /// Outage length, s.
+    pub outage_s: f64,
+    /// The faults injected.
+    pub faults: Vec<FaultKind>,
+    /// Fault starts, s from the drive's start.
+    pub fault_starts: Vec<f64>,
+    /// Fault length, s.
+    pub fault_s: f64,
+    /// The monitor's config (a `federated` config with `input: imu`).
+    pub config: Value,
+    /// False-alarm probability of every test.
+    pub p_fa: f64,
+}
+
+/// The shared drive's mounting: its IMU's axes are (back, right, up) in the car
+/// (roll 180°, yaw 180° from forward-right-down), a yaw of 90° in the monitor's
+/// convention; the antenna 5 cm left of the IMU.
+pub const DRIVE_MOUNTING_DEG: [f64; 3] = [0.0, 0.0, 90.0];
+/// The antenna from the IMU, body frame (right, forward, up), m.
+pub const DRIVE_LEVER_ARM_M: [f64; 3] = [-0.05, 0.0, 0.0];
+
+/// The monitor config for the drive: the noise densities of the source project's
+/// configuration (gyro 0.0038 °/s/√Hz = 0.228 °/√h; accelerometer 70 µg/√Hz =
+/// 0.0412 m/s/√h; bias random walks 3.8e-5 °/s²/√Hz = 8.2 °/h/√h and 7 µg/√Hz·s⁻¹ =
+/// 420 µg/√h), bias uncertainties after the static calibration (gyro 50 °/h, the
+/// accelerometers 15 mg: their scale error shows as ~13 mg at rest), the aid's σ.
+pub fn drive_config(noise: &AidNoise) -> Value {
+    json!({
+        "aids": ["gnss"],
+        "input": "imu",
+        "gnss": {"pos_sigma_m": noise.pos_sigma_h_m, "vel_sigma_mps": noise.vel_sigma_mps},
+        "imu": {
+            "gyro_bias_dph": 50.0,
+            "accel_bias_ug": 15000.0,
+            "arw_deg_rthr": 10.0,
+            "vrw_mps_rthr": 1.0,
+            "gyro_bias_walk_dph_rthr": 100.0,
+            "accel_bias_walk_ug_rthr": 420.0
+        },
+        "init": {"pos_sigma_m": 3.0, "vel_sigma_mps": 0.3},
+        "hal_m": 40.0,
+        "strapdown": {
+            "mounting_deg": DRIVE_MOUNTING_DEG,
+            "gnss_lever_arm_m": DRIVE_LEVER_ARM_M,
+            "align": {"static_s": 10.0, "max_accel_dev_mps2": 0.5, "max_rate_dps": 2.0}
+        }
+    })
+}
+
+impl Default for DriveParams {
+    fn default() -> Self {
+        let noise = AidNoise::default();
+        DriveParams {
+            seeds: vec![1, 2, 3],
+            noise,
+            outages: vec![150.0, 250.0, 350.0, 450.0],
+            outage_s: 15.0,
+            faults: vec![
+                FaultKind::Jump(10.0),
+                FaultKind::Ramp(0.5),
+                FaultKind::Ramp(1.0),
+                FaultKind::Ramp(2.0),
+                FaultKind::Frozen,
+            ],
+            // 197 s: the car stands still (196.5–207 s), where a frozen receiver is right
+            // until it moves again and only the stuck test can see it.
+            fault_starts: vec![120.0, 197.0, 300.0, 420.0],
+            fault_s: 60.0,
+            config: drive_config(&noise),
+            p_fa: 1e-3,
+        }
+    }
+}
+
+/// One fault-free run's figures.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FreeRow {
+    /// Noise seed.
+    pub seed: u64,
+    /// The run.
+    pub run: DriveRun,
+}
+
+/// One faulted run's figures.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FaultRow {
+    /// The fault.
+    pub kind: FaultKind,
+    /// Start, s from the drive's start.
+    pub start: f64,
+    /// Noise seed.
+    pub seed: u64,
+    /// Seconds from the start to the first fix a GNSS test finds unhealthy: from then on
+    /// the fixes no longer update the filter (rejected) until the aid is healthy again.
+    pub rejected_s: Option<f64>,
+    /// Seconds to the aid's isolation (the alarm; left out of fusion).
+    pub isolated_s: Option<f64>,
+    /// Seconds to the `gnss.stuck` test's first unhealthy epoch.
+    pub stuck_s: Option<f64>,
+    /// The injected horizontal error at the first rejected fix, m.
+    pub injected_at_rejection_m: Option<f64>,
+    /// The injected horizontal error at the last fix before the isolation, m.
+    pub injected_at_isolation_m: Option<f64>,
+    /// Worst horizontal solution error while the fault lasts, m.
+    pub worst_error_m: f64,
+    /// Alarms logged while the fault lasts (any GNSS test).
+    pub alarms: usize,
+}
+
+/// Everything the experiment measured.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DriveResult {
+    /// The parameters.
+    pub params: DriveParams,
+    /// Fault-free runs, one per seed.
+    pub free: Vec<FreeRow>,
+    /// Faulted runs.
+    pub faults: Vec<FaultRow>,
+}
+
+/// The monitor spec of the drive.
+fn spec(params: &DriveParams) -> Result<MonitorSpec, ExperimentError> {
+    let config = MonitorConfig::parse(MonitorKind::Federated, &params.config)
+        .map_err(|e| ExperimentError::Build(e.into()))?;
+    Ok(MonitorSpec {
+        kind: MonitorKind::Federated,
+        config,
+        policy: PolicyConfig::counters_default(),
+        threshold: ThresholdSpec::PFa(params.p_fa),
+    })
+}
+
+/// The antenna lever arm of `config`, body frame, m.
+fn lever_arm(config: &Value) -> Vector3<f64> {
+    let l = &config["strapdown"]["gnss_lever_arm_m"];
+    Vector3::from_fn(|i, _| l[i].as_f64().unwrap_or(0.0))
+}
+
+/// Runs the drive fault-free for every seed, then every fault at every start for the
+/// first two seeds; `progress` is called after each run with (done, total).
+pub fn run(
+    data: &DriveData,
+    params: &DriveParams,
+    mut progress: impl FnMut(usize, usize),
+) -> Result<DriveResult, ExperimentError> {
+    let spec = spec(params)?;
+    let lever = lever_arm(&params.config);
+    let fault_seeds: Vec<u64> = params.seeds.iter().copied().take(2).collect();
+    let total =
+        params.seeds.len() + params.faults.len() * params.fault_starts.len() * fault_seeds.len();
+    let mut done = 0;
+    let mut free = Vec::new();
+    for &seed in &params.seeds {
+        let plan = AidPlan {
+            noise: params.noise,
+            outages: params.outages.clone(),
+            outage_s: params.outage_s,
+            fault: None,
+            seed,
+        };
+        let (epochs, _) = with_aid(&data.imu, &data.reference, &plan);
+        free.push(FreeRow {
+            seed,
+            run: run::run(&epochs, &data.reference, &spec, lever)?,
+        });
+        done += 1;
+        progress(done, total);
+    }
+    let mut faults = Vec::new();
+    for &kind in &params.faults {
+        for &start in &params.fault_starts {
+            for &seed in &fault_seeds {
+                faults.push(fault_run(data, params, &spec, lever, (kind, start, seed))?);
+                done += 1;
+                progress(done, total);
+            }
+        }
+    }
+    Ok(DriveResult {
+        params: params.clone(),
+        free,
+        faults,
+    })
+}
+
+/// One faulted run (no outages) and its delays.
+fn fault_run(
+    data: &DriveData,
+    params: &DriveParams,
+    spec: &MonitorSpec,
+    lever: Vector3<f64>,
+    (kind, start, seed): (FaultKind, f64, u64),
+) -> Result<FaultRow, ExperimentError> {
+    let window = FaultWindow {
+        kind,
+        start,
+        duration: params.fault_s,
+    };
+    let plan = AidPlan {
+        noise: params.noise,
+        outages: Vec::new(),
+        outage_s: params.outage_s,
+        fault: Some(window),
+        seed,
+    };
+    let (epochs, injected) = with_aid(&data.imu, &data.reference, &plan);
+    let r = run::run(&epochs, &data.reference, spec, lever)?;
+    let end = start + params.fault_s;
+    let t0 = data.imu.first().map_or(0.0, |e| e.t);
+    let injected_at = |te: Option<f64>| {
+        te.and_then(|te| {
+            injected
+                .iter()
+                .filter(|(i, _)| data.imu[*i].t - t0 <= te + 1e-6)
+                .last()
+                .map(|(_, e)| e.xy().norm())
+        })
+    };
+    let rejected = r.first_unhealthy(start, None).filter(|&t| t < end);
+    let isolated = r.first_isolated(start).filter(|&t| t < end);
+    let worst_error_m = r
+        .errors
+        .iter()
+        .filter(|s| (start..end).contains(&s.t))
+        .map(ErrSample::horizontal)
+        .fold(0.0, f64::max);
+    let alarms = r
+        .entries
+        .iter()
+        .filter(|e| (start..end).contains(&e.t) && e.severity == Severity::Alarm)
+        .count();
+    let delay = |t: Option<f64>| t.filter(|&t| t < end).map(|t| t - start);
+    Ok(FaultRow {
+        kind,
+        start,
+        seed,
+        rejected_s: rejected.map(|t| t - start),
+        isolated_s: isolated.map(|t| t - start),
+        stuck_s: delay(r.first_unhealthy(start, Some("gnss.stuck"))),
+        injected_at_rejection_m: injected_at(rejected),
+        injected_at_isolation_m: injected_at(isolated),
+        worst_error_m,
+        alarms,
+    })
+}

@@ -1,0 +1,103 @@
+//! `navguard experiment drive`: reads the shared car drive (IMU CSV on GPS time through
+//! its time tag, the RTK `.pos`) with the converter's readers and runs
+//! [`navguard_sim::experiment::drive`] on it; prints its tables and writes its figures.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use nalgebra::Vector3;
+use navguard_formats::rtklib_pos;
+use navguard_sim::experiment::drive;
+
+use super::convert_drive::{DriveArgs as ReadArgs, read_imu};
+use super::experiment::Experiment;
+
+/// `navguard experiment drive` flags.
+#[derive(Debug, clap::Args)]
+pub(crate) struct DriveArgs {
+    /// The folder holding the drive (`imu_1934.csv`, its `.tag`, `gnss_1934_sf.pos`).
+    #[arg(long, default_value = "tests/data/drive")]
+    pub data: PathBuf,
+    /// Noise seeds of the fault-free runs (the fault runs use the first two).
+    #[arg(long, value_delimiter = ',', default_value = "1,2,3")]
+    pub seeds: Vec<u64>,
+    /// False-alarm probability of every test.
+    #[arg(long, default_value_t = 1e-3)]
+    pub p_fa: f64,
+    /// Horizontal σ of the 1 Hz aid, m.
+    #[arg(long, default_value_t = 1.5)]
+    pub sigma_h: f64,
+    /// A `federated` monitor config (JSON file) to run instead of the drive's own
+    /// (`navguard_sim::experiment::drive::drive_config`).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Directory for the figures.
+    #[arg(long, default_value = "target/experiments/drive")]
+    pub out_dir: PathBuf,
+}
+
+/// The drive's IMU epochs (the logger's 0.125 s latency removed) and its RTK reference.
+pub(crate) fn read_drive(dir: &Path) -> anyhow::Result<drive::DriveData> {
+    let read = ReadArgs {
+        imu: Some(dir.join("imu_1934.csv")),
+        tag: Some(dir.join("imu_1934.csv.tag")),
+        imu_time_offset: -0.125,
+        ..ReadArgs::default()
+    };
+    let imu = read_imu(&read)?;
+    let pos = dir.join("gnss_1934_sf.pos");
+    let fixes = rtklib_pos::read_pos(&pos).with_context(|| format!("reading {}", pos.display()))?;
+    let reference = fixes
+        .iter()
+        .map(|f| drive::RefFix {
+            t: f.t,
+            lla: f.lla,
+            vel: Vector3::from(f.vel.unwrap_or_default()),
+        })
+        .collect();
+    Ok(drive::DriveData { imu, reference })
+}
+
+impl Experiment for DriveArgs {
+    type Output = drive::DriveResult;
+    const TITLE: &'static str = "drive";
+
+    fn run(&self) -> anyhow::Result<Self::Output> {
+        let data = read_drive(&self.data)?;
+        let noise = drive::AidNoise {
+            pos_sigma_h_m: self.sigma_h,
+            ..drive::AidNoise::default()
+        };
+        let config = match &self.config {
+            Some(path) => {
+                let text = std::fs::read_to_string(path)
+                    .with_context(|| format!("reading {}", path.display()))?;
+                serde_json::from_str(&text)
+                    .with_context(|| format!("{} is not JSON", path.display()))?
+            }
+            None => drive::drive_config(&noise),
+        };
+        let params = drive::DriveParams {
+            seeds: self.seeds.clone(),
+            noise,
+            config,
+            p_fa: self.p_fa,
+            ..drive::DriveParams::default()
+        };
+        Ok(drive::run(&data, &params, |done, total| {
+            eprint!("\rdrive: run {done}/{total}");
+        })?)
+    }
+
+    fn render(output: &Self::Output) -> String {
+        drive::render(output)
+    }
+
+    fn plots(output: &Self::Output) -> Vec<(String, String)> {
+        drive::plots(output)
+    }
+
+    fn out_dir(&self) -> Option<&Path> {
+        Some(&self.out_dir)
+    }
+}
