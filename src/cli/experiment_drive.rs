@@ -6,6 +6,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use nalgebra::Vector3;
+use navguard::service::wire::{epoch_to_wire, parse_frame};
+use navguard_core::epoch::Epoch;
 use navguard_formats::rtklib_pos;
 use navguard_sim::experiment::drive;
 
@@ -31,9 +33,61 @@ pub(crate) struct DriveArgs {
     /// (`navguard_sim::experiment::drive::drive_config`).
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// Also write the fault-free run of the first seed for `navguard replay`: its epochs
+    /// (`drive.jsonl`) and the session body (`drive-session.json`), into this folder.
+    #[arg(long)]
+    pub write_epochs: Option<PathBuf>,
     /// Directory for the figures.
     #[arg(long, default_value = "target/experiments/drive")]
     pub out_dir: PathBuf,
+}
+
+/// Epochs through the ingest wire format and back: what a server gets from `replay`.
+fn through_the_wire(epochs: Vec<Epoch>) -> Result<Vec<Epoch>, String> {
+    let mut out = Vec::with_capacity(epochs.len());
+    for e in &epochs {
+        let line = epoch_to_wire(e).map_err(|e| e.message)?;
+        out.extend(parse_frame(&line, 1).map_err(|e| e.message)?);
+    }
+    Ok(out)
+}
+
+/// Writes the fault-free run of `seed` and its session body into `dir`.
+fn write_epochs(
+    dir: &Path,
+    data: &drive::DriveData,
+    params: &drive::DriveParams,
+) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let seed = params.seeds.first().copied().unwrap_or(1);
+    // As built: the experiment reads them back through the wire once, as a server does.
+    let epochs = drive::free_epochs(data, params, seed, &|e| Ok(e))?;
+    let mut text = String::with_capacity(epochs.len() * 120);
+    for e in &epochs {
+        text.push_str(&epoch_to_wire(e).map_err(|e| anyhow::anyhow!(e.message))?);
+        text.push('\n');
+    }
+    let path = dir.join("drive.jsonl");
+    std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
+    let spec = drive::monitor_spec(params)?;
+    let body = serde_json::json!({
+        "id": "drive",
+        "monitors": [{
+            "name": "nav",
+            "type": "federated",
+            "config": params.config,
+            "policy": spec.policy,
+            "p_fa": params.p_fa,
+        }],
+    });
+    let path = dir.join("drive-session.json");
+    std::fs::write(&path, serde_json::to_string_pretty(&body)?)
+        .with_context(|| format!("writing {}", path.display()))?;
+    eprintln!(
+        "wrote the fault-free run of seed {seed} and its session to {}",
+        dir.display()
+    );
+    Ok(())
 }
 
 /// The drive's IMU epochs (the logger's 0.125 s latency removed) and its RTK reference.
@@ -84,9 +138,14 @@ impl Experiment for DriveArgs {
             p_fa: self.p_fa,
             ..drive::DriveParams::default()
         };
-        Ok(drive::run(&data, &params, |done, total| {
+        if let Some(dir) = &self.write_epochs {
+            write_epochs(dir, &data, &params)?;
+        }
+        let result = drive::run(&data, &params, &through_the_wire, |done, total| {
             eprint!("\rdrive: run {done}/{total}");
-        })?)
+        })?;
+        eprintln!();
+        Ok(result)
     }
 
     fn render(output: &Self::Output) -> String {

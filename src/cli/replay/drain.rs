@@ -17,6 +17,9 @@ use crate::cli::http::Endpoint;
 const DRAIN_STALL: Duration = Duration::from_secs(30);
 /// Longest wait for alarms the stats count but the socket has not delivered.
 const ALARM_GRACE: Duration = Duration::from_secs(5);
+/// On an echoing session, how long the socket may go without a new `result` before the
+/// ones still missing are given up.
+const RESULT_QUIET: Duration = Duration::from_secs(2);
 
 /// The session's `/stats` (`path` is `/api/v1/sessions/{id}`).
 pub(super) async fn stats(endpoint: &Endpoint, path: &str) -> anyhow::Result<SessionStats> {
@@ -78,6 +81,7 @@ pub(super) async fn drain(
         let want = current.alarms().saturating_sub(base_alarms);
         let got = tally.lock().unwrap_or_else(|p| p.into_inner()).alarm_total;
         if got >= want {
+            await_results(tally, sent.epochs).await;
             return Ok(current);
         }
         if Instant::now() > deadline {
@@ -85,6 +89,21 @@ pub(super) async fn drain(
             return Ok(current);
         }
         tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+/// On an echoing session (some `result` came back), waits until a result per epoch sent
+/// has arrived or none has for [`RESULT_QUIET`]: the server has handled every frame, but
+/// its last results may still be on the socket (`--messages` copies them all).
+async fn await_results(tally: &Arc<Mutex<Tally>>, epochs: u64) {
+    let count = || tally.lock().unwrap_or_else(|p| p.into_inner()).results();
+    let mut last = (Instant::now(), count());
+    while last.1 > 0 && last.1 < epochs && last.0.elapsed() < RESULT_QUIET {
+        tokio::time::sleep(Duration::from_millis(20)).await;
+        let now = count();
+        if now != last.1 {
+            last = (Instant::now(), now);
+        }
     }
 }
 

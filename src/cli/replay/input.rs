@@ -32,6 +32,8 @@ pub(super) struct FileScan {
     pub z: bool,
     /// Some epoch has a `gnss_raw` block (pseudoranges).
     pub gnss_raw: bool,
+    /// Some epoch has an `imu` block (raw IMU).
+    pub imu: bool,
 }
 
 #[derive(Debug, Deserialize)]
@@ -49,6 +51,8 @@ struct Peek {
     z: Option<IgnoredAny>,
     #[serde(default)]
     gnss_raw: Option<IgnoredAny>,
+    #[serde(default)]
+    imu: Option<IgnoredAny>,
 }
 
 fn peek(line: &str, number: usize) -> anyhow::Result<Peek> {
@@ -78,6 +82,7 @@ pub(super) fn scan(path: &Path) -> anyhow::Result<FileScan> {
         out.cns |= p.cns.is_some();
         out.z |= p.z.is_some();
         out.gnss_raw |= p.gnss_raw.is_some();
+        out.imu |= p.imu.is_some();
     }
     if out.epochs == 0 {
         bail!("{} holds no epochs", path.display());

@@ -146,6 +146,9 @@ How a new session's monitor is chosen (an existing session is used as it is):
     `federated` when the file has `ins` blocks, with config --monitor-config or,
         by default, {\"aids\": [the aids present in the file: gnss, dvl, cns]} and
         every other field at its seed 004 default (the `ship` scenario's setup);
+    `federated` with `input: imu` when the file has `imu` blocks and no `ins`
+        (`navguard convert --format imu-csv`'s output), with config
+        --monitor-config or, by default, {\"aids\": [\"gnss\"], \"input\": \"imu\"};
     `gnss` when the file has `gnss_raw` blocks and no `ins` (`navguard convert`'s
         output), with config --monitor-config or, by default, {} (every default);
     `linear` when the file has `z` blocks and no `ins` (needs --monitor-config);

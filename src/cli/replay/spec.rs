@@ -112,9 +112,20 @@ fn spec_file(path: &std::path::Path, session: &str) -> anyhow::Result<CreateSess
 }
 
 /// The one monitor's type and config: `federated` for a file with `ins` (over the
-/// aids it holds unless `--monitor-config` says otherwise), `gnss` for `gnss_raw`
-/// (its defaults unless `--monitor-config`), `linear` for `z`.
+/// aids it holds unless `--monitor-config` says otherwise) or with `imu` and no `ins`
+/// (`input: imu`, its GNSS aid, the strapdown defaults unless `--monitor-config`),
+/// `gnss` for `gnss_raw` (its defaults unless `--monitor-config`), `linear` for `z`.
 fn monitor_config(args: &ReplayArgs, scan: &FileScan) -> anyhow::Result<(MonitorKind, Value)> {
+    if scan.imu && !scan.ins {
+        let config = match &args.monitor_config {
+            Some(text) => json_arg(text, "--monitor-config")?,
+            None if scan.gnss => serde_json::json!({"aids": ["gnss"], "input": "imu"}),
+            None => bail!(
+                "the file has `imu` blocks but no `gnss`: the strapdown needs a GNSS fix to align (give --monitor-config for other aids)"
+            ),
+        };
+        return Ok((MonitorKind::Federated, config));
+    }
     if scan.gnss_raw && !scan.ins {
         let config = match &args.monitor_config {
             Some(text) => json_arg(text, "--monitor-config")?,
@@ -177,6 +188,28 @@ mod tests {
         assert_eq!(body.monitors[0].kind, MonitorKind::Gnss);
         assert_eq!(body.monitors[0].name, "gnss");
         assert_eq!(body.monitors[0].config, serde_json::json!({}));
+    }
+
+    #[test]
+    fn a_file_with_raw_imu_gets_a_federated_monitor_on_its_imu() {
+        let scan = FileScan {
+            epochs: 3,
+            imu: true,
+            gnss: true,
+            ..FileScan::default()
+        };
+        let body = session_body(&args(&[]), &scan).unwrap();
+        assert_eq!(body.monitors[0].kind, MonitorKind::Federated);
+        assert_eq!(
+            body.monitors[0].config,
+            serde_json::json!({"aids": ["gnss"], "input": "imu"})
+        );
+        let no_fix = FileScan {
+            gnss: false,
+            ..scan
+        };
+        let err = session_body(&args(&[]), &no_fix).unwrap_err().to_string();
+        assert!(err.contains("no `gnss`"), "{err}");
     }
 
     #[test]

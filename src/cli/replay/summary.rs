@@ -71,6 +71,11 @@ pub(super) struct Tally {
 }
 
 impl Tally {
+    /// `result` messages received.
+    pub(super) fn results(&self) -> u64 {
+        self.results
+    }
+
     /// A tally that copies messages to `messages` (`--messages`) when given.
     pub(super) fn new(messages: Option<std::io::BufWriter<std::fs::File>>) -> Self {
         Self {

@@ -208,6 +208,12 @@ pub struct AvailabilitySpan {
     pub to_t: Option<f64>,
 }
 
+/// A number that JSON wrote as `null` (serde_json writes a non-finite `f64` so) reads
+/// back as NaN.
+fn nan_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+}
+
 /// Integrity availability of a monitor with a protection level (docs/methods.md §M24).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct IntegrityStats {
@@ -215,7 +221,9 @@ pub struct IntegrityStats {
     pub state: Availability,
     /// Epoch time it was entered.
     pub state_since_t: f64,
-    /// Last protection level, m.
+    /// Last protection level, m; none yet (a strapdown still aligning) is NaN, `null` on
+    /// the wire.
+    #[serde(deserialize_with = "nan_if_null")]
     pub protection_level: f64,
     /// Alert limit, m.
     pub alert_limit: f64,
@@ -534,6 +542,28 @@ mod tests {
     fn session_alarms_sum_over_monitors_and_tests() {
         assert_eq!(sample().alarms(), 6);
         assert_eq!(sample().warnings(), 0);
+    }
+
+    #[test]
+    fn a_protection_level_not_yet_known_goes_out_as_null_and_reads_back_as_nan() {
+        let aligning = Integrity {
+            state: Availability::Converging,
+            protection_level: f64::NAN,
+            alert_limit: 40.0,
+        };
+        let s = IntegrityStats::new(3.0, &aligning);
+        let text = serde_json::to_string(&s).unwrap();
+        assert!(text.contains("\"protection_level\":null"), "{text}");
+        let back: IntegrityStats = serde_json::from_str(&text).unwrap();
+        assert!(back.protection_level.is_nan());
+        assert_eq!(
+            (back.state, back.alert_limit),
+            (Availability::Converging, 40.0)
+        );
+        assert_eq!(
+            back.max_protection_level, None,
+            "never the max while converging"
+        );
     }
 
     #[test]

@@ -81,6 +81,9 @@ pub enum ExperimentError {
         /// The failure.
         source: StepError,
     },
+    /// The epochs could not be prepared (e.g. written to the wire and read back).
+    #[error("preparing the epochs: {0}")]
+    Prepare(String),
     /// The monitor's outputs carry no corrected solution.
     #[error("the monitor reports no corrected `solution` (t = {0} s)")]
     NoSolution(f64),

@@ -231,8 +231,9 @@ pub struct DriveResult {
     pub faults: Vec<FaultRow>,
 }
 
-/// The monitor spec of the drive.
-fn spec(params: &DriveParams) -> Result<MonitorSpec, ExperimentError> {
+/// The monitor spec the drive runs: `params.config` under the counters policy at
+/// `params.p_fa` (the CLI writes it for `navguard replay`).
+pub fn monitor_spec(params: &DriveParams) -> Result<MonitorSpec, ExperimentError> {
     let config = MonitorConfig::parse(MonitorKind::Federated, &params.config)
         .map_err(|e| ExperimentError::Build(e.into()))?;
     Ok(MonitorSpec {
@@ -249,14 +250,37 @@ fn lever_arm(config: &Value) -> Vector3<f64> {
     Vector3::from_fn(|i, _| l[i].as_f64().unwrap_or(0.0))
 }
 
+/// How a run's epochs reach the monitor: as built, or (the CLI) through the ingest wire
+/// format and back, exactly as `navguard replay` would stream them to a server.
+pub type Prepare<'a> = &'a dyn Fn(Vec<Epoch>) -> Result<Vec<Epoch>, String>;
+
+/// The epochs of the fault-free run of `seed` (outages as `params` says), prepared.
+pub fn free_epochs(
+    data: &DriveData,
+    params: &DriveParams,
+    seed: u64,
+    prepare: Prepare<'_>,
+) -> Result<Vec<Epoch>, ExperimentError> {
+    let plan = AidPlan {
+        noise: params.noise,
+        outages: params.outages.clone(),
+        outage_s: params.outage_s,
+        fault: None,
+        seed,
+    };
+    prepare(with_aid(&data.imu, &data.reference, &plan).0).map_err(ExperimentError::Prepare)
+}
+
 /// Runs the drive fault-free for every seed, then every fault at every start for the
-/// first two seeds; `progress` is called after each run with (done, total).
+/// first two seeds, each run's epochs through `prepare`; `progress` is called after each
+/// run with (done, total).
 pub fn run(
     data: &DriveData,
     params: &DriveParams,
+    prepare: Prepare<'_>,
     mut progress: impl FnMut(usize, usize),
 ) -> Result<DriveResult, ExperimentError> {
-    let spec = spec(params)?;
+    let spec = monitor_spec(params)?;
     let lever = lever_arm(&params.config);
     let fault_seeds: Vec<u64> = params.seeds.iter().copied().take(2).collect();
     let total =
@@ -264,14 +288,7 @@ pub fn run(
     let mut done = 0;
     let mut free = Vec::new();
     for &seed in &params.seeds {
-        let plan = AidPlan {
-            noise: params.noise,
-            outages: params.outages.clone(),
-            outage_s: params.outage_s,
-            fault: None,
-            seed,
-        };
-        let (epochs, _) = with_aid(&data.imu, &data.reference, &plan);
+        let epochs = free_epochs(data, params, seed, prepare)?;
         free.push(FreeRow {
             seed,
             run: run::run(&epochs, &data.reference, &spec, lever)?,
@@ -283,7 +300,8 @@ pub fn run(
     for &kind in &params.faults {
         for &start in &params.fault_starts {
             for &seed in &fault_seeds {
-                faults.push(fault_run(data, params, &spec, lever, (kind, start, seed))?);
+                let case = (kind, start, seed);
+                faults.push(fault_run(data, params, &spec, (lever, prepare), case)?);
                 done += 1;
                 progress(done, total);
             }
@@ -301,7 +319,7 @@ fn fault_run(
     data: &DriveData,
     params: &DriveParams,
     spec: &MonitorSpec,
-    lever: Vector3<f64>,
+    (lever, prepare): (Vector3<f64>, Prepare<'_>),
     (kind, start, seed): (FaultKind, f64, u64),
 ) -> Result<FaultRow, ExperimentError> {
     let window = FaultWindow {
@@ -317,6 +335,7 @@ fn fault_run(
         seed,
     };
     let (epochs, injected) = with_aid(&data.imu, &data.reference, &plan);
+    let epochs = prepare(epochs).map_err(ExperimentError::Prepare)?;
     let r = run::run(&epochs, &data.reference, spec, lever)?;
     let end = start + params.fault_s;
     let t0 = data.imu.first().map_or(0.0, |e| e.t);

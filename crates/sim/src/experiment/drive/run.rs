@@ -157,27 +157,6 @@ pub(super) fn run(
         };
         let rel = e.t - t0;
         record_tests(&mut out, report, rel);
-        if std::env::var_os("DRIVE_DEBUG").is_some() && e.gnss.is_some() {
-            let v = serde_json::to_value(&report.outputs).unwrap_or(Value::Null);
-            let lam: Vec<String> = report
-                .tests
-                .iter()
-                .map(|o| {
-                    format!(
-                        "{}={:.1}/{:?}",
-                        o.name, o.statistic.value, o.decision.health
-                    )
-                })
-                .collect();
-            let err = out.errors.last().map(|s| (s.horizontal(), s.pos[2], s.vel));
-            eprintln!(
-                "{rel:.2} {:?} {} {:?} {}",
-                v["alignment"],
-                lam.join(" "),
-                err,
-                v["solution"]["att"]
-            );
-        }
         let (solution, isolated) = read_outputs(report);
         if isolated != was_isolated {
             out.isolation.push((rel, isolated));
@@ -199,18 +178,6 @@ pub(super) fn run(
                 severity: entry.severity,
             })
         }));
-    }
-    if std::env::var_os("DRIVE_DEBUG2").is_some() {
-        for s in out.errors.iter().filter(|s| (276.0..294.0).contains(&s.t)) {
-            eprintln!(
-                "E {:.2} pos {:?} vel {:.3} att {:?} course {:?}",
-                s.t,
-                s.pos.map(|x| (x * 100.0).round() / 100.0),
-                s.vel,
-                s.att.map(|x| (x * 100.0).round() / 100.0),
-                s.course
-            );
-        }
     }
     Ok(out)
 }
