@@ -163,7 +163,10 @@ pub(crate) fn read_solution(format: GnssFormat, a: &DriveArgs) -> anyhow::Result
 pub(crate) fn read_imu(a: &DriveArgs) -> anyhow::Result<Vec<Epoch>> {
     let path = need(&a.imu, "--imu", "--format imu-csv")?;
     let samples = imu_csv::read_imu_csv(path, &a.layout())?;
-    let (first, last) = (samples[0].t, samples[samples.len() - 1].t);
+    let (Some(first), Some(last)) = (samples.first(), samples.last()) else {
+        anyhow::bail!("{}: no IMU samples", path.display());
+    };
+    let (first, last) = (first.t, last.t);
     let offset = a.imu_time_offset;
     let imu = match &a.tag {
         Some(tag_path) => {
