@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use nalgebra::Vector3;
 use navguard_core::epoch::Epoch;
-use navguard_core::monitor::{self, Monitor, NoModels};
+use navguard_core::monitor::{self, NoModels};
 use navguard_formats::imu_csv::{self, ImuCsvLayout};
 use navguard_formats::{rtklib_pos, timetag};
 use navguard_sim::experiment::drive::{self, DriveData, DriveParams};

@@ -56,7 +56,10 @@ pub use config::{
     DVL_DRIFT_DEFAULT_ON, DvlNoise, FederatedConfig, FederatedConfigWire, GNSS_DRIFT_DEFAULT_ON,
     GnssNoise, ImuSection, InitSigma, MAX_GAP_S, STUCK_DEFAULT_ON,
 };
-pub use imu::{AlignSection, Alignment, FrontState, InputKind, StrapdownConfig, StrapdownSection};
+pub use imu::{
+    AlignSection, Alignment, DEFAULT_REINIT_AFTER_S, FrontState, InputKind, StrapdownConfig,
+    StrapdownSection,
+};
 
 use nalgebra::{Matrix2, Vector3};
 use serde::{Deserialize, Serialize};

@@ -97,9 +97,12 @@ impl DriveRun {
     }
 }
 
+/// A solution read from the outputs: position, ENU velocity (m/s), attitude (degrees).
+type Solution = (Lla, Vector3<f64>, [f64; 3]);
+
 /// The monitor's outputs in their wire shape (docs/architecture.md §A6): the solution
-/// `(lla, vel, att)` and whether `gnss` is isolated.
-fn read_outputs(report: &MonitorReport) -> (Option<(Lla, Vector3<f64>, [f64; 3])>, bool) {
+/// and whether `gnss` is isolated.
+fn read_outputs(report: &MonitorReport) -> (Option<Solution>, bool) {
     let v = serde_json::to_value(&report.outputs).unwrap_or(Value::Null);
     let isolated = v["isolated"]
         .as_array()
@@ -207,7 +210,7 @@ fn error_sample(
     reference: &[RefFix],
     t: f64,
     rel: f64,
-    (lla, vel, att): (Lla, Vector3<f64>, [f64; 3]),
+    (lla, vel, att): Solution,
     lever_b: &Vector3<f64>,
     origin: &Lla,
 ) -> Option<ErrSample> {
