@@ -28,9 +28,7 @@ fn read_drive() -> DriveData {
     let samples = imu_csv::read_imu_csv(&dir.join("imu_1934.csv"), &ImuCsvLayout::default())
         .expect("the drive's IMU CSV");
     let tag = timetag::read_tag(&dir.join("imu_1934.csv.tag")).expect("its time tag");
-    let (first, last) = (samples[0].t, samples[samples.len() - 1].t);
-    let map = tag.mapping(first, last, -0.125);
-    let imu = imu_csv::to_epochs(&samples, |t| map.gps(t));
+    let imu = imu_csv::to_epochs_tagged(&samples, &tag, -0.125);
     let reference = rtklib_pos::read_pos(&dir.join("gnss_1934_sf.pos"))
         .expect("the drive's RTK solution")
         .iter()

@@ -18,7 +18,7 @@ use std::path::Path;
 use common::*;
 use nalgebra::Vector3;
 use navguard::service::Limits;
-use navguard::service::wire::{epoch_to_wire, parse_frame, result_frame};
+use navguard::service::wire::{self, epoch_to_wire, parse_frame, result_frame};
 use navguard_core::epoch::Epoch;
 use navguard_core::monitor::{self, NoModels};
 use navguard_core::session::{AlarmLevel, Seat, SessionCore};
@@ -34,9 +34,7 @@ fn read_drive() -> DriveData {
     let samples =
         imu_csv::read_imu_csv(&dir.join("imu_1934.csv"), &ImuCsvLayout::default()).unwrap();
     let tag = timetag::read_tag(&dir.join("imu_1934.csv.tag")).unwrap();
-    let (first, last) = (samples[0].t, samples[samples.len() - 1].t);
-    let map = tag.mapping(first, last, -0.125);
-    let imu = imu_csv::to_epochs(&samples, |t| map.gps(t));
+    let imu = imu_csv::to_epochs_tagged(&samples, &tag, -0.125);
     let reference = rtklib_pos::read_pos(&dir.join("gnss_1934_sf.pos"))
         .unwrap()
         .iter()
@@ -51,12 +49,7 @@ fn read_drive() -> DriveData {
 
 /// Epochs through the ingest wire format and back, as a server gets them.
 fn through_the_wire(epochs: Vec<Epoch>) -> Result<Vec<Epoch>, String> {
-    let mut out = Vec::with_capacity(epochs.len());
-    for e in &epochs {
-        let line = epoch_to_wire(e).map_err(|e| e.message)?;
-        out.extend(parse_frame(&line, 1).map_err(|e| e.message)?);
-    }
-    Ok(out)
+    wire::through_the_wire(&epochs).map_err(|e| e.message)
 }
 
 #[test]

@@ -171,7 +171,6 @@ pub(crate) fn read_imu(a: &DriveArgs) -> anyhow::Result<Vec<Epoch>> {
     let imu = match &a.tag {
         Some(tag_path) => {
             let tag = timetag::read_tag(tag_path)?;
-            let map = tag.mapping(first, last, offset);
             eprintln!(
                 "imu: {} samples over {:.3} s of counter, on the tag's {:.3} s from GPS {:.3} s, offset {offset} s",
                 thousands(samples.len() as u64),
@@ -179,7 +178,7 @@ pub(crate) fn read_imu(a: &DriveArgs) -> anyhow::Result<Vec<Epoch>> {
                 tag.span_s(),
                 tag.start_gps_s
             );
-            imu_csv::to_epochs(&samples, |t| map.gps(t))
+            imu_csv::to_epochs_tagged(&samples, &tag, offset)
         }
         None => {
             eprintln!(

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use nalgebra::Vector3;
-use navguard::service::wire::{epoch_to_wire, parse_frame};
+use navguard::service::wire::{self, epoch_to_wire};
 use navguard_core::epoch::Epoch;
 use navguard_formats::rtklib_pos;
 use navguard_sim::experiment::drive;
@@ -44,12 +44,7 @@ pub(crate) struct DriveArgs {
 
 /// Epochs through the ingest wire format and back: what a server gets from `replay`.
 fn through_the_wire(epochs: Vec<Epoch>) -> Result<Vec<Epoch>, String> {
-    let mut out = Vec::with_capacity(epochs.len());
-    for e in &epochs {
-        let line = epoch_to_wire(e).map_err(|e| e.message)?;
-        out.extend(parse_frame(&line, 1).map_err(|e| e.message)?);
-    }
-    Ok(out)
+    wire::through_the_wire(&epochs).map_err(|e| e.message)
 }
 
 /// Writes the fault-free run of `seed` and its session body into `dir`.

@@ -268,6 +268,21 @@ pub fn to_epochs(samples: &[ImuSample], gps_time: impl Fn(f64) -> f64) -> Vec<Ep
         .collect()
 }
 
+/// The samples as IMU-only epochs on GPS time through `tag`: its linear map from the
+/// samples' first and last counters ([`crate::timetag::TimeTag::mapping`]) plus
+/// `offset_s` (the logger's latency, negative when it stamps late). No samples, no epochs.
+pub fn to_epochs_tagged(
+    samples: &[ImuSample],
+    tag: &crate::timetag::TimeTag,
+    offset_s: f64,
+) -> Vec<Epoch> {
+    let (Some(first), Some(last)) = (samples.first(), samples.last()) else {
+        return Vec::new();
+    };
+    let map = tag.mapping(first.t, last.t, offset_s);
+    to_epochs(samples, |t| map.gps(t))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -722,6 +722,18 @@ pub fn epoch_to_wire(epoch: &Epoch) -> Result<String, FrameError> {
         .map_err(|e| FrameError::new(FrameErrorCode::InvalidEpoch, e.to_string()))
 }
 
+/// Epochs written as ingest frames and parsed back, one by one: what a server gets from
+/// a file of them (`navguard replay`). Degrees on the wire do not always round-trip to the
+/// same radians, so an in-process run that must match a server's bit for bit runs on
+/// these.
+pub fn through_the_wire(epochs: &[Epoch]) -> Result<Vec<Epoch>, FrameError> {
+    let mut out = Vec::with_capacity(epochs.len());
+    for e in epochs {
+        out.extend(parse_frame(&epoch_to_wire(e)?, 1)?);
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
 mod batch_tests {
     use super::*;

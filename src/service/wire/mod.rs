@@ -21,7 +21,7 @@ pub mod rest;
 pub use events::{
     ErrorEvent, RESULT_FRAME_BYTES, Tagged, result_frame, tagged, write_result_frame,
 };
-pub use ingest::{FrameError, FrameErrorCode, epoch_to_wire, parse_frame};
+pub use ingest::{FrameError, FrameErrorCode, epoch_to_wire, parse_frame, through_the_wire};
 pub use navguard_core::session::{
     AlarmLevel, AlarmRecord, AvailabilityChange, Severity, StateChange, TestThreshold,
     TestThresholdSpec, ThresholdUpdate, ThresholdView,

@@ -349,11 +349,7 @@ fn record(
             });
     }
     if let Some(i) = report.integrity {
-        run.integrity_counts[match i.state {
-            Availability::Converging => 0,
-            Availability::Available => 1,
-            Availability::Unavailable => 2,
-        }] += 1;
+        run.integrity_counts[integrity_slot(i.state)] += 1;
     }
     let outputs = serde_json::to_value(&report.outputs).unwrap_or(Value::Null);
     let (lla, vel, hpl) = solution(&outputs).ok_or(ExperimentError::NoSolution(t))?;
@@ -371,6 +367,16 @@ fn record(
         vn_mps: vel[1] - e.truth.vel.y,
     });
     Ok(())
+}
+
+/// The slot of an availability in the runs' `integrity_counts`: converging, available,
+/// unavailable.
+pub(crate) fn integrity_slot(state: Availability) -> usize {
+    match state {
+        Availability::Converging => 0,
+        Availability::Available => 1,
+        Availability::Unavailable => 2,
+    }
 }
 
 /// The fault windows of a scenario that concern one aid's test, merged where

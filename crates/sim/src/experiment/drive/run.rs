@@ -9,12 +9,12 @@ use serde_json::Value;
 use navguard_core::detect::Health;
 use navguard_core::epoch::Epoch;
 use navguard_core::geo::{self, Lla};
-use navguard_core::monitor::{self, Availability, MonitorReport, MonitorSpec};
+use navguard_core::monitor::{self, MonitorReport, MonitorSpec};
 use navguard_core::session::{AlarmLevel, Seat, SessionCore};
 
 use super::RefFix;
 use super::aid::reference_at;
-use crate::experiment::{ExperimentError, LogEntry};
+use crate::experiment::{ExperimentError, LogEntry, integrity_slot};
 
 /// IMU epochs between two error samples (4 Hz at 100 Hz).
 const ERROR_EVERY: usize = 25;
@@ -197,11 +197,7 @@ fn record_tests(out: &mut DriveRun, report: &MonitorReport, rel: f64) {
         });
     }
     if let Some(i) = report.integrity {
-        out.integrity_counts[match i.state {
-            Availability::Converging => 0,
-            Availability::Available => 1,
-            Availability::Unavailable => 2,
-        }] += 1;
+        out.integrity_counts[integrity_slot(i.state)] += 1;
     }
 }
 
