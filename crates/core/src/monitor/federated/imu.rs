@@ -98,7 +98,7 @@ impl Default for StrapdownSection {
 
 /// Default `reinit_after_s`, s: a MEMS INS coasting 20 s is tens of metres off, more
 /// than any GNSS fix it would be tested against.
-pub const DEFAULT_REINIT_AFTER_S: f64 = 20.0;
+pub(super) const DEFAULT_REINIT_AFTER_S: f64 = 20.0;
 
 /// The validated `strapdown` section.
 #[derive(Debug, Clone, PartialEq)]

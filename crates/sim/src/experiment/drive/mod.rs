@@ -343,8 +343,7 @@ fn fault_run(
         te.and_then(|te| {
             injected
                 .iter()
-                .filter(|(i, _)| data.imu[*i].t - t0 <= te + 1e-6)
-                .last()
+                .rfind(|(i, _)| data.imu[*i].t - t0 <= te + 1e-6)
                 .map(|(_, e)| e.xy().norm())
         })
     };

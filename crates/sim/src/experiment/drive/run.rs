@@ -97,9 +97,13 @@ impl DriveRun {
     }
 }
 
+/// A solution as the outputs carry it: position, velocity (ENU, m/s) and attitude
+/// (roll, pitch, yaw, degrees).
+type Solution = (Lla, Vector3<f64>, [f64; 3]);
+
 /// The monitor's outputs in their wire shape (docs/architecture.md §A6): the solution
 /// `(lla, vel, att)` and whether `gnss` is isolated.
-fn read_outputs(report: &MonitorReport) -> (Option<(Lla, Vector3<f64>, [f64; 3])>, bool) {
+fn read_outputs(report: &MonitorReport) -> (Option<Solution>, bool) {
     let v = serde_json::to_value(&report.outputs).unwrap_or(Value::Null);
     let isolated = v["isolated"]
         .as_array()
