@@ -3,7 +3,8 @@
 // Drawn by hand (no library): downsampled to min/max per pixel column so a
 // 6000-point history costs the same as the chart is wide; redrawn only when
 // the data, the time range or the hover position changed. Also TrackChart:
-// a federated monitor's corrected and raw INS tracks in local ENU metres.
+// a federated monitor's corrected and raw INS tracks in local ENU metres (one
+// track, the mechanized solution, for a monitor on raw IMU).
 
 import { fmtNum, fmtT, isNum } from "./dom.js";
 
@@ -259,7 +260,9 @@ const TRACK_PAD = { left: 56, right: 10, top: 8, bottom: 22 };
  * first point received (a `Track` from live.js). Equal scales on both axes so
  * a turn looks like a turn and a drift's direction reads true. Points closer
  * than a pixel to the last one drawn are skipped, so 20,000 points cost about
- * as much as the path is long on screen.
+ * as much as the path is long on screen. When the INS track is the solution
+ * (a monitor on raw IMU mechanizes it and feeds the correction back, or no
+ * point has yet parted), only the solution is drawn, under one legend entry.
  */
 export class TrackChart {
   constructor() {
@@ -273,6 +276,8 @@ export class TrackChart {
     this.el.append(this.canvas);
     this.track = null;
     this.drawnKey = "";
+    /** What an empty plot says (a monitor on raw IMU has no position until aligned). */
+    this.emptyText = "waiting for the first INS epoch\u2026";
   }
 
   setTrack(track) { this.track = track; this.drawnKey = ""; }
@@ -301,7 +306,7 @@ export class TrackChart {
     const plotW = cssW - P.left - P.right, plotH = cssH - P.top - P.bottom;
     if (n === 0) {
       g.fillStyle = COLORS.axis;
-      g.fillText("waiting for the first INS epoch\u2026", P.left + 8, P.top + plotH / 2);
+      g.fillText(this.emptyText, P.left + 8, P.top + plotH / 2);
       c.dataset.points = "0";
       return true;
     }
@@ -309,7 +314,13 @@ export class TrackChart {
     // Extent of both tracks, then one scale (m per pixel) for both axes: the
     // tighter of the two fits, the other axis is centred with room to spare.
     let e0 = Infinity, e1 = -Infinity, n0 = Infinity, n1 = -Infinity;
-    for (const [E, N] of [[tr.sE, tr.sN], [tr.iE, tr.iN]]) {
+    // One track when the INS is the solution: an identical line on top would only
+    // hide it, and a second legend entry would suggest two tracks.
+    const single = tr.mechanized || !tr.distinct;
+    const lines = single
+      ? [[tr.sE, tr.sN, TRACK_COLORS.solution, 4]]
+      : [[tr.sE, tr.sN, TRACK_COLORS.solution, 4], [tr.iE, tr.iN, TRACK_COLORS.ins, 1.5]];
+    for (const [E, N] of lines) {
       for (let i = 0; i < n; i++) {
         const e = E[i], nn = N[i];
         if (e < e0) e0 = e; if (e > e1) e1 = e;
@@ -352,7 +363,7 @@ export class TrackChart {
     g.save();
     g.beginPath(); g.rect(P.left, P.top, plotW, plotH); g.clip();
     let drawn = 0;
-    for (const [E, N, color, width] of [[tr.sE, tr.sN, TRACK_COLORS.solution, 4], [tr.iE, tr.iN, TRACK_COLORS.ins, 1.5]]) {
+    for (const [E, N, color, width] of lines) {
       g.strokeStyle = color; g.lineWidth = width; g.lineJoin = "round";
       g.beginPath();
       let lx = xOf(E[0]), ly = yOf(N[0]);
@@ -374,9 +385,11 @@ export class TrackChart {
 
     // Legend inside the plot, in the corner the track crosses least: a fixed
     // corner would sooner or later sit on the vehicle's latest position.
-    const items = [["corrected", TRACK_COLORS.solution], ["raw INS", TRACK_COLORS.ins]];
+    const items = tr.mechanized ? [["mechanized solution", TRACK_COLORS.solution]]
+      : single ? [["corrected = raw INS", TRACK_COLORS.solution]]
+        : [["corrected", TRACK_COLORS.solution], ["raw INS", TRACK_COLORS.ins]];
     g.font = "11px system-ui, sans-serif"; g.textAlign = "left"; g.textBaseline = "middle";
-    const lw = 96, lh = 16 * items.length + 6;
+    const lw = single ? 150 : 96, lh = 16 * items.length + 6;
     const corners = [
       [P.left + plotW - lw - 6, P.top + 6], [P.left + 6, P.top + 20],
       [P.left + plotW - lw - 6, P.top + plotH - lh - 20], [P.left + 6, P.top + plotH - lh - 6],
@@ -405,6 +418,8 @@ export class TrackChart {
     // For tests and the curious: points held, segments drawn, the last offset.
     c.dataset.points = String(n);
     c.dataset.drawn = String(drawn);
+    c.dataset.lines = String(lines.length);
+    c.dataset.legend = items.map((x) => x[0]).join(", ");
     c.dataset.lastE = String(tr.sE[n - 1]);
     c.dataset.lastN = String(tr.sN[n - 1]);
     return true;

@@ -132,6 +132,11 @@ export class Track {
   clear() {
     this.t = []; this.sE = []; this.sN = []; this.iE = []; this.iN = [];
     this.origin = null; // {lat, lon (deg), rn, re (m per rad)}
+    // With `input: imu` the track carries the alignment state, and its INS position is
+    // the solution (the mechanization after the closed-loop feedback): one track, not two.
+    this.alignment = null; // the latest track's, null for a monitor fed a client's INS
+    this.mechanized = false;
+    this.distinct = false; // some INS point differs from its solution
     this.version = (this.version || 0) + 1; // lets a chart tell new data from a redraw
   }
   get length() { return this.t.length; }
@@ -141,9 +146,14 @@ export class Track {
     const older = list.filter((tr) => tr.t < first);
     if (!older.length) return;
     const newer = this.t.map((t, i) => i);
-    const keep = { t: this.t.slice(), sE: this.sE, sN: this.sN, iE: this.iE, iN: this.iN, origin: this.origin };
+    const keep = { t: this.t.slice(), sE: this.sE, sN: this.sN, iE: this.iE, iN: this.iN, origin: this.origin,
+      alignment: this.alignment, mechanized: this.mechanized, distinct: this.distinct };
     this.clear();
     for (const tr of older) this.push(tr);
+    // The live state is newer than any history sample's.
+    if (keep.alignment) this.alignment = keep.alignment;
+    this.mechanized = this.mechanized || keep.mechanized;
+    this.distinct = this.distinct || keep.distinct;
     if (keep.origin && this.origin) {
       // Re-express the held points in the new (older) origin's frame.
       const o = this.origin, k = Math.PI / 180;
@@ -156,11 +166,18 @@ export class Track {
     }
     this.version++;
   }
-  /** Adds the `track` of one stats message; repeats (no new INS epoch) are skipped. */
+  /**
+   * Adds the `track` of one stats message; repeats (no new INS epoch) are skipped,
+   * but a new alignment state is kept (it moves while the position stays).
+   */
   push(tr) {
     const n = this.t.length;
-    if (n && tr.t === this.t[n - 1]) return false;
     if (n && tr.t < this.t[n - 1]) this.clear(); // stream restarted (t went back)
+    if (typeof tr.alignment === "string") {
+      if (this.alignment !== tr.alignment) { this.alignment = tr.alignment; this.version++; }
+      this.mechanized = true;
+    }
+    if (this.t.length && tr.t === this.t[this.t.length - 1]) return false;
     if (!this.origin) {
       const lat = tr.solution.lat * Math.PI / 180, sin = Math.sin(lat);
       const w = Math.sqrt(1 - WGS84_E2 * sin * sin);
@@ -174,6 +191,7 @@ export class Track {
     this.t.push(tr.t);
     this.sE.push((tr.solution.lon - o.lon) * k * o.re); this.sN.push((tr.solution.lat - o.lat) * k * o.rn);
     this.iE.push((tr.ins.lon - o.lon) * k * o.re); this.iN.push((tr.ins.lat - o.lat) * k * o.rn);
+    if (tr.ins.lat !== tr.solution.lat || tr.ins.lon !== tr.solution.lon) this.distinct = true;
     if (this.t.length > TRACK_CAP + TRACK_CAP / 4) {
       // Drop the oldest in one splice per TRACK_CAP / 4 points (amortised O(1)); the origin stays.
       const drop = this.t.length - TRACK_CAP;
@@ -397,7 +415,8 @@ export class Live {
         if (mv.integrity) {
           if (!integrity.has(m)) integrity.set(m, []);
           const i = mv.integrity;
-          integrity.get(m).push({ t: sample.t, v: i.protection_level, thr: i.alert_limit, state: AVAILABILITY_BAND[i.state] || "unknown" });
+          // A null level (not yet known: an imu monitor aligning) has no point to draw.
+          if (isNum(i.protection_level)) integrity.get(m).push({ t: sample.t, v: i.protection_level, thr: i.alert_limit, state: AVAILABILITY_BAND[i.state] || "unknown" });
         }
         if (mv.track) {
           if (!tracks.has(m)) tracks.set(m, []);

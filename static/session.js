@@ -1,7 +1,7 @@
 // session.js — one session in detail: for each monitor a strip chart per
 // test (statistic against threshold, suspect/isolated bands), HPL against HAL
 // for federated monitors with their corrected track against the raw INS
-// track, a gnss monitor's sky plot, levels, residuals and Stanford diagram
+// track (or, on raw IMU, the mechanized solution with its alignment state), a gnss monitor's sky plot, levels, residuals and Stanford diagram
 // (gnss.js), the threshold controls, and the session's alarms.
 // All charts of the session share one time range, so zooming one zooms all.
 
@@ -13,6 +13,36 @@ import { download } from "./api.js";
 import { GnssPanel } from "./gnss.js";
 
 const SESSION_ALARMS = 50;
+
+/** What each alignment state of a federated monitor on raw IMU waits for. */
+const ALIGNMENT_TEXT = {
+  levelling: "levelling \u2014 waiting for a still vehicle and a GNSS fix",
+  heading: "heading \u2014 levelled, waiting for speed",
+  aligned: "aligned",
+  aligning: "aligning \u2014 levelling, or levelled and waiting for speed",
+};
+
+/** Whether a federated monitor mechanizes raw IMU (`input: imu`): from its spec, or its track. */
+function onImu(m) {
+  return !!((m.spec && m.spec.config && m.spec.config.input === "imu") || (m.live && m.live.track && m.live.track.alignment));
+}
+
+/**
+ * The alignment state of a federated monitor on raw IMU, or null for one fed a
+ * client's INS. The stats carry it in the monitor's `track`, which exists only
+ * from the first solution on (a later restart keeps the track and moves its
+ * state). Before that the monitor is still aligning: with a configured heading
+ * that can only be levelling (it aligns as soon as it has levelled at a fix);
+ * without one it is levelling or, levelled and moving, waiting for the speed
+ * that gives the heading, which the stats do not tell apart: "aligning".
+ */
+export function alignmentOf(m) {
+  if (m.type !== "federated" || !onImu(m)) return null;
+  const tr = m.live && m.live.track;
+  if (tr && ALIGNMENT_TEXT[tr.alignment]) return tr.alignment;
+  const align = m.spec && m.spec.config && m.spec.config.strapdown && m.spec.config.strapdown.align;
+  return align && isNum(align.heading_deg) ? "levelling" : "aligning";
+}
 
 export class SessionView {
   constructor(live, root) {
@@ -127,7 +157,7 @@ export class SessionView {
       return;
     }
     const monitors = s.monitors();
-    const shape = JSON.stringify(monitors.map((m) => [m.name, Object.keys(m.tests), !!(m.live && m.live.integrity)]));
+    const shape = JSON.stringify(monitors.map((m) => [m.name, Object.keys(m.tests), !!(m.live && m.live.integrity), onImu(m)]));
     if (shape !== this.shape) { this.shape = shape; this.build(s, monitors); }
     if (this.headDirty) { this.headDirty = false; this.fillHead(s, monitors); }
     for (const c of this.charts) c.chart.draw();
@@ -135,7 +165,9 @@ export class SessionView {
     for (const tc of this.tracks) {
       if (!tc.chart.draw()) continue;
       const tr = tc.track, n = tr.length;
-      setText(tc.value, n ? "INS \u2212 corrected " + fmtNum(Math.hypot(tr.iE[n - 1] - tr.sE[n - 1], tr.iN[n - 1] - tr.sN[n - 1])) + " m \u00b7 " + n + " points" : "");
+      // On raw IMU the INS is the solution: there is no INS − corrected distance to show.
+      const gap = tr.mechanized ? "" : "INS \u2212 corrected " + fmtNum(Math.hypot(tr.iE[n - 1] - tr.sE[n - 1], tr.iN[n - 1] - tr.sN[n - 1])) + " m \u00b7 ";
+      setText(tc.value, n ? gap + n + " points" : "");
     }
     for (const p of this.gnss) p.draw();
     if (this.alarmsDirty) { this.alarmsDirty = false; this.fillAlarms(); }
@@ -194,14 +226,25 @@ export class SessionView {
         const track = s.trackFor(m.name);
         chart.setTrack(track);
         const value = el("span", { class: "num muted" });
-        this.tracks.push({ chart, track, value });
+        const imu = onImu(m);
+        if (imu) {
+          chart.canvas.setAttribute("aria-label", "the mechanized solution's track, east and north in metres");
+          chart.emptyText = "no solution until the strapdown is aligned\u2026";
+        }
+        // On raw IMU: the alignment state beside the track, filled by fillHead as stats arrive.
+        const alignment = imu ? el("span", { class: "alignment", "data-kind": "alignment", "data-monitor": m.name }) : null;
+        this.tracks.push({ chart, track, value, alignment, monitor: m.name });
         extra.push(el("figure", { class: "strip track" },
-          el("figcaption", null, el("strong", null, "Track (local ENU, m)"), " ", value),
+          el("figcaption", null, el("strong", null, "Track (local ENU, m)"), " ", alignment, " ", value),
           chart.el,
           el("p", { class: "muted note" },
-            "Corrected solution vs raw INS, east/north metres from the first point received. " +
+            (imu
+              ? "The mechanized solution (the monitor's own strapdown on the raw IMU, corrected in closed loop, so it is also the INS), "
+              : "Corrected solution vs raw INS, ") +
+            "east/north metres from the first point received. " +
             "Sampled from the session's stats messages (\u2264 20 per second, so a faster INS is thinned); " +
-            "the last 20,000 points are kept.")));
+            "the last 20,000 points are kept." +
+            (imu ? " No solution, no tests and no protection level until aligned." : ""))));
       }
       if (m.type === "gnss") {
         const panel = new GnssPanel(s.id, m.name, s.gnssFor(m.name), s.seriesFor(m.name, INTEGRITY));
@@ -222,6 +265,12 @@ export class SessionView {
 
   fillHead(s, monitors) {
     for (const p of this.gnss) p.fill(monitors.find((x) => x.name === p.monitor));
+    for (const tc of this.tracks) {
+      if (!tc.alignment) continue;
+      const state = alignmentOf(monitors.find((x) => x.name === tc.monitor) || {}) || "aligning";
+      if (tc.alignment.dataset.state !== state) tc.alignment.dataset.state = state;
+      setText(tc.alignment, ALIGNMENT_TEXT[state]);
+    }
     for (const m of monitors) {
       const cell = this.policyCells && this.policyCells.get(m.name);
       if (cell && m.spec) {
@@ -237,7 +286,9 @@ export class SessionView {
         const state = i ? i.state : "unknown";
         if (c.badge.dataset.state !== state) c.badge.dataset.state = state;
         setText(c.badge, state);
-        setText(c.value, i ? "HPL " + fmtNum(i.protection_level) + " m / HAL " + fmtNum(i.alert_limit) + " m \u00b7 unavailable " +
+        // A null level is not yet known (an imu monitor aligning): a dash, no unit.
+        const pl = isNum(i && i.protection_level) ? fmtNum(i.protection_level) + " m" : "\u2014";
+        setText(c.value, i ? "HPL " + pl + " / HAL " + fmtNum(i.alert_limit) + " m \u00b7 unavailable " +
           fmtNum(i.time_s.unavailable) + " s, converging " + fmtNum(i.time_s.converging) + " s" : "");
         continue;
       }

@@ -9,7 +9,10 @@
 //! second and prints the page's own frame-time figures (never asserted: no
 //! test asserts wall-clock time), and saves screenshots under `target/`. A
 //! second test streams real phone pseudoranges into a `gnss` monitor and checks
-//! that its sky plot, protection-level chart and Stanford diagram are drawn.
+//! that its sky plot, protection-level chart and Stanford diagram are drawn. A
+//! third streams a still vehicle's raw IMU into two `federated` monitors with
+//! `input: imu` and checks their alignment badges, the single mechanized track and
+//! an unknown protection level shown as a dash.
 //!
 //! Needs `/usr/bin/chromium` and `/usr/bin/chromedriver` (Debian's `chromium`
 //! and `chromium-driver`; `CHROMIUM` / `CHROMEDRIVER` override the paths). With
@@ -381,7 +384,9 @@ async fn the_dashboard_shows_a_faulty_replay_and_applies_a_threshold_change() {
              if (near(i, 0x0a, 0x7d, 0x4f)) corrected++;   // the corrected track
              if (near(i, 0xd9, 0x73, 0x0d)) ins++;         // the raw INS track
            }
-           return {corrected, ins, drawn: Number(c.dataset.drawn), lastE: Number(c.dataset.lastE), lastN: Number(c.dataset.lastN)};"#,
+           return {corrected, ins, drawn: Number(c.dataset.drawn), lastE: Number(c.dataset.lastE), lastN: Number(c.dataset.lastN),
+                   lines: c.dataset.lines, legend: c.dataset.legend,
+                   badge: !!document.querySelector('[data-kind="alignment"][data-monitor="federated"]')};"#,
     )
     .await;
     println!("track plot: {track_points} points, {track_ink}");
@@ -391,6 +396,10 @@ async fn the_dashboard_shows_a_faulty_replay_and_applies_a_threshold_change() {
         "{track_ink}"
     );
     assert!(track_ink["ins"].as_u64().unwrap() > 200, "{track_ink}");
+    // A monitor fed a client's INS: two tracks, two legend entries, no alignment badge.
+    assert_eq!(track_ink["lines"], "2", "{track_ink}");
+    assert_eq!(track_ink["legend"], "corrected, raw INS", "{track_ink}");
+    assert_eq!(track_ink["badge"], false, "{track_ink}");
     // The ship moves: the last corrected point is well away from the origin.
     let (e, n) = (
         track_ink["lastE"].as_f64().unwrap(),
@@ -886,6 +895,169 @@ async fn the_dashboard_draws_a_gnss_monitors_sky_plot_levels_and_stanford_diagra
         .unwrap_or(f64::NAN);
     assert!(value.is_finite() && value > 0.0, "{hpl}");
     save_screenshot(&client, "dashboard-gnss.png").await;
+
+    client.close().await.unwrap();
+    server.shutdown().await;
+}
+
+/// A still vehicle's raw IMU at 100 Hz from `t0` for `seconds`: gravity up, no
+/// rotation; with `fixes`, a still GNSS fix every 100th epoch (1 Hz, the first
+/// at `t0`). Frames of 10 epochs.
+fn still_imu_frames(t0: f64, seconds: usize, fixes: bool) -> Vec<String> {
+    (0..seconds * 100)
+        .map(|k| {
+            let t = t0 + k as f64 / 100.0;
+            let mut epoch = json!({"t": t, "imu": {"f": [0.0, 0.0, 9.80], "w": [0.0, 0.0, 0.0]}});
+            if fixes && k % 100 == 0 {
+                epoch["gnss"] =
+                    json!({"lat": 40.0, "lon": -105.0, "h": 1600.0, "vel": [0.0, 0.0, 0.0]});
+            }
+            epoch
+        })
+        .collect::<Vec<Value>>()
+        .chunks(10)
+        .map(|chunk| Value::from(chunk.to_vec()).to_string())
+        .collect()
+}
+
+/// A JS expression: the alignment badge of `monitor` as `{state, text}`, null before it exists.
+fn alignment_badge(monitor: &str) -> String {
+    format!(
+        r#"(() => {{ const b = document.querySelector('[data-kind="alignment"][data-monitor="{monitor}"]'); return b && {{state: b.dataset.state, text: b.textContent}}; }})()"#
+    )
+}
+
+// Over 80 lines: one scenario in the order it happens; its steps share its state.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_dashboard_shows_the_alignment_of_a_federated_monitor_on_raw_imu() {
+    let Some((chromium, driver_path)) = browser_tools_or_skip() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let server = common::start(&dir.path().join("t.db"), None, Limits::default()).await;
+    let http = common::http(&server);
+    let ws = common::ws(&server);
+    // "level" finds its heading from the GNSS speed, so a still vehicle keeps it
+    // levelling; "heading" is given one, so it aligns once levelled at a fix.
+    let monitor = |name: &str, align: Value| {
+        json!({"name": name, "type": "federated",
+               "config": {"aids": ["gnss"], "input": "imu", "strapdown": {"align": align}}})
+    };
+    let created = reqwest::Client::new()
+        .post(format!("{http}/api/v1/sessions"))
+        .json(&json!({
+            "id": "imu",
+            "monitors": [
+                monitor("level", json!({"static_s": 2})),
+                monitor("heading", json!({"static_s": 2, "heading_deg": 30})),
+            ],
+        }))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(created.status(), 201, "{}", created.text().await.unwrap());
+
+    let driver = start_driver(&driver_path).await;
+    let profile = tempfile::tempdir().unwrap();
+    let client = open_browser(&driver, &chromium, profile.path()).await;
+    client.goto(&format!("{http}/#/session/imu")).await.unwrap();
+
+    // 1. Three still seconds without a fix: no solution, nothing aligns. With a given
+    // heading only levelling is left; without one the stats cannot tell levelling from
+    // waiting for speed, and the badge says so.
+    stream_every(
+        format!("{ws}/api/v1/sessions/imu/ingest"),
+        still_imu_frames(0.0, 3, false),
+        Duration::from_millis(20),
+    )
+    .await;
+    let heading = wait_js(
+        &client,
+        &format!(
+            "{} && {0}.state === 'levelling' && {0}",
+            alignment_badge("heading")
+        ),
+        "the heading monitor's badge to say levelling",
+    )
+    .await;
+    let level = wait_js(
+        &client,
+        &format!(
+            "{} && {0}.state === 'aligning' && {0}",
+            alignment_badge("level")
+        ),
+        "the level monitor's badge to say aligning",
+    )
+    .await;
+    println!("no fix yet: heading {heading}, level {level}");
+    assert_eq!(
+        heading["text"],
+        "levelling \u{2014} waiting for a still vehicle and a GNSS fix"
+    );
+    assert!(
+        level["text"]
+            .as_str()
+            .unwrap()
+            .starts_with("aligning \u{2014} levelling"),
+        "{level}"
+    );
+    // While aligning the protection level is not known: a dash, never "null" or "NaN".
+    let hpl = wait_js(
+        &client,
+        r#"(() => { const f = document.querySelector('section[data-monitor="level"] figure.hpl figcaption'); return f && f.textContent.includes('converging') && f.textContent; })()"#,
+        "the level monitor's HPL caption",
+    )
+    .await;
+    println!("aligning HPL caption: {hpl}");
+    let hpl = hpl.as_str().unwrap();
+    assert!(hpl.contains("HPL \u{2014} / HAL"), "{hpl}");
+    assert!(!hpl.contains("null") && !hpl.contains("NaN"), "{hpl}");
+
+    // 2. Three more still seconds with a fix each second: the given heading aligns at
+    // the first fix, and its one track is the mechanized solution; the other stays put.
+    stream_every(
+        format!("{ws}/api/v1/sessions/imu/ingest"),
+        still_imu_frames(3.0, 3, true),
+        Duration::from_millis(20),
+    )
+    .await;
+    let aligned = wait_js(
+        &client,
+        &format!(
+            "{} && {0}.state === 'aligned' && {0}",
+            alignment_badge("heading")
+        ),
+        "the heading monitor's badge to say aligned",
+    )
+    .await;
+    assert_eq!(aligned["text"], "aligned", "{aligned}");
+    let track = wait_js(
+        &client,
+        r#"(() => { const c = document.querySelector('canvas.track-chart[data-monitor="heading"]'); return c && Number(c.dataset.points) >= 2 && {points: Number(c.dataset.points), lines: c.dataset.lines, legend: c.dataset.legend}; })()"#,
+        "the heading monitor's track",
+    )
+    .await;
+    println!("aligned: {aligned}, track {track}");
+    assert_eq!(track["lines"], "1", "{track}");
+    assert_eq!(track["legend"], "mechanized solution", "{track}");
+    let level = js(&client, &format!("return {};", alignment_badge("level"))).await;
+    assert_eq!(level["state"], "aligning", "{level}");
+    let level_track = js(
+        &client,
+        r#"return Number(document.querySelector('canvas.track-chart[data-monitor="level"]').dataset.points);"#,
+    )
+    .await;
+    assert_eq!(
+        level_track, 0,
+        "a still vehicle without a heading has no solution"
+    );
+    // The aligned monitor's badge and mechanized track on screen.
+    js(
+        &client,
+        r#"document.querySelector('section[data-monitor="heading"] figure.track').scrollIntoView({block: 'center'}); return null;"#,
+    )
+    .await;
+    save_screenshot(&client, "dashboard-imu.png").await;
 
     client.close().await.unwrap();
     server.shutdown().await;
