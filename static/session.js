@@ -22,22 +22,21 @@ const ALIGNMENT_TEXT = {
   aligning: "aligning \u2014 levelling, or levelled and waiting for speed",
 };
 
-/** Whether a federated monitor mechanizes raw IMU (`input: imu`): from its spec, or its track. */
+/** Whether a federated monitor mechanizes raw IMU (`input: imu`): from its spec, or its stats. */
 function onImu(m) {
-  return !!((m.spec && m.spec.config && m.spec.config.input === "imu") || (m.live && m.live.track && m.live.track.alignment));
+  return !!((m.spec && m.spec.config && m.spec.config.input === "imu") ||
+    (m.live && (m.live.alignment || (m.live.track && m.live.track.alignment))));
 }
 
 /**
  * The alignment state of a federated monitor on raw IMU, or null for one fed a
- * client's INS. The stats carry it in the monitor's `track`, which exists only
- * from the first solution on (a later restart keeps the track and moves its
- * state). Before that the monitor is still aligning: with a configured heading
- * that can only be levelling (it aligns as soon as it has levelled at a fix);
- * without one it is levelling or, levelled and moving, waiting for the speed
- * that gives the heading, which the stats do not tell apart: "aligning".
+ * client's INS: the stats' `alignment` (after every IMU epoch), else its track's.
+ * Before the first IMU epoch there is neither: with a configured heading the state
+ * can only be levelling; without one "aligning".
  */
 export function alignmentOf(m) {
   if (m.type !== "federated" || !onImu(m)) return null;
+  if (m.live && ALIGNMENT_TEXT[m.live.alignment]) return m.live.alignment;
   const tr = m.live && m.live.track;
   if (tr && ALIGNMENT_TEXT[tr.alignment]) return tr.alignment;
   const align = m.spec && m.spec.config && m.spec.config.strapdown && m.spec.config.strapdown.align;

@@ -962,9 +962,8 @@ async fn the_dashboard_shows_the_alignment_of_a_federated_monitor_on_raw_imu() {
     let client = open_browser(&driver, &chromium, profile.path()).await;
     client.goto(&format!("{http}/#/session/imu")).await.unwrap();
 
-    // 1. Three still seconds without a fix: no solution, nothing aligns. With a given
-    // heading only levelling is left; without one the stats cannot tell levelling from
-    // waiting for speed, and the badge says so.
+    // 1. Three still seconds without a fix: no solution, nothing aligns, and both
+    // monitors' stats say levelling (a fix is needed to place the mechanization).
     stream_every(
         format!("{ws}/api/v1/sessions/imu/ingest"),
         still_imu_frames(0.0, 3, false),
@@ -983,10 +982,10 @@ async fn the_dashboard_shows_the_alignment_of_a_federated_monitor_on_raw_imu() {
     let level = wait_js(
         &client,
         &format!(
-            "{} && {0}.state === 'aligning' && {0}",
+            "{} && {0}.state === 'levelling' && {0}",
             alignment_badge("level")
         ),
-        "the level monitor's badge to say aligning",
+        "the level monitor's badge to say levelling",
     )
     .await;
     println!("no fix yet: heading {heading}, level {level}");
@@ -994,12 +993,9 @@ async fn the_dashboard_shows_the_alignment_of_a_federated_monitor_on_raw_imu() {
         heading["text"],
         "levelling \u{2014} waiting for a still vehicle and a GNSS fix"
     );
-    assert!(
-        level["text"]
-            .as_str()
-            .unwrap()
-            .starts_with("aligning \u{2014} levelling"),
-        "{level}"
+    assert_eq!(
+        level["text"],
+        "levelling \u{2014} waiting for a still vehicle and a GNSS fix"
     );
     // While aligning the protection level is not known: a dash, never "null" or "NaN".
     let hpl = wait_js(
@@ -1014,7 +1010,8 @@ async fn the_dashboard_shows_the_alignment_of_a_federated_monitor_on_raw_imu() {
     assert!(!hpl.contains("null") && !hpl.contains("NaN"), "{hpl}");
 
     // 2. Three more still seconds with a fix each second: the given heading aligns at
-    // the first fix, and its one track is the mechanized solution; the other stays put.
+    // the first fix, and its one track is the mechanized solution; the other, levelled
+    // but never moving, stays levelling (it starts when the vehicle moves off).
     stream_every(
         format!("{ws}/api/v1/sessions/imu/ingest"),
         still_imu_frames(3.0, 3, true),
@@ -1041,7 +1038,7 @@ async fn the_dashboard_shows_the_alignment_of_a_federated_monitor_on_raw_imu() {
     assert_eq!(track["lines"], "1", "{track}");
     assert_eq!(track["legend"], "mechanized solution", "{track}");
     let level = js(&client, &format!("return {};", alignment_badge("level"))).await;
-    assert_eq!(level["state"], "aligning", "{level}");
+    assert_eq!(level["state"], "levelling", "{level}");
     let level_track = js(
         &client,
         r#"return Number(document.querySelector('canvas.track-chart[data-monitor="level"]').dataset.points);"#,

@@ -275,6 +275,9 @@ fn record_track(stats: &mut MonitorStats, t: f64, report: &MonitorReport, epoch:
     else {
         return;
     };
+    if epoch.imu.is_some() && alignment.is_some() {
+        stats.alignment = *alignment;
+    }
     let ins = match (&epoch.ins, &epoch.imu, solution) {
         (Some(ins), _, Some(_)) => Position {
             lat: ins.lat.to_degrees(),

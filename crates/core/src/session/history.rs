@@ -217,6 +217,7 @@ mod tests {
                     worst_test_ratio: None,
                     tests: BTreeMap::from([(TestName::from("residual"), test)]),
                     track: None,
+                    alignment: None,
                     gnss: None,
                     integrity: None,
                 },

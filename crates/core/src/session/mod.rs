@@ -402,6 +402,7 @@ fn initial_stats(id: &str, roster: &[Member], engines: &[Box<dyn Monitor>]) -> S
                     worst_test_ratio: None,
                     tests,
                     track: None,
+                    alignment: None,
                     gnss: None,
                     integrity: None,
                 };

@@ -367,6 +367,10 @@ pub struct MonitorStats {
     /// before the first INS epoch and for other kinds.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub track: Option<Track>,
+    /// `federated` with `input: imu` only: the strapdown's alignment state after its last
+    /// IMU epoch (before the first solution too, when there is no track yet).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alignment: Option<crate::monitor::federated::Alignment>,
     /// `gnss` only: the latest epoch with pseudoranges; absent before it and for other
     /// kinds.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -491,6 +495,7 @@ mod tests {
                     ins: position,
                     alignment: None,
                 }),
+                alignment: None,
                 gnss: None,
                 integrity: None,
             },
@@ -503,6 +508,7 @@ mod tests {
                 worst_test_ratio: None,
                 tests: BTreeMap::from([(TestName::from("r"), test)]),
                 track: None,
+                alignment: None,
                 gnss: None,
                 integrity: None,
             },

@@ -595,3 +595,65 @@ fn the_history_samples_once_a_second_of_epoch_time() {
     // t = 0 … 4.9 s: samples at 0, 1, 2, 3, 4.
     assert_eq!(core.history().len(), 5);
 }
+
+/// A federated monitor on raw IMU, still, with a fix every 100th epoch: the stats carry
+/// its alignment state from the first IMU epoch, before any track; with a configured
+/// heading it aligns once levelled and the track carries the state too.
+#[test]
+fn the_stats_carry_a_raw_imu_monitors_alignment_before_and_with_its_track() {
+    use crate::epoch::{GnssBlock, ImuBlock};
+    use crate::monitor::federated::Alignment;
+    let monitor = |align: serde_json::Value| {
+        let config = serde_json::json!({"aids": ["gnss"], "input": "imu",
+            "strapdown": {"align": align}});
+        let spec = crate::monitor::MonitorSpec {
+            kind: MonitorKind::Federated,
+            config: crate::monitor::MonitorConfig::parse(MonitorKind::Federated, &config).unwrap(),
+            policy: PolicyConfig::counters_default(),
+            threshold: ThresholdSpec::PFa(1e-3),
+        };
+        crate::monitor::build(&spec, &crate::monitor::NoModels).unwrap()
+    };
+    let seats = vec![
+        Seat {
+            name: "level".into(),
+            monitor: monitor(serde_json::json!({"static_s": 2})),
+            alarm_level: AlarmLevel::default(),
+        },
+        Seat {
+            name: "heading".into(),
+            monitor: monitor(serde_json::json!({"static_s": 2, "heading_deg": 30})),
+            alarm_level: AlarmLevel::default(),
+        },
+    ];
+    let mut core = SessionCore::new("imu", seats, 0);
+    let mut effects = Vec::new();
+    for k in 0..400 {
+        let epoch = Epoch {
+            t: k as f64 * 0.01,
+            imu: Some(ImuBlock {
+                accel: [0.0, 0.0, crate::geo::normal_gravity(0.7, 1600.0)],
+                gyro: [0.0; 3],
+                dt: None,
+            }),
+            gnss: (k % 100 == 0).then(|| GnssBlock {
+                lat: 0.7,
+                lon: -1.8,
+                h: 1600.0,
+                vel: Some([0.0; 3]),
+                ..GnssBlock::default()
+            }),
+            ..Epoch::default()
+        };
+        let (reports, failure) = core.step(&epoch);
+        assert!(failure.is_none());
+        core.commit(&epoch, &reports, &mut effects);
+    }
+    let stats = core.stats();
+    let level = &stats.monitors["level"];
+    assert_eq!(level.alignment, Some(Alignment::Levelling));
+    assert!(level.track.is_none(), "no solution while levelling");
+    let heading = &stats.monitors["heading"];
+    assert_eq!(heading.alignment, Some(Alignment::Aligned));
+    assert_eq!(heading.track.unwrap().alignment, Some(Alignment::Aligned));
+}
