@@ -392,9 +392,12 @@ impl FrontState {
         }
         let gap = !matches!(dt, Some(d) if d > 0.0 && d <= cfg.section.max_gap_s);
         if gap && self.last_t.is_some() {
-            // A gap (or time standing still or going back): the history is void.
+            // A gap (or time standing still or going back): the history is void; the
+            // bias estimates are kept (levelling refines the gyros' again).
             *self = FrontState {
                 last_fix: self.last_fix.take(),
+                gyro_bias: self.gyro_bias,
+                accel_bias: self.accel_bias,
                 ..FrontState::new(cfg)
             };
         }

@@ -257,12 +257,16 @@ fn a_given_heading_aligns_once_levelled_and_a_gap_restarts_alignment() {
     // 5 s of static data after the first fix at t = 0 (the first sample only starts time).
     let t = aligned_at.unwrap();
     assert!((5.0..5.05).contains(&t), "aligned at {t} s");
-    // A two-second hole in the IMU stream: back to levelling, no tests.
+    // A two-second hole in the IMU stream: back to levelling, no tests; the gyro bias
+    // estimates (the static mean found them) are kept.
+    let before = m.front.as_ref().unwrap().biases();
+    assert!((before.0[2] - GYRO_BIAS[2]).abs() < 1.5e-4, "{before:?}");
     let mut late = epochs[1000].epoch.clone();
     late.t = epochs[799].epoch.t + 2.0;
     let r = m.step(&late).unwrap();
     assert_eq!(alignment(&r), Some(Alignment::Levelling));
     assert!(r.tests.is_empty());
+    assert_eq!(m.front.as_ref().unwrap().biases(), before);
 }
 
 #[test]
