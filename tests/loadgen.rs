@@ -310,3 +310,49 @@ async fn a_ramp_streams_every_step_to_its_maximum_and_draws_the_curve() {
     assert_eq!(body["sessions"].as_array().map(Vec::len), Some(0), "{body}");
     server.shutdown().await;
 }
+
+/// `navguard loadgen --input imu` end to end: two raw-IMU sessions at 10 frames of 10
+/// epochs a second, every epoch answered in order and no error. Nothing depends on time.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_raw_imu_run_answers_every_epoch_in_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let server = service::start(ServiceConfig::new(
+        "127.0.0.1:0".parse().unwrap(),
+        dir.path().join("imu.db"),
+    ))
+    .await
+    .unwrap();
+    let output = tokio::process::Command::new(env!("CARGO_BIN_EXE_navguard"))
+        .arg("loadgen")
+        .args(["--url", &format!("ws://{}", server.addr)])
+        .args([
+            "--input",
+            "imu",
+            "--sessions",
+            "2",
+            "--rate",
+            "10",
+            "--batch",
+            "10",
+        ])
+        .args(["--duration", "1", "--settle", "0", "--json"])
+        .output()
+        .await
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "loadgen failed: {stderr}");
+    let report: Value = serde_json::from_slice(&output.stdout).unwrap();
+    assert_eq!(report["monitor"], "federated/imu", "{report}");
+    assert_eq!(report["batch"], 10);
+    let sent = report["epochs_sent"].as_u64().unwrap();
+    // 10 frames of 10 epochs a second for 1 s: at most 11 frames a session.
+    assert!((10..=220).contains(&sent), "sent {sent}");
+    assert_eq!(sent % 10, 0, "whole frames of 10: {sent}");
+    assert_eq!(report["results"], sent, "{report}");
+    assert_eq!(report["out_of_order"], 0, "{report}");
+    assert_eq!(report["unanswered_frames"], 0, "{report}");
+    assert_eq!(report["errors"], serde_json::json!({}), "{report}");
+    let (_, body) = common::get_json(&format!("http://{}/api/v1/sessions", server.addr)).await;
+    assert_eq!(body["sessions"].as_array().map(Vec::len), Some(0), "{body}");
+    server.shutdown().await;
+}

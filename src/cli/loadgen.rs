@@ -7,9 +7,11 @@
 //! deletes its sessions. `--ramp` repeats the run with more sessions each step
 //! until the p99 crosses a limit ([`ramp`]).
 //!
-//! The workload is generated once and shared by every session: the `ship`
-//! scenario of [`navguard_sim`] for `federated`, a constant-velocity track for
-//! `linear`. A session streams it in passes; each pass is a fresh socket (the
+//! The workload is generated once and shared by the sessions: the `ship`
+//! scenario of [`navguard_sim`] for `federated`, a synthetic car's raw IMU at
+//! 100 Hz for `federated` with `--input imu` ([`imu`]; a few variants of it on
+//! different seeds, session i streaming variant i mod their count), a
+//! constant-velocity track for `linear`. A session streams it in passes; each pass is a fresh socket (the
 //! server restarts filter state and time on a new stream, docs/architecture.md §A3), so a
 //! long run never needs an unbounded scenario in memory. The tool talks only
 //! to `--url`, stops after `--duration`, and waits at most a bounded time for
@@ -40,6 +42,7 @@ use tokio_tungstenite::tungstenite::Utf8Bytes;
 use super::http::Endpoint;
 use super::{progress_bar, thousands};
 
+mod imu;
 mod ramp;
 mod report;
 mod stream;
@@ -55,6 +58,8 @@ const DRAIN_TIMEOUT: Duration = Duration::from_secs(20);
 const REST_CONCURRENCY: usize = 16;
 /// Size of the GNSS position step (federated) or `z` step (linear) injected by `--fault-at`.
 const FAULT_STEP: f64 = 100.0;
+/// Most variants of the raw-IMU stream (each on its own seed) the sessions share.
+const IMU_VARIANTS: u64 = 16;
 
 /// Frames per second per session, or as fast as the server takes them.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -100,6 +105,16 @@ pub(crate) enum MonitorArg {
     Linear,
 }
 
+/// What a `federated` session's epochs carry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum InputArg {
+    /// The simulated ship's `ins` solutions with GNSS, DVL and CNS aids.
+    Ins,
+    /// A synthetic car's raw `imu` rates at 100 Hz with a 1 Hz `gnss` fix, mechanized
+    /// by the monitor (`input: imu`, the real drive's config).
+    Imu,
+}
+
 /// `navguard loadgen` flags.
 #[derive(Debug, clap::Args)]
 #[command(after_long_help = LOADGEN_HELP)]
@@ -125,6 +140,11 @@ pub(crate) struct LoadgenArgs {
     /// The monitor each session runs.
     #[arg(long, value_enum, default_value = "federated")]
     pub monitor: MonitorArg,
+    /// What the federated sessions' epochs carry: `ins` solutions (the ship) or raw
+    /// `imu` samples at 100 Hz (a car; `--rate 100 --batch 1` is real time, and so is
+    /// `--rate 10 --batch 10`).
+    #[arg(long, value_enum, default_value = "ins")]
+    pub input: InputArg,
     /// Epoch time t (s) at which a 100 m step starts on GNSS position (federated)
     /// or on z[0] (linear), in every session and pass, lasting to the pass's end.
     #[arg(long)]
@@ -161,6 +181,7 @@ Examples (server in another terminal: cargo run --release -- serve --db /tmp/lg.
   navguard loadgen --sessions 1 --rate max --batch 200 --duration 10
   navguard loadgen --sessions 1000 --rate 10 --batch 1 --duration 30
   navguard loadgen --sessions 1 --rate 10 --fault-at 20 --duration 30
+  navguard loadgen --input imu --sessions 200 --rate 100 --batch 1 --duration 40
   navguard loadgen --sessions 250 --ramp 250 --duration 10 --svg ramp.svg
 Latency: frame-to-result is from just before a frame is written to the socket
 to the arrival of the `result` of its last epoch; alarm-to-event is from the
@@ -174,10 +195,11 @@ stream all of them again; it reports the largest count whose p99 stayed under
 the limit with every frame answered. Sessions are named loadgen-PID-I and
 deleted at the end.";
 
-/// The workload shared by every session: pre-serialised frames of one pass.
+/// The workload shared by the sessions: pre-serialised frames of one pass.
 struct Workload {
-    /// Frames, ready to send (cloning shares the bytes).
-    frames: Vec<Utf8Bytes>,
+    /// Frames of each variant of the pass, ready to send (cloning shares the bytes);
+    /// every variant has the same epoch times. Session i streams variant i mod their count.
+    frames: Vec<Vec<Utf8Bytes>>,
     /// Epoch indices of each frame.
     ranges: Vec<Range<usize>>,
     /// `t` of every epoch of the pass.
@@ -193,15 +215,64 @@ impl Workload {
             Rate::Hz(hz) => (hz * args.duration * args.batch as f64).ceil() + args.batch as f64,
         };
         let epochs = (per_session.min(MAX_PASS_EPOCHS as f64) as usize).max(args.batch as usize);
-        let (lines, spec) = match args.monitor {
-            MonitorArg::Federated => federated_lines(epochs, args.seed, args.fault_at)?,
-            MonitorArg::Linear => linear_lines(epochs, args.seed, args.fault_at),
+        let (variants, spec) = match (args.monitor, args.input) {
+            (MonitorArg::Federated, InputArg::Ins) => {
+                let (lines, spec) = federated_lines(epochs, args.seed, args.fault_at)?;
+                (vec![lines], spec)
+            }
+            (MonitorArg::Federated, InputArg::Imu) => {
+                let most = args.ramp.map_or(args.sessions, |_| args.ramp_max);
+                imu_lines(epochs, args.seed, args.fault_at, most.min(IMU_VARIANTS))?
+            }
+            (MonitorArg::Linear, InputArg::Ins) => {
+                let (lines, spec) = linear_lines(epochs, args.seed, args.fault_at);
+                (vec![lines], spec)
+            }
+            (MonitorArg::Linear, InputArg::Imu) => {
+                bail!("--input imu needs --monitor federated")
+            }
         };
-        let times = lines.iter().map(|(t, _)| *t).collect();
+        let times: Vec<f64> = variants[0].iter().map(|(t, _)| *t).collect();
         let batch = args.batch as usize;
-        let mut frames = Vec::with_capacity(lines.len().div_ceil(batch));
-        let mut ranges = Vec::with_capacity(frames.capacity());
-        for (k, chunk) in lines.chunks(batch).enumerate() {
+        let ranges: Vec<Range<usize>> = (0..times.len())
+            .step_by(batch)
+            .map(|start| start..(start + batch).min(times.len()))
+            .collect();
+        let frames = variants
+            .iter()
+            .map(|lines| frames_of(lines, batch))
+            .collect();
+        Ok(Workload {
+            frames,
+            ranges,
+            times,
+            spec,
+        })
+    }
+
+    fn epochs(&self) -> usize {
+        self.times.len()
+    }
+
+    /// Frames in one pass.
+    fn frame_count(&self) -> usize {
+        self.ranges.len()
+    }
+
+    /// The frames session `i` streams.
+    fn frames_of_session(&self, i: usize) -> &[Utf8Bytes] {
+        &self.frames[i % self.frames.len()]
+    }
+}
+
+/// Each epoch's time and wire line.
+type Lines = Vec<(f64, String)>;
+
+/// Wire lines grouped `batch` to a frame: a line alone for 1, arrays for more.
+fn frames_of(lines: &[(f64, String)], batch: usize) -> Vec<Utf8Bytes> {
+    lines
+        .chunks(batch)
+        .map(|chunk| {
             let text = if batch == 1 {
                 chunk[0].1.clone()
             } else {
@@ -216,20 +287,9 @@ impl Workload {
                 text.push(']');
                 text
             };
-            frames.push(Utf8Bytes::from(text));
-            ranges.push(k * batch..k * batch + chunk.len());
-        }
-        Ok(Workload {
-            frames,
-            ranges,
-            times,
-            spec,
+            Utf8Bytes::from(text)
         })
-    }
-
-    fn epochs(&self) -> usize {
-        self.times.len()
-    }
+        .collect()
 }
 
 /// The ship scenario (10 Hz INS, GNSS and DVL at 1 Hz, CNS at 0.1 Hz) as wire lines.
@@ -263,6 +323,32 @@ fn federated_lines(
         .collect::<anyhow::Result<Vec<_>>>()?;
     let config = federated_config(&scenario)?;
     Ok((lines, echo_session(MonitorKind::Federated, config)))
+}
+
+/// `variants` raw-IMU drives on seeds `seed`, `seed + 1`, … as wire lines, and the
+/// session body of a `federated` monitor with `input: imu` on the real drive's config.
+fn imu_lines(
+    epochs: usize,
+    seed: u64,
+    fault_at: Option<f64>,
+    variants: u64,
+) -> anyhow::Result<(Vec<Lines>, CreateSession)> {
+    let lines = (0..variants.max(1))
+        .map(|v| {
+            imu::drive(epochs, seed.wrapping_add(v), fault_at, FAULT_STEP)
+                .iter()
+                .map(|d| {
+                    epoch_to_wire(&d.epoch)
+                        .map(|line| (d.epoch.t, line))
+                        .map_err(|e| anyhow::anyhow!("serialising an IMU epoch: {}", e.message))
+                })
+                .collect::<anyhow::Result<Vec<_>>>()
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    Ok((
+        lines,
+        echo_session(MonitorKind::Federated, imu::monitor_config()),
+    ))
 }
 
 /// The `federated` config for the simulated ship: its aids, IMU and initial errors.
@@ -480,7 +566,7 @@ pub(crate) async fn run(args: LoadgenArgs) -> anyhow::Result<()> {
         eprintln!(
             "workload: {} epochs per pass in {} frames of ≤ {}",
             thousands(work.epochs() as u64),
-            thousands(work.frames.len() as u64),
+            thousands(work.frame_count() as u64),
             args.batch
         );
     }
@@ -595,6 +681,7 @@ async fn stream(
                 endpoint.clone(),
                 id.clone(),
                 work.clone(),
+                i,
                 args.rate,
                 phase,
                 deadline,
@@ -610,6 +697,14 @@ async fn stream(
     }
     let end = total.last_answer.unwrap_or_else(Instant::now);
     (total, (end - started).as_secs_f64())
+}
+
+/// The workload's name in reports: the monitor, and `/imu` for raw-IMU input.
+fn workload_label(args: &LoadgenArgs) -> String {
+    match (args.monitor, args.input) {
+        (MonitorArg::Federated, InputArg::Imu) => "federated/imu".into(),
+        (monitor, _) => format!("{monitor:?}").to_lowercase(),
+    }
 }
 
 fn report(
@@ -629,7 +724,7 @@ fn report(
     };
     Report {
         url: args.url.clone(),
-        monitor: format!("{:?}", args.monitor).to_lowercase(),
+        monitor: workload_label(args),
         sessions,
         rate_hz: args.rate.hz(),
         batch: args.batch,
@@ -663,7 +758,9 @@ mod tests {
     use super::stream::result_t;
     use super::*;
     use clap::Parser;
+    use futures_util::SinkExt;
     use serde_json::json;
+    use tokio_tungstenite::tungstenite::Message;
 
     #[derive(Parser)]
     struct Wrap {
@@ -768,8 +865,8 @@ mod tests {
         ]);
         let w = Workload::build(&a).unwrap();
         // 10 Hz × 2 s × 3 epochs + one spare frame = 63 epochs in 21 frames.
-        assert_eq!((w.epochs(), w.frames.len()), (63, 21));
-        let first: Value = serde_json::from_str(w.frames[0].as_str()).unwrap();
+        assert_eq!((w.epochs(), w.frame_count()), (63, 21));
+        let first: Value = serde_json::from_str(w.frames[0][0].as_str()).unwrap();
         assert_eq!(first.as_array().map(Vec::len), Some(3));
         assert_eq!(first[1]["t"], json!(0.1));
         assert_eq!(w.ranges[20], 60..63);
@@ -785,7 +882,7 @@ mod tests {
         let a = args(&["--rate", "1", "--duration", "2", "--fault-at", "1"]);
         let w = Workload::build(&a).unwrap();
         assert_eq!(w.epochs(), 3);
-        let first: Value = serde_json::from_str(w.frames[0].as_str()).unwrap();
+        let first: Value = serde_json::from_str(w.frames[0][0].as_str()).unwrap();
         assert!(first["ins"].is_object() && first["gnss"].is_object());
         assert!(w.spec.echo);
         assert_eq!(w.spec.monitors[0].kind, MonitorKind::Federated);
@@ -793,5 +890,125 @@ mod tests {
             w.spec.monitors[0].policy,
             PolicyConfig::Counters { n1: 10, n2: 5 }
         );
+    }
+
+    #[test]
+    fn an_imu_workload_streams_100_hz_rates_with_a_fix_a_second_in_variants() {
+        let a = args(&[
+            "--input",
+            "imu",
+            "--sessions",
+            "3",
+            "--rate",
+            "10",
+            "--batch",
+            "10",
+            "--duration",
+            "2",
+        ]);
+        let w = Workload::build(&a).unwrap();
+        // 10 frames/s × 2 s × 10 epochs + one spare frame, at 100 Hz.
+        assert_eq!((w.epochs(), w.frame_count()), (210, 21));
+        assert!((w.times[1] - 0.01).abs() < 1e-12);
+        // One variant per session (up to IMU_VARIANTS), the same times in each.
+        assert_eq!(w.frames.len(), 3);
+        assert_ne!(w.frames_of_session(0)[0], w.frames_of_session(1)[0]);
+        assert_eq!(w.frames_of_session(3)[0], w.frames_of_session(0)[0]);
+        let first: Value = serde_json::from_str(w.frames[1][0].as_str()).unwrap();
+        let epochs = first.as_array().unwrap();
+        assert_eq!(epochs.len(), 10);
+        assert!(epochs[0]["imu"]["f"].is_array() && epochs[0]["imu"]["w"].is_array());
+        assert!(epochs[0]["gnss"]["vel"].is_array());
+        assert!(epochs[1].get("gnss").is_none() && epochs[1].get("ins").is_none());
+        let second: Value = serde_json::from_str(w.frames[1][10].as_str()).unwrap();
+        assert_eq!(second[0]["t"], json!(1.0));
+        assert!(second[0]["gnss"].is_object());
+        let spec = &w.spec.monitors[0];
+        assert_eq!(spec.kind, MonitorKind::Federated);
+        assert_eq!(spec.config["input"], "imu");
+        assert_eq!(
+            spec.config["strapdown"]["mounting_deg"],
+            json!([0.0, 0.0, 0.0])
+        );
+        assert_eq!(workload_label(&a), "federated/imu");
+        // Sixteen variants at most, however many sessions.
+        let many = args(&["--input", "imu", "--sessions", "1000", "--duration", "0.1"]);
+        assert_eq!(Workload::build(&many).unwrap().frames.len(), 16);
+    }
+
+    /// The raw-IMU workload through a real server on port 0: the session's monitor levels
+    /// over the stop, takes the heading from the first fix at speed, then tests every fix,
+    /// healthy throughout.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn an_imu_session_aligns_on_a_real_server_then_tests_every_fix() {
+        let dir = tempfile::tempdir().unwrap();
+        let server = navguard::service::start(navguard::service::ServiceConfig::new(
+            "127.0.0.1:0".parse().unwrap(),
+            dir.path().join("imu.db"),
+        ))
+        .await
+        .unwrap();
+        let url = format!("ws://{}", server.addr);
+        // 1 frame/s of 100 epochs for 29 s: 30 s of the drive, in 30 frames.
+        let a = args(&["--url", &url, "--input", "imu", "--rate", "1"]);
+        let a = LoadgenArgs {
+            batch: 100,
+            duration: 29.0,
+            ..a
+        };
+        let w = Workload::build(&a).unwrap();
+        assert_eq!(w.epochs(), 3_000);
+        let endpoint = Endpoint::parse(&url, None).unwrap();
+        create_session(&endpoint, &w.spec, "imu").await.unwrap();
+        let socket = endpoint
+            .connect("/api/v1/sessions/imu/ingest")
+            .await
+            .unwrap();
+        let (mut sink, mut stream) = socket.split();
+        for frame in w.frames_of_session(0) {
+            sink.send(Message::Text(frame.clone())).await.unwrap();
+        }
+        let (mut results, mut aligned_at, mut gnss_tests) = (0, None, 0);
+        while results < w.epochs() {
+            let message = tokio::time::timeout(Duration::from_secs(60), stream.next())
+                .await
+                .expect("results keep coming")
+                .expect("the socket is open")
+                .expect("no socket error");
+            let Message::Text(text) = message else {
+                continue;
+            };
+            let v: Value = serde_json::from_str(&text).unwrap();
+            // Availability and state changes may come too; no alarm, no error.
+            assert!(v["type"] != "alarm" && v["type"] != "error", "{v}");
+            if v["type"] != "result" {
+                continue;
+            }
+            let m = &v["monitors"]["federated"];
+            if m["alignment"] == "aligned" && aligned_at.is_none() {
+                aligned_at = v["t"].as_f64();
+            }
+            if let Some(gnss) = m["tests"].get("gnss") {
+                assert_eq!(gnss["state"], "healthy", "{v}");
+                gnss_tests += 1;
+            }
+            results += 1;
+        }
+        let at = aligned_at.expect("the monitor aligned");
+        assert!(
+            (imu::STATIC_S..imu::STATIC_S + 5.0).contains(&at),
+            "aligned at {at} s"
+        );
+        // A fix a second from alignment to the drive's 30th second.
+        assert!(gnss_tests >= 14, "{gnss_tests} gnss tests");
+        sink.close().await.unwrap();
+        server.shutdown().await;
+    }
+
+    #[test]
+    fn imu_input_needs_the_federated_monitor() {
+        let a = args(&["--input", "imu", "--monitor", "linear"]);
+        let err = Workload::build(&a).err().unwrap();
+        assert!(err.to_string().contains("--monitor federated"), "{err}");
     }
 }

@@ -15,6 +15,7 @@ use serde::Serialize;
 use super::report::{Report, ms, rate_label};
 use super::{
     LoadgenArgs, Workload, create_sessions, delete_sessions, measure, server_sample, session_ids,
+    workload_label,
 };
 use crate::cli::http::Endpoint;
 use crate::cli::thousands;
@@ -140,7 +141,7 @@ pub(super) async fn run(
     let best = largest_within(&steps);
     let report = RampReport {
         url: args.url.clone(),
-        monitor: format!("{:?}", args.monitor).to_lowercase(),
+        monitor: workload_label(args),
         rate_hz: args.rate.hz(),
         batch: args.batch,
         step_duration_s: args.duration,

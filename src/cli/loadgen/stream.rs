@@ -180,11 +180,13 @@ impl Reader {
     }
 }
 
-/// Streams one session for the run: passes over the workload until the deadline.
+/// Streams session `index` for the run: passes over its variant of the workload
+/// until the deadline.
 pub(super) async fn run_session(
     endpoint: Arc<Endpoint>,
     id: String,
     work: Arc<Workload>,
+    index: usize,
     rate: Rate,
     phase: Duration,
     deadline: Instant,
@@ -193,7 +195,10 @@ pub(super) async fn run_session(
     let path = format!("/api/v1/sessions/{id}/ingest");
     let mut first = true;
     while Instant::now() < deadline {
-        let tally = match run_pass(&endpoint, &path, &work, rate, phase, first, deadline).await {
+        // Only the first pass waits for the session's phase.
+        let phase = if first { phase } else { Duration::ZERO };
+        let pass = run_pass(&endpoint, &path, &work, index, rate, phase, deadline);
+        let tally = match pass.await {
             Ok(tally) => tally,
             Err(e) => {
                 total.failures.push(format!("{id}: {e:#}"));
@@ -213,9 +218,9 @@ pub(super) async fn run_pass(
     endpoint: &Endpoint,
     path: &str,
     work: &Arc<Workload>,
+    index: usize,
     rate: Rate,
     phase: Duration,
-    first: bool,
     deadline: Instant,
 ) -> anyhow::Result<Tally> {
     let socket = endpoint.connect(path).await?;
@@ -230,8 +235,8 @@ pub(super) async fn run_pass(
         tally: Tally::default(),
     };
     let reading = tokio::spawn(reader.read(stream));
-    let ticks = pacing(rate, if first { phase } else { Duration::ZERO });
-    let sent = send_frames(&mut sink, work, &flight, ticks, deadline).await;
+    let ticks = pacing(rate, phase);
+    let sent = send_frames(&mut sink, work, index, &flight, ticks, deadline).await;
     // Wait for every frame's answer, or give up after DRAIN_TIMEOUT.
     let drain_deadline = Instant::now() + DRAIN_TIMEOUT;
     loop {
@@ -279,11 +284,12 @@ fn pacing(rate: Rate, phase: Duration) -> Option<tokio::time::Interval> {
     }
 }
 
-/// Sends the workload's frames in order on the clock, stamping each in the
+/// Sends session `index`'s frames in order on the clock, stamping each in the
 /// flight queue just before it goes, until the deadline or a failed send.
 async fn send_frames<S>(
     sink: &mut S,
     work: &Workload,
+    index: usize,
     flight: &Mutex<Flight>,
     mut ticks: Option<tokio::time::Interval>,
     deadline: Instant,
@@ -296,7 +302,7 @@ where
         epochs: 0,
         error: None,
     };
-    for (k, frame) in work.frames.iter().enumerate() {
+    for (k, frame) in work.frames_of_session(index).iter().enumerate() {
         if let Some(ticks) = &mut ticks {
             ticks.tick().await;
         }
