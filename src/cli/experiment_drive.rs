@@ -30,7 +30,7 @@ pub(crate) struct DriveArgs {
     #[arg(long, default_value_t = 1.5)]
     pub sigma_h: f64,
     /// A `federated` monitor config (JSON file) to run instead of the drive's own
-    /// (`navguard_sim::experiment::drive::drive_config`).
+    /// (`navguard_sim::drive_config::drive_config`).
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Also write the fault-free run of the first seed for `navguard replay`: its epochs

@@ -8,7 +8,9 @@
 //! sensors ([`sensors`]), injects faults ([`faults`]) and hands the resulting
 //! domain [`navguard_core::epoch::Epoch`]s, each with its truth, to the monitors, the
 //! CLI (`navguard simulate`, which writes them as ingest frames) and the
-//! experiments ([`experiment`]). [`plot`] draws SVG line charts, for the
+//! experiments ([`experiment`]). [`drive_config`] is the shared car drive's raw-IMU
+//! monitor config (the drive experiment's and `loadgen --input imu`'s). [`plot`] draws
+//! SVG line charts, for the
 //! experiments' figures and the CLI's load-ramp curve; the layers before `sim`
 //! never plot.
 //!
@@ -18,6 +20,7 @@
 //! change between `rand` releases; the seed → stream mapping is ours and fixed).
 
 pub mod ads_gnss;
+pub mod drive_config;
 pub mod experiment;
 pub mod faults;
 pub mod imu_channel;

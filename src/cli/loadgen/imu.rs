@@ -192,9 +192,8 @@ fn body_rates(lla: &Lla, m: &Motion) -> (Vector3<f64>, Vector3<f64>) {
 /// The monitor config: the real drive's (`navguard experiment drive`), with the IMU
 /// mounted along the body axes and the antenna on it, as the synthetic rates are.
 pub(super) fn monitor_config() -> Value {
-    let mut config = navguard_sim::experiment::drive::drive_config(
-        &navguard_sim::experiment::drive::AidNoise::default(),
-    );
+    let mut config =
+        navguard_sim::drive_config::drive_config(&navguard_sim::drive_config::AidNoise::default());
     config["strapdown"]["mounting_deg"] = serde_json::json!([0.0, 0.0, 0.0]);
     config["strapdown"]["gnss_lever_arm_m"] = serde_json::json!([0.0, 0.0, 0.0]);
     config
