@@ -213,8 +213,8 @@ fn error_sample(
     let (ref_lla, ref_vel) = reference_at(reference, t)?;
     let [r, p, y] = att.map(f64::to_radians);
     let antenna = geo::apply_offset(&lla, &(geo::dcm_body_to_nav(r, p, y) * lever_b));
-    let d = geo::local_offset(&ref_lla, &antenna);
-    let track = geo::local_offset(origin, &antenna);
+    let d = geo::local_offset(&antenna, &ref_lla);
+    let track = geo::local_offset(&antenna, origin);
     let course = ref_vel.x.atan2(ref_vel.y).to_degrees().rem_euclid(360.0);
     Some(ErrSample {
         t: rel,
