@@ -245,6 +245,14 @@ export class GnssHistory {
     this.latest = latest;
     this.version++;
   }
+  /** Takes a full snapshot (with satellites) as the latest unless a newer one is held. */
+  adoptLatest(g) {
+    if (this.latest && Array.isArray(this.latest.satellites) && this.latest.t >= g.t) return;
+    const n = this.t.length;
+    if (!n || g.t > this.t[n - 1]) { this.push(g); return; }
+    this.latest = g;
+    this.version++;
+  }
   append(g) {
     const num = (x) => (isNum(x) ? x : null);
     this.t.push(g.t); this.hpl.push(num(g.hpl)); this.vpl.push(num(g.vpl)); this.hal.push(num(g.hal));
@@ -435,7 +443,21 @@ export class Live {
     for (const [m, points] of integrity) s.seriesFor(m, INTEGRITY).prepend(points);
     for (const [m, list] of tracks) s.trackFor(m).prepend(list);
     for (const [m, list] of gnss) s.gnssFor(m).prepend(list);
+    if (gnss.size) await this.loadGnssLatest(s, [...gnss.keys()]);
     this.emit("stats", s);
+  }
+
+  /**
+   * The history carries a gnss monitor's levels, not its satellites: the latest
+   * epoch's (sky plot, residuals) come from the session's current stats.
+   */
+  async loadGnssLatest(s, monitors) {
+    let st;
+    try { st = await get("api/v1/sessions/" + encodeURIComponent(s.id) + "/stats"); } catch (_) { return; }
+    for (const m of monitors) {
+      const snap = st && st.monitors && st.monitors[m] && st.monitors[m].gnss;
+      if (snap && isNum(snap.t)) s.gnssFor(m).adoptLatest(snap);
+    }
   }
 
   /** Refreshes one session's REST view now (after a threshold change, say). */

@@ -896,6 +896,28 @@ async fn the_dashboard_draws_a_gnss_monitors_sky_plot_levels_and_stanford_diagra
     assert!(value.is_finite() && value > 0.0, "{hpl}");
     save_screenshot(&client, "dashboard-gnss.png").await;
 
+    // Opened afresh after the run, the view draws the same figures from the history
+    // (levels, Stanford points) and the current stats (the latest satellites).
+    client.goto("about:blank").await.unwrap();
+    client
+        .goto(&format!("{http}/#/session/gnss"))
+        .await
+        .unwrap();
+    let sky_again = wait_js(
+        &client,
+        &format!("{} >= 15 && {0}", gnss_canvas("sky", "points")),
+        "the reopened view's sky plot to draw the latest satellites",
+    )
+    .await;
+    let stanford_again = wait_js(
+        &client,
+        &format!("{} >= 3 && {0}", gnss_canvas("stanford", "points")),
+        "the reopened view's Stanford diagram to hold the history's epochs",
+    )
+    .await;
+    assert_eq!(sky_again, sky, "the same latest epoch");
+    println!("reopened: sky {sky_again} satellites, Stanford {stanford_again} epochs");
+
     client.close().await.unwrap();
     server.shutdown().await;
 }

@@ -2,13 +2,14 @@
 //! one sample per second of epoch time, the last `capacity` of them, so a dashboard
 //! opened mid-run draws the past before the live `stats` messages continue it
 //! (`GET /api/v1/sessions/{id}/history?since=`). Kept compactly (statistics as `f32`,
-//! states as a byte), about 10 bytes per test per sample; restarted with each stream.
+//! states as a byte), about 10 bytes per test per sample (40 more for a `gnss`
+//! monitor's levels and errors); restarted with each stream.
 
 use std::collections::VecDeque;
 
 use serde::Serialize;
 
-use super::stats::{SessionStats, Track};
+use super::stats::{GnssSnapshot, SessionStats, Track};
 use crate::detect::Health;
 use crate::monitor::{Availability, TestName};
 
@@ -23,6 +24,48 @@ struct TestPoint {
     state: Health,
 }
 
+/// A `gnss` monitor's latest pseudorange epoch at one sample: its time, protection
+/// levels, alert limits and (with a truth) errors, m; `None` where the epoch had none.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct GnssPoint {
+    t: f64,
+    hpl: Option<f32>,
+    vpl: Option<f32>,
+    hal: f32,
+    val: Option<f32>,
+    hpe: Option<f32>,
+    vpe: Option<f32>,
+}
+
+impl GnssPoint {
+    fn of(g: &GnssSnapshot) -> Self {
+        let o = &g.outputs;
+        let f = |x: Option<f64>| x.map(|v| v as f32);
+        GnssPoint {
+            t: g.t,
+            hpl: f(o.hpl),
+            vpl: f(o.vpl),
+            hal: o.hal as f32,
+            val: f(o.val),
+            hpe: f(o.hpe),
+            vpe: f(o.vpe),
+        }
+    }
+
+    fn json(&self) -> serde_json::Value {
+        let f = |x: Option<f32>| x.map(f64::from);
+        serde_json::json!({
+            "t": self.t,
+            "hpl": f(self.hpl),
+            "vpl": f(self.vpl),
+            "hal": f64::from(self.hal),
+            "val": f(self.val),
+            "hpe": f(self.hpe),
+            "vpe": f(self.vpe),
+        })
+    }
+}
+
 /// One monitor at one sample.
 #[derive(Debug, Clone, PartialEq)]
 struct MonitorPoint {
@@ -31,6 +74,9 @@ struct MonitorPoint {
     /// Protection level, alert limit, availability.
     integrity: Option<(f32, f32, Availability)>,
     track: Option<Track>,
+    /// `gnss` monitors: the latest pseudorange epoch's levels and errors (without its
+    /// satellites, which only the latest `stats` carry).
+    gnss: Option<GnssPoint>,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -116,6 +162,7 @@ impl History {
                         .and_then(|m| m.integrity.as_ref())
                         .map(|i| (i.protection_level as f32, i.alert_limit as f32, i.state)),
                     track: m.and_then(|m| m.track),
+                    gnss: m.and_then(|m| m.gnss.as_ref()).map(GnssPoint::of),
                 }
             })
             .collect();
@@ -172,6 +219,9 @@ impl History {
                     "track".into(),
                     serde_json::to_value(track).unwrap_or_default(),
                 );
+            }
+            if let Some(g) = &point.gnss {
+                m.insert("gnss".into(), g.json());
             }
             monitors.insert(name.clone(), m.into());
         }
@@ -257,6 +307,43 @@ mod tests {
         // Time going back (a new stream) restarts it.
         h.offer(0.5, &stats(0.5));
         assert_eq!(h.len(), 1);
+    }
+
+    #[test]
+    fn a_gnss_monitors_levels_and_errors_are_sampled_without_its_satellites() {
+        use crate::monitor::gnss::GnssOutputs;
+        use crate::session::stats::GnssSnapshot;
+        use std::sync::Arc;
+        let with_gnss = |t: f64, hpe: Option<f64>| {
+            let mut s = stats(t);
+            let mut o = GnssOutputs::without_solution(40.0, None, Vec::new());
+            o.hpl = Some(12.5);
+            o.vpl = Some(20.25);
+            o.hpe = hpe;
+            let m = s.monitors.get_mut("m").unwrap();
+            m.gnss = Some(GnssSnapshot {
+                t: t - 0.5,
+                outputs: Arc::new(o),
+            });
+            s
+        };
+        let mut h = History::new(10, &stats(0.0));
+        h.offer(1.0, &with_gnss(1.0, Some(3.5)));
+        h.offer(2.0, &with_gnss(2.0, None));
+        h.offer(3.0, &stats(3.0));
+        let v = h.view(None);
+        let g = &v.samples[0]["monitors"]["m"]["gnss"];
+        assert_eq!(
+            *g,
+            serde_json::json!({"t": 0.5, "hpl": 12.5, "vpl": 20.25, "hal": 40.0, "val": null, "hpe": 3.5, "vpe": null}),
+        );
+        assert_eq!(
+            v.samples[1]["monitors"]["m"]["gnss"]["hpe"],
+            serde_json::Value::Null
+        );
+        assert_eq!(v.samples[1]["monitors"]["m"]["gnss"]["t"], 1.5);
+        // A monitor without a gnss snapshot has no `gnss` member.
+        assert!(v.samples[2]["monitors"]["m"].get("gnss").is_none());
     }
 
     #[test]
