@@ -11,6 +11,7 @@
 //! - [`error`]: one error enum; every malformed line is named by file and 1-based line.
 //! - [`gpstime`]: GPS week/seconds, calendar and UTC ↔ GPS seconds.
 //! - [`ephemeris`]: IS-GPS-200 broadcast orbits and satellite clocks, at transmit time.
+//! - [`sp3`]: SP3-c/d precise orbits and clocks, interpolated to the same states.
 //! - [`klobuchar`]: the IS-GPS-200 single-frequency ionospheric model.
 //! - [`geometry`]: look angles from an a-priori position, and truths.
 //! - [`rinex`]: RINEX 2.10/2.11 and 3.0x observation and navigation files (GPS; the
@@ -53,6 +54,7 @@ pub mod merge;
 pub mod nmea;
 pub mod rinex;
 pub mod rtklib_pos;
+pub mod sp3;
 pub mod timetag;
 
 pub use error::FormatError;
