@@ -9,7 +9,8 @@
 
 use std::path::PathBuf;
 
-use navguard_core::epoch::Epoch;
+use navguard_core::epoch::{Constellation, Epoch, SatId};
+use navguard_formats::ephemeris::GalileoMessage;
 use navguard_formats::rinex::convert::{RinexParams, convert};
 use navguard_formats::rinex::nav::{NavFile, parse_nav, read_nav};
 use navguard_formats::rinex::obs::{ObsFile, parse_obs, read_obs};
@@ -151,8 +152,9 @@ fn obs2_to_3(v2: &str, c1w: Option<f64>) -> String {
 
 /// The RINEX 2.10 GPS navigation text as RINEX 3.04 (mixed): `ION ALPHA`/`ION BETA`
 /// as `GPSA`/`GPSB`, each record's first line re-headed `Gnn yyyy mm dd hh mm ss`,
-/// the orbit lines indented by one more column, `D` exponents as `E`; a GLONASS and
-/// a Galileo record after the first GPS record, to be skipped.
+/// the orbit lines indented by one more column, `D` exponents as `E`; after the first
+/// GPS record a GLONASS record, to be skipped, and a Galileo one (an F/NAV record by its
+/// data sources, 2), to be kept.
 fn nav2_to_3(v2: &str) -> String {
     let lines: Vec<&str> = v2.lines().collect();
     let end = lines
@@ -272,14 +274,30 @@ fn assert_same(a: &[Epoch], b: &[Epoch]) -> usize {
 }
 
 #[test]
-fn rinex3_nav_gives_the_rinex2_ephemerides_and_skips_other_systems() {
+fn rinex3_nav_gives_the_rinex2_ephemerides_keeps_galileo_and_skips_glonass() {
     let (v2, v3) = (nav2(), nav3());
-    assert_eq!(v3.ephemerides.len(), 162);
-    assert_eq!(v3.ephemerides, v2.ephemerides);
+    assert_eq!(v3.ephemerides.len(), 162 + 1);
+    for prn in 1..=32 {
+        let sat = SatId {
+            constellation: Constellation::Gps,
+            prn,
+        };
+        assert_eq!(v3.ephemerides.of(sat), v2.ephemerides.of(sat), "{sat}");
+    }
+    let e11 = SatId {
+        constellation: Constellation::Galileo,
+        prn: 11,
+    };
+    let gal = v3.ephemerides.of(e11)[0].galileo.unwrap();
+    assert_eq!(gal.message, GalileoMessage::FNav);
+    assert_eq!(
+        (gal.sisa_m, gal.bgd_e1_e5a, gal.bgd_e1_e5b),
+        (1.0, 3.0, 4.0)
+    );
     assert_eq!(v3.klobuchar, v2.klobuchar);
     assert!(v3.klobuchar.is_some());
     assert_eq!(v3.leap_seconds, Some(13.0));
-    assert_eq!(v3.other_systems_skipped, 2);
+    assert_eq!(v3.other_systems_skipped, 1);
     assert_eq!(v2.other_systems_skipped, 0);
 }
 
@@ -429,10 +447,8 @@ fn rinex3_malformed_lines_are_named_by_file_and_line() {
         .collect();
     let e = error_of(&bad, false);
     assert!(
-        e.starts_with(&format!(
-            "bad.rnx:{}: GPS record of line {second} cut short",
-            second + 7
-        )),
+        e.starts_with(&format!("bad.rnx:{}: G", second + 7))
+            && e.contains(&format!(" record of line {second} cut short")),
         "{e}"
     );
 }

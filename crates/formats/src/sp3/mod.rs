@@ -273,6 +273,7 @@ mod tests {
             week: 1590,
             health: 0.0,
             tgd: 0.0,
+            galileo: None,
         }
     }
 
