@@ -75,15 +75,15 @@ fn a_galileo_orbit_matches_an_independent_os_sis_icd_computation() {
     let e1e5a = C_LIGHT * e.clock_s(t, ClockFor::IonoFree);
     assert!((e1 - -4_932.664_813).abs() < 1e-5, "{e1}");
     assert!((e1e5a - -4_932.595_012).abs() < 1e-5, "{e1e5a}");
-    // With GPS's μ (5.8e-8 larger) the along-track position 30 min from t_oe moves by
-    // 0.16 m: the 1 mm check tells the constants apart.
+    // With GPS's μ (5.8e-8 larger) the position 30 min from t_oe moves by 0.48 m (the
+    // Python reference with GPS's μ): the 1 mm check tells the constants apart.
     let as_gps = Ephemeris {
         sat: sat(Constellation::Gps, 1),
         galileo: None,
         ..e.clone()
     };
     let off = dist(as_gps.position(t), want);
-    assert!(off > 0.1, "{off}");
+    assert!(off > 0.4, "{off}");
 }
 
 #[test]
