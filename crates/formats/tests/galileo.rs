@@ -190,3 +190,23 @@ fn gps_records_of_the_mixed_file_are_gps_orbits() {
     assert!(worst < 5.0, "{worst}");
     eprintln!("consecutive GPS batches: worst position {worst:.2} m");
 }
+
+#[test]
+fn galileo_data_sources_naming_no_clock_are_an_error_at_their_line() {
+    let text = std::fs::read_to_string(data("BRDM00DLR_S_20230730000_01D_MN_GE.rnx")).unwrap();
+    // E01's first record starts at line 75; its data sources (516) are on line 80.
+    let lines: Vec<&str> = text.lines().collect();
+    assert!(lines[74].starts_with("E01 2023 03 14 00 00 00"));
+    for (bad, why) in [
+        ("0.000000000000e+00", "names no single clock"),
+        ("7.680000000000e+02", "names no single clock"),
+        ("5.165000000000e+02", "not a 10-bit integer"),
+    ] {
+        let edited = text.replacen("5.160000000000e+02", bad, 1);
+        let e = navguard_formats::rinex::nav::parse_nav(&edited, "e.rnx")
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("e.rnx:80: Galileo data sources"), "{e}");
+        assert!(e.contains(why), "{e}");
+    }
+}

@@ -185,7 +185,12 @@ pub(crate) fn ephemeris(
 /// data-source bit 9 (E5b,E1: I/NAV) or bit 8 (E5a,E1: F/NAV); a file without either
 /// (RINEX 3.00–3.02 writers) is read by the message bits, 1 (F/NAV E5a-I) against 0 and 2
 /// (I/NAV E1-B, E5b-I).
-fn galileo(v: &[f64], at: At<'_>) -> Result<GalileoNav, FormatError> {
+fn galileo(v: &[f64], record: At<'_>) -> Result<GalileoNav, FormatError> {
+    // The data sources are on the record's sixth line (orbit line 5).
+    let at = At {
+        line: record.line + 5,
+        ..record
+    };
     let bits = v[20];
     if !(0.0..1024.0).contains(&bits) || bits.fract() != 0.0 {
         return Err(at.err(format!(
