@@ -94,8 +94,8 @@ fn skipped(line: &str) -> bool {
         || line.starts_with("EV")
 }
 
-/// The header up to the first `*` line: the file with no epochs yet, the declared epoch
-/// count and the index of the first line after the header.
+/// The header up to the first `*` (or stray `P`) line: the file with no epochs yet, the
+/// declared epoch count and the index of the first line after the header.
 fn header(lines: &[&str], file: &str) -> Result<(Sp3File, usize, usize), FormatError> {
     let first = lines.first().copied().unwrap_or("");
     let at = At { file, line: 1 };
@@ -121,7 +121,7 @@ fn header(lines: &[&str], file: &str) -> Result<(Sp3File, usize, usize), FormatE
     }
     let mut sats = Vec::new();
     let mut expected: Option<usize> = None;
-    let mut time_system: Option<String> = None;
+    let mut time_system: Option<(String, usize)> = None;
     let mut k = 2;
     while k < lines.len() && !lines[k].starts_with('*') && !lines[k].starts_with('P') {
         let (line, at) = (lines[k], At { file, line: k + 1 });
@@ -131,7 +131,7 @@ fn header(lines: &[&str], file: &str) -> Result<(Sp3File, usize, usize), FormatE
             }
             satellite_ids(line, &mut sats, at)?;
         } else if line.starts_with("%c") && time_system.is_none() {
-            time_system = Some(cols(line, 9, 12).trim().to_string());
+            time_system = Some((cols(line, 9, 12).trim().to_string(), k + 1));
         }
         k += 1;
     }
@@ -145,13 +145,12 @@ fn header(lines: &[&str], file: &str) -> Result<(Sp3File, usize, usize), FormatE
             ),
         ));
     }
-    match time_system.as_deref() {
-        Some("GPS") | Some("ccc") | None => {}
-        Some(other) => {
-            return Err(missing(
-                file,
-                format!("time system '{other}' is not read (only GPS time is)"),
-            ));
+    if let Some((system, line)) = time_system {
+        if system != "GPS" && system != "ccc" {
+            let at = At { file, line };
+            return Err(at.err(format!(
+                "time system '{system}' is not read (only GPS time is)"
+            )));
         }
     }
     let f = Sp3File {
@@ -393,7 +392,10 @@ mod tests {
             13,
             "%c G  cc UTC ccc cccc cccc cccc cccc ccccc ccccc ccccc ccccc",
         ));
-        assert!(e.contains("time system 'UTC' is not read"), "{e}");
+        assert!(
+            e.starts_with("x.sp3:13: time system 'UTC' is not read"),
+            "{e}"
+        );
         let header: String = IGS.lines().take(22).map(|l| format!("{l}\n")).collect();
         assert!(error_of(&header).contains("no '*' epoch line"));
         assert!(error_of("").starts_with("x.sp3:1: not an SP3"));
