@@ -41,6 +41,7 @@ fn args(format: Format, obs: PathBuf) -> ConvertArgs {
         format,
         obs: Some(obs),
         nav: None,
+        sp3: Vec::new(),
         truth_file: None,
         truth: None,
         truth_approx_position: false,

@@ -26,10 +26,16 @@
 //! clock reading `t_sv = t_rx − PR/c`; system time is `t = t_sv − Δt_sv(t)`, solved by
 //! two fixed-point rounds (Δt_sv changes by < 1e-12 s per second).
 //!
-//! # Galileo
-//! Galileo's F/NAV and I/NAV use the same Kepler model with μ = 3.986004418e14 m³/s²,
-//! F = −4.442807309e-10 and the same Ω̇_E (Galileo OS SIS ICD §5.1.1); [`Constants`]
-//! holds both, but only GPS navigation files are read today.
+//! # Galileo (OS SIS ICD §5.1.1–5.1.5)
+//! The same Kepler model and clock polynomial with Galileo's μ = 3.986004418e14 m³/s²
+//! and F = −4.442807309e-10 s/√m, and the same Ω̇_E. Times are GST, taken as GPS
+//! seconds: RINEX gives the week as GPS-aligned (GST week + 1024), and the GST − GPST
+//! offset (GGTO, a few ns) is left to the receiver's clock per constellation. The
+//! broadcast clock refers to the iono-free combination of its message: E1/E5b for
+//! I/NAV, E1/E5a for F/NAV. An E1 single-frequency user subtracts that message's
+//! group delay, `Δt_sv,E1 = Δt_sv − BGD(E1,E5b)` (I/NAV) or `− BGD(E1,E5a)` (F/NAV)
+//! (§5.1.5); the E1/E5a combination ([`ClockFor::IonoFree`]) takes an I/NAV clock across
+//! with `Δt_sv,E1E5a = Δt_sv − BGD(E1,E5b) + BGD(E1,E5a)`, both being the same E1 clock.
 
 use std::collections::BTreeMap;
 
@@ -124,10 +130,36 @@ pub struct Ephemeris {
     pub idot: f64,
     /// GPS week of t_oe (continuous, not modulo 1024).
     pub week: i64,
-    /// SV health word; 0 is healthy.
+    /// SV health word; 0 is healthy (Galileo: every signal's health and validity bits).
     pub health: f64,
-    /// Group delay T_GD, s.
+    /// Group delay T_GD, s (Galileo: BGD(E1,E5a), as RINEX's field in that place).
     pub tgd: f64,
+    /// Galileo's message, group delays and accuracy; `None` for GPS and QZSS.
+    pub galileo: Option<GalileoNav>,
+}
+
+/// The Galileo navigation message a record was decoded from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GalileoMessage {
+    /// I/NAV (E1-B, E5b-I): the clock refers to E1/E5b.
+    INav,
+    /// F/NAV (E5a-I): the clock refers to E1/E5a.
+    FNav,
+}
+
+/// What a Galileo record adds to the Kepler elements (RINEX 3.04 Table A8).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GalileoNav {
+    /// The message the clock came from.
+    pub message: GalileoMessage,
+    /// BGD(E1,E5a), s.
+    pub bgd_e1_e5a: f64,
+    /// BGD(E1,E5b), s (F/NAV does not carry it: 0 there).
+    pub bgd_e1_e5b: f64,
+    /// Signal-in-space accuracy, m.
+    pub sisa_m: f64,
+    /// RINEX's data-source bits, as read.
+    pub data_sources: u32,
 }
 
 /// Which signal the clock correction is for.
@@ -196,11 +228,31 @@ impl Ephemeris {
     pub fn clock_s(&self, t: f64, for_signal: ClockFor) -> f64 {
         let dt = wrap_half_week(t - self.toc);
         let rel = self.constants().f_rel * self.e * self.sqrt_a * self.eccentric_anomaly(t).sin();
-        let tgd = match for_signal {
-            ClockFor::L1 => self.tgd,
-            ClockFor::IonoFree => 0.0,
-        };
-        self.af0 + self.af1 * dt + self.af2 * dt * dt + rel - tgd
+        self.af0 + self.af1 * dt + self.af2 * dt * dt + rel - self.group_delay_s(for_signal)
+    }
+
+    /// What is subtracted from this record's clock for `for_signal`: T_GD for GPS L1;
+    /// for Galileo the message's BGD for E1, and for E1/E5a the step from the I/NAV
+    /// clock's E1/E5b reference (module docs).
+    pub fn group_delay_s(&self, for_signal: ClockFor) -> f64 {
+        match (self.galileo, for_signal) {
+            (None, ClockFor::L1) => self.tgd,
+            (None, ClockFor::IonoFree) => 0.0,
+            (Some(g), ClockFor::L1) => match g.message {
+                GalileoMessage::INav => g.bgd_e1_e5b,
+                GalileoMessage::FNav => g.bgd_e1_e5a,
+            },
+            (Some(g), ClockFor::IonoFree) => match g.message {
+                GalileoMessage::INav => g.bgd_e1_e5b - g.bgd_e1_e5a,
+                GalileoMessage::FNav => 0.0,
+            },
+        }
+    }
+
+    /// The group delay an L1 (E1) user subtracts from a precise clock that refers to the
+    /// IGS's iono-free combination (GPS P1/P2, Galileo E1/E5a): T_GD or BGD(E1,E5a).
+    pub fn precise_group_delay_s(&self) -> f64 {
+        self.galileo.map_or(self.tgd, |g| g.bgd_e1_e5a)
     }
 
     /// The state at the transmit time of a signal whose satellite clock read `t_sv`
@@ -259,11 +311,23 @@ impl Ephemerides {
     }
 
     /// The healthy ephemeris of `sat` with t_oe nearest `t`, if one is within
-    /// [`MAX_AGE_S`] (the earlier one on a tie).
+    /// [`MAX_AGE_S`] (the earlier one on a tie). Galileo prefers I/NAV records (the E1
+    /// message) and takes an F/NAV one only when no I/NAV record is within reach.
     pub fn select(&self, sat: SatId, t: f64) -> Option<&Ephemeris> {
-        self.of(sat)
-            .iter()
-            .filter(|e| e.health == 0.0 && (t - e.toe).abs() <= MAX_AGE_S)
-            .min_by(|a, b| (t - a.toe).abs().total_cmp(&(t - b.toe).abs()))
+        let usable = |e: &&Ephemeris| e.health == 0.0 && (t - e.toe).abs() <= MAX_AGE_S;
+        let nearest = |inav_only: bool| {
+            self.of(sat)
+                .iter()
+                .filter(usable)
+                .filter(|e| {
+                    !inav_only || e.galileo.is_some_and(|g| g.message == GalileoMessage::INav)
+                })
+                .min_by(|a, b| (t - a.toe).abs().total_cmp(&(t - b.toe).abs()))
+        };
+        if sat.constellation == Constellation::Galileo {
+            nearest(true).or_else(|| nearest(false))
+        } else {
+            nearest(false)
+        }
     }
 }

@@ -10,11 +10,14 @@
 //! In the order data flows through them:
 //! - [`error`]: one error enum; every malformed line is named by file and 1-based line.
 //! - [`gpstime`]: GPS week/seconds, calendar and UTC ↔ GPS seconds.
-//! - [`ephemeris`]: IS-GPS-200 broadcast orbits and satellite clocks, at transmit time.
+//! - [`ephemeris`]: IS-GPS-200 (and Galileo OS SIS ICD) broadcast orbits and satellite
+//!   clocks, at transmit time.
+//! - [`sp3`]: SP3-c/d precise orbits and clocks, interpolated to the same states.
+//! - [`orbits`]: the one door to either source for the observation readers.
 //! - [`klobuchar`]: the IS-GPS-200 single-frequency ionospheric model.
 //! - [`geometry`]: look angles from an a-priori position, and truths.
-//! - [`rinex`]: RINEX 2.10/2.11 and 3.0x observation and navigation files (GPS; the
-//!   version on the first line decides), and their conversion.
+//! - [`rinex`]: RINEX 2.10/2.11 and 3.0x observation and navigation files (GPS; RINEX 3
+//!   also Galileo; the version on the first line decides), and their conversion.
 //! - [`gnsslogger`]: Android GnssLogger `Raw` records with a RINEX navigation file.
 //! - [`gsdc`]: the Google Smartphone Decimeter Challenge 2021 and 2023 CSVs.
 //! - [`fix`]: GNSS fixes (the solution readers' output) and the σ policy that makes
@@ -51,8 +54,10 @@ pub mod kfgins;
 pub mod klobuchar;
 pub mod merge;
 pub mod nmea;
+pub mod orbits;
 pub mod rinex;
 pub mod rtklib_pos;
+pub mod sp3;
 pub mod timetag;
 
 pub use error::FormatError;

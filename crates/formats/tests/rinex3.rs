@@ -9,7 +9,8 @@
 
 use std::path::PathBuf;
 
-use navguard_core::epoch::Epoch;
+use navguard_core::epoch::{Constellation, Epoch, SatId};
+use navguard_formats::ephemeris::GalileoMessage;
 use navguard_formats::rinex::convert::{RinexParams, convert};
 use navguard_formats::rinex::nav::{NavFile, parse_nav, read_nav};
 use navguard_formats::rinex::obs::{ObsFile, parse_obs, read_obs};
@@ -151,8 +152,9 @@ fn obs2_to_3(v2: &str, c1w: Option<f64>) -> String {
 
 /// The RINEX 2.10 GPS navigation text as RINEX 3.04 (mixed): `ION ALPHA`/`ION BETA`
 /// as `GPSA`/`GPSB`, each record's first line re-headed `Gnn yyyy mm dd hh mm ss`,
-/// the orbit lines indented by one more column, `D` exponents as `E`; a GLONASS and
-/// a Galileo record after the first GPS record, to be skipped.
+/// the orbit lines indented by one more column, `D` exponents as `E`; after the first
+/// GPS record a GLONASS record, to be skipped, and a Galileo one (an F/NAV record by its
+/// data sources, 2), to be kept.
 fn nav2_to_3(v2: &str) -> String {
     let lines: Vec<&str> = v2.lines().collect();
     let end = lines
@@ -272,32 +274,62 @@ fn assert_same(a: &[Epoch], b: &[Epoch]) -> usize {
 }
 
 #[test]
-fn rinex3_nav_gives_the_rinex2_ephemerides_and_skips_other_systems() {
+fn rinex3_nav_gives_the_rinex2_ephemerides_keeps_galileo_and_skips_glonass() {
     let (v2, v3) = (nav2(), nav3());
-    assert_eq!(v3.ephemerides.len(), 162);
-    assert_eq!(v3.ephemerides, v2.ephemerides);
+    assert_eq!(v3.ephemerides.len(), 162 + 1);
+    for prn in 1..=32 {
+        let sat = SatId {
+            constellation: Constellation::Gps,
+            prn,
+        };
+        assert_eq!(v3.ephemerides.of(sat), v2.ephemerides.of(sat), "{sat}");
+    }
+    let e11 = SatId {
+        constellation: Constellation::Galileo,
+        prn: 11,
+    };
+    let gal = v3.ephemerides.of(e11)[0].galileo.unwrap();
+    assert_eq!(gal.message, GalileoMessage::FNav);
+    assert_eq!(
+        (gal.sisa_m, gal.bgd_e1_e5a, gal.bgd_e1_e5b),
+        (1.0, 3.0, 4.0)
+    );
     assert_eq!(v3.klobuchar, v2.klobuchar);
     assert!(v3.klobuchar.is_some());
     assert_eq!(v3.leap_seconds, Some(13.0));
-    assert_eq!(v3.other_systems_skipped, 2);
+    assert_eq!(v3.other_systems_skipped, 1);
     assert_eq!(v2.other_systems_skipped, 0);
 }
 
 #[test]
-fn rinex3_obs_keeps_gps_skips_galileo_and_the_splice_events() {
+fn rinex3_obs_keeps_gps_and_galileo_and_skips_the_splice_events() {
     let (v2, v3) = (obs2(), obs3(None));
     assert_eq!(v3.types, G_TYPES);
+    assert_eq!(v3.galileo_types, ["C1C", "L1C"]);
     assert_eq!(v3.approx_position, v2.approx_position);
     assert_eq!(v3.epochs.len(), 120);
     assert_eq!(v3.events_skipped, 3);
-    assert_eq!(v3.other_systems_skipped, 24);
+    assert_eq!(v3.other_systems_skipped, 0);
+    let galileo = |s: &&(SatId, _)| s.0.constellation == Constellation::Galileo;
+    let e11: usize = v3
+        .epochs
+        .iter()
+        .map(|e| e.sats.iter().filter(galileo).count())
+        .sum();
+    assert_eq!(e11, 24);
+    let e = v3.epochs[0].sats.iter().find(galileo).unwrap();
+    assert_eq!(
+        e.1[0].map(|o| (o.value, o.ssi)),
+        Some((23_456_789.123, Some(7)))
+    );
     for (a, b) in v2.epochs.iter().zip(&v3.epochs) {
         assert_eq!(a.t, b.t);
-        let ids = |e: &navguard_formats::rinex::obs::ObsEpoch| {
-            e.sats.iter().map(|s| s.0).collect::<Vec<_>>()
-        };
-        assert_eq!(ids(a), ids(b));
-        for ((_, x), (_, y)) in a.sats.iter().zip(&b.sats) {
+        let gps: Vec<_> = b.sats.iter().filter(|s| !galileo(s)).collect();
+        assert_eq!(
+            a.sats.iter().map(|s| s.0).collect::<Vec<_>>(),
+            gps.iter().map(|s| s.0).collect::<Vec<_>>()
+        );
+        for ((_, x), (_, y)) in a.sats.iter().zip(gps) {
             // C1 = C1C, L1 = L1C, P2 = C2W, L2 = L2W, with LLI and SSI.
             assert_eq!((x[1], x[0], x[3], x[2]), (y[0], y[1], y[6], y[7]));
             assert!(y[4].is_none() && y[8..].iter().all(Option::is_none));
@@ -315,7 +347,9 @@ fn rinex3_converts_to_the_rinex2_pseudoranges_orbits_and_clocks() {
         };
         let a = convert(&o2, &n2, "v2", p).unwrap();
         let b = convert(&o3, &n3, "v3", p).unwrap();
-        assert_eq!(a.dropped, b.dropped);
+        // E11's 24 observations are dropped: its record's health is 2 (and it has no
+        // E5a code for the iono-free pair).
+        assert_eq!(a.dropped + 24, b.dropped);
         let n = assert_same(&a.epochs, &b.epochs);
         eprintln!("iono_free {iono_free}: {n} satellite observations agree");
         assert!(n > 900, "{n}");
@@ -429,10 +463,8 @@ fn rinex3_malformed_lines_are_named_by_file_and_line() {
         .collect();
     let e = error_of(&bad, false);
     assert!(
-        e.starts_with(&format!(
-            "bad.rnx:{}: GPS record of line {second} cut short",
-            second + 7
-        )),
+        e.starts_with(&format!("bad.rnx:{}: G", second + 7))
+            && e.contains(&format!(" record of line {second} cut short")),
         "{e}"
     );
 }

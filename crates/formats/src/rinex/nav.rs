@@ -7,12 +7,12 @@ use std::path::Path;
 use navguard_core::epoch::{Constellation, SatId};
 
 use super::{cols, date, int, label, major_version, real, sat_id};
-use crate::ephemeris::{Ephemerides, Ephemeris};
+use crate::ephemeris::{Ephemerides, Ephemeris, GalileoMessage, GalileoNav};
 use crate::error::{At, FormatError, missing, read_to_string};
 use crate::gpstime::{WEEK_S, wrap_half_week};
 use crate::klobuchar::Klobuchar;
 
-/// A parsed GPS navigation file.
+/// A parsed navigation file (GPS; RINEX 3 also Galileo).
 #[derive(Debug, Clone, PartialEq)]
 pub struct NavFile {
     /// `ION ALPHA` / `ION BETA`, when the header has both.
@@ -21,12 +21,13 @@ pub struct NavFile {
     pub leap_seconds: Option<f64>,
     /// Every broadcast record.
     pub ephemerides: Ephemerides,
-    /// RINEX 3: records of systems other than GPS, skipped. Always 0 for RINEX 2.
+    /// RINEX 3: records of systems other than GPS and Galileo, skipped. Always 0 for
+    /// RINEX 2.
     pub other_systems_skipped: usize,
 }
 
 /// Reads a RINEX 2.x GPS or 3.x navigation file (the version on its first line
-/// decides; of RINEX 3 only the GPS records are kept).
+/// decides; of RINEX 3 the GPS and Galileo records are kept).
 pub fn read_nav(path: &Path) -> Result<NavFile, FormatError> {
     parse_nav(&read_to_string(path)?, &path.display().to_string())
 }
@@ -128,22 +129,27 @@ fn record(lines: &[&str], k: usize, file: &str) -> Result<Ephemeris, FormatError
     ephemeris(sat, toc, &v, at)
 }
 
-/// The broadcast values of Table A4 (RINEX 3.04 Table A8 has the same order for GPS)
-/// with the clock reference time `toc`, as an [`Ephemeris`].
+/// The broadcast values of Table A4 (RINEX 3.04 Table A8 has the same order for GPS and,
+/// but for the fields noted in [`galileo`], for Galileo) with the clock reference time
+/// `toc`, as an [`Ephemeris`].
 pub(crate) fn ephemeris(
     sat: SatId,
     toc: f64,
     v: &[f64],
     at: At<'_>,
 ) -> Result<Ephemeris, FormatError> {
+    // The week field goes with t_oe (Galileo: GST week + 1024, aligned with GPS weeks);
+    // t_oe near a week's edge and t_oc across it stay consistent by the half-week rule.
     let week = v[21] as i64;
-    // The week field goes with t_oe; t_oe near a week's edge and t_oc across it stay
-    // consistent by the half-week rule.
     let toe_raw = week as f64 * WEEK_S + v[11];
     let toe = toc + wrap_half_week(toe_raw - toc);
     if v[10] <= 0.0 {
         return Err(at.err("√A must be positive"));
     }
+    let galileo = match sat.constellation {
+        Constellation::Galileo => Some(galileo(v, at)?),
+        _ => None,
+    };
     Ok(Ephemeris {
         sat,
         toc,
@@ -170,5 +176,43 @@ pub(crate) fn ephemeris(
         week: ((toe / WEEK_S).floor()) as i64,
         health: v[24],
         tgd: v[25],
+        galileo,
+    })
+}
+
+/// The Galileo fields of RINEX 3.04 Table A8: data sources (orbit line 5, field 2),
+/// SISA in m, health, BGD E5a/E1 and BGD E5b/E1 (orbit line 6). The clock's reference is
+/// data-source bit 9 (E5b,E1: I/NAV) or bit 8 (E5a,E1: F/NAV); a file without either
+/// (RINEX 3.00–3.02 writers) is read by the message bits, 1 (F/NAV E5a-I) against 0 and 2
+/// (I/NAV E1-B, E5b-I).
+fn galileo(v: &[f64], record: At<'_>) -> Result<GalileoNav, FormatError> {
+    // The data sources are on the record's sixth line (orbit line 5).
+    let at = At {
+        line: record.line + 5,
+        ..record
+    };
+    let bits = v[20];
+    if !(0.0..1024.0).contains(&bits) || bits.fract() != 0.0 {
+        return Err(at.err(format!(
+            "Galileo data sources '{bits}' is not a 10-bit integer"
+        )));
+    }
+    let bits = bits as u32;
+    let bit = |k: u32| bits & (1 << k) != 0;
+    let message = match (bit(9), bit(8), bit(0) || bit(2), bit(1)) {
+        (true, false, _, _) | (false, false, true, false) => GalileoMessage::INav,
+        (false, true, _, _) | (false, false, false, true) => GalileoMessage::FNav,
+        _ => {
+            return Err(at.err(format!(
+                "Galileo data sources {bits} names no single clock (bits 8/9, or 0-2)"
+            )));
+        }
+    };
+    Ok(GalileoNav {
+        message,
+        bgd_e1_e5a: v[25],
+        bgd_e1_e5b: v[26],
+        sisa_m: v[23],
+        data_sources: bits,
     })
 }

@@ -4,14 +4,18 @@
 //! - `RINEX VERSION / TYPE`: the type `N` in column 21 (any system, `M` for mixed).
 //! - `IONOSPHERIC CORR`: `GPSA` (α₀..α₃) and `GPSB` (β₀..β₃), 4D12.4 from column 6,
 //!   are the Klobuchar coefficients; the other models' lines (`GAL`, `QZSA`, `BDSA`, …)
-//!   are ignored.
+//!   are ignored (Galileo's NeQuick is not computed).
 //! - `LEAP SECONDS`: I6 in columns 1–6, as RINEX 2.
-//! - GPS records: `G05 yyyy mm dd hh mm ss` and three D19.12 from column 24, then seven
-//!   broadcast-orbit lines of four D19.12 after a 4-space indent, in the order of
-//!   RINEX 2 (Table A8 = RINEX 2.11 Table A4).
-//! - Records of other systems (GLONASS and SBAS of 4 or 5 lines, Galileo, BeiDou, QZSS,
-//!   IRNSS of 8) are skipped by their continuation lines (those starting with a blank)
-//!   and counted in [`NavFile::other_systems_skipped`]: only GPS orbits are computed.
+//! - GPS and Galileo records: `G05 yyyy mm dd hh mm ss` (`E11 …`) and three D19.12 from
+//!   column 24, then seven broadcast-orbit lines of four D19.12 after a 4-space indent.
+//!   GPS in the order of RINEX 2 (Table A8 = RINEX 2.11 Table A4); Galileo in the same
+//!   places for the Kepler elements and clock, with IODnav for IODE, the data sources,
+//!   GAL week (aligned with GPS weeks), SISA, health and BGD E5a/E1 and E5b/E1 where GPS
+//!   has its own fields ([`super::nav::ephemeris`]). A satellite with both I/NAV and F/NAV
+//!   records keeps both, told apart by the data sources.
+//! - Records of other systems (GLONASS and SBAS of 4 or 5 lines, BeiDou, QZSS, IRNSS of 8)
+//!   are skipped by their continuation lines (those starting with a blank) and counted in
+//!   [`NavFile::other_systems_skipped`].
 
 use navguard_core::epoch::Constellation;
 
@@ -70,7 +74,10 @@ pub(crate) fn parse(lines: &[&str], file: &str) -> Result<NavFile, FormatError> 
             return Err(at.err("expected a record starting with a satellite (e.g. 'G05')"));
         }
         let sat = sat_id(cols(line, 0, 3), Constellation::Gps, at)?;
-        if sat.constellation != Constellation::Gps {
+        if !matches!(
+            sat.constellation,
+            Constellation::Gps | Constellation::Galileo
+        ) {
             other_systems_skipped += 1;
             k += 1;
             while k < lines.len() && !starts_record(lines[k]) && !lines[k].trim().is_empty() {
@@ -80,7 +87,7 @@ pub(crate) fn parse(lines: &[&str], file: &str) -> Result<NavFile, FormatError> 
         }
         if let Some(j) = (k + 1..(k + 8).min(lines.len())).find(|&j| starts_record(lines[j])) {
             return Err(At { file, line: j + 1 }.err(format!(
-                "GPS record of line {} cut short: 7 broadcast-orbit lines expected",
+                "{sat} record of line {} cut short: 7 broadcast-orbit lines expected",
                 k + 1
             )));
         }

@@ -35,7 +35,8 @@ pub struct ObsEpoch {
     pub t: f64,
     /// The event flag: 0 OK, 1 power failure before this epoch.
     pub flag: u8,
-    /// Each satellite's values, in the order of [`ObsFile::types`].
+    /// Each satellite's values, in the order of its system's list
+    /// ([`ObsFile::types_of`]).
     pub sats: Vec<(SatId, Vec<Option<ObsValue>>)>,
 }
 
@@ -45,6 +46,9 @@ pub struct ObsFile {
     /// RINEX 2 `# / TYPES OF OBSERV`, e.g. `["L1", "C1", "L2", "P2"]`; RINEX 3 the
     /// GPS list of `SYS / # / OBS TYPES`, e.g. `["C1C", "L1C", "C2W", "L2W"]`.
     pub types: Vec<String>,
+    /// RINEX 3: the Galileo list of `SYS / # / OBS TYPES` (e.g. `["C1C", "C5Q"]`);
+    /// RINEX 2: the one list again, which every system's satellites use.
+    pub galileo_types: Vec<String>,
     /// `APPROX POSITION XYZ`, ECEF m, when given and not zero.
     pub approx_position: Option<[f64; 3]>,
     /// The file's satellite system (`G`, or `M` for mixed: blanks read as GPS).
@@ -53,9 +57,19 @@ pub struct ObsFile {
     pub epochs: Vec<ObsEpoch>,
     /// How many event records (flags 2–6) were skipped.
     pub events_skipped: usize,
-    /// RINEX 3: satellite observations of systems other than GPS, not kept (only GPS
-    /// is converted). Always 0 for RINEX 2, whose mixed files keep every satellite.
+    /// RINEX 3: satellite observations of systems other than GPS and Galileo, not kept.
+    /// Always 0 for RINEX 2, whose mixed files keep every satellite.
     pub other_systems_skipped: usize,
+}
+
+impl ObsFile {
+    /// The observation codes, in value order, of a satellite of constellation `c`.
+    pub fn types_of(&self, c: Constellation) -> &[String] {
+        match c {
+            Constellation::Galileo => &self.galileo_types,
+            _ => &self.types,
+        }
+    }
 }
 
 /// Reads a RINEX 2.x or 3.x observation file (the version on its first line decides).
@@ -152,6 +166,7 @@ pub fn parse_obs(text: &str, file: &str) -> Result<ObsFile, FormatError> {
         }
     }
     Ok(ObsFile {
+        galileo_types: h.types.clone(),
         types: h.types,
         approx_position: h.approx,
         system: h.system,

@@ -13,9 +13,11 @@
 //! - Event flags 2–5 are followed by `n` header or comment lines, flag 6 by `n`
 //!   cycle-slip satellite lines: all skipped and counted.
 //!
-//! Only GPS is kept: [`ObsFile::types`] is the `G` list, and satellites of other
-//! systems are skipped and counted in [`ObsFile::other_systems_skipped`] (their
-//! ephemerides are not read either, see [`super::nav3`]).
+//! GPS and Galileo are kept: [`ObsFile::types`] is the `G` list and
+//! [`ObsFile::galileo_types`] the `E` list; a satellite of either system without its
+//! list is an error. Satellites of other systems are skipped and counted in
+//! [`ObsFile::other_systems_skipped`] (their ephemerides are not read either, see
+//! [`super::nav3`]).
 
 use std::collections::BTreeMap;
 
@@ -95,7 +97,7 @@ fn header(lines: &[&str], file: &str) -> Result<(Header, usize), FormatError> {
 /// already checked).
 pub(crate) fn parse(lines: &[&str], file: &str) -> Result<ObsFile, FormatError> {
     let (h, mut k) = header(lines, file)?;
-    let gps = h.types.get(&'G');
+    let (gps, gal) = (h.types.get(&'G'), h.types.get(&'E'));
     let mut epochs = Vec::new();
     let (mut events_skipped, mut other_systems_skipped) = (0, 0);
     while k < lines.len() {
@@ -121,12 +123,16 @@ pub(crate) fn parse(lines: &[&str], file: &str) -> Result<ObsFile, FormatError> 
                         .get(li)
                         .ok_or_else(|| at.err("observations cut short"))?;
                     let id = sat_line_id(line, h.system, at)?;
-                    if id.constellation != Constellation::Gps {
-                        other_systems_skipped += 1;
-                        continue;
-                    }
-                    let types = gps.ok_or_else(|| {
-                        at.err("GPS satellite but no G line in SYS / # / OBS TYPES")
+                    let (types, letter) = match id.constellation {
+                        Constellation::Gps => (gps, 'G'),
+                        Constellation::Galileo => (gal, 'E'),
+                        _ => {
+                            other_systems_skipped += 1;
+                            continue;
+                        }
+                    };
+                    let types = types.ok_or_else(|| {
+                        at.err(format!("{id} but no {letter} line in SYS / # / OBS TYPES"))
                     })?;
                     let values = (0..types.len())
                         .map(|i| obs_value(cols(line, 3 + 16 * i, 19 + 16 * i), at))
@@ -146,6 +152,7 @@ pub(crate) fn parse(lines: &[&str], file: &str) -> Result<ObsFile, FormatError> 
     }
     Ok(ObsFile {
         types: gps.cloned().unwrap_or_default(),
+        galileo_types: gal.cloned().unwrap_or_default(),
         approx_position: h.approx,
         system: h.system,
         epochs,
