@@ -33,7 +33,7 @@ pub(crate) enum ExperimentCommand {
     Guards(GuardsArgs),
     /// T_a's false-alarm rate on coloured residuals: successive-difference vs batch-means variance.
     Coloured(ColouredArgs),
-    /// The gnss monitor on real receiver data: fault-free and injected faults, three FDE methods.
+    /// The gnss monitor on real receiver data: fault-free and injected faults, three FDE methods and one with pairs of faults monitored.
     Raim(super::experiment_raim::RaimArgs),
     /// The federated monitor on the real car drive: raw 100 Hz IMU, 1 Hz degraded GNSS, outages, faults.
     Drive(super::experiment_drive::DriveArgs),

@@ -26,6 +26,7 @@ use std::collections::BTreeMap;
 
 use navguard_core::detect::{PolicyConfig, ThresholdSpec};
 use navguard_core::epoch::{Epoch, SatId};
+use navguard_core::gnss::araim::AraimParams;
 use navguard_core::monitor::{self, MonitorConfig, MonitorKind, MonitorSpec, Outputs};
 use navguard_core::session::{AlarmLevel, Seat, SessionCore};
 use rand::rngs::StdRng;
@@ -49,6 +50,16 @@ pub struct Dataset {
     pub sigma: serde_json::Value,
 }
 
+/// The method name of solution separation under a threat model with pairs of satellite
+/// faults monitored: `araim.p_sat` raised to [`PAIRS_P_SAT`], at which two simultaneous
+/// faults among the 7–9 satellites of the geodetic receiver are more probable than
+/// `P_THRES`, so ARAIM enumerates pairs as fault modes (in its protection levels and
+/// as exclusion candidates).
+pub const PAIRS: &str = "ss_pairs";
+
+/// `araim.p_sat` of [`PAIRS`] (the ADD's default is 1e-5).
+pub const PAIRS_P_SAT: f64 = 1e-4;
+
 /// What to run.
 #[derive(Debug, Clone)]
 pub struct RaimParams {
@@ -64,7 +75,8 @@ pub struct RaimParams {
     pub hal_m: f64,
     /// The fault cases.
     pub faults: Vec<Fault>,
-    /// The exclusion methods compared.
+    /// The exclusion methods compared: `rtklib`, `greedy`, `solution_separation` (the
+    /// monitor's `fde.method`, default threat model) and [`PAIRS`].
     pub methods: Vec<&'static str>,
 }
 
@@ -77,7 +89,7 @@ impl Default for RaimParams {
             p_fa: 1e-3,
             hal_m: 40.0,
             faults: Fault::standard_cases(),
-            methods: vec!["rtklib", "greedy", "solution_separation"],
+            methods: vec!["rtklib", "greedy", "solution_separation", PAIRS],
         }
     }
 }
@@ -193,12 +205,18 @@ fn spec(
 ) -> Result<MonitorSpec, ExperimentError> {
     let mut sigma = d.sigma.clone();
     sigma["scale"] = scale.into();
+    let (fde, p_sat) = if method == PAIRS {
+        ("solution_separation", PAIRS_P_SAT)
+    } else {
+        (method, AraimParams::default().p_sat)
+    };
     let config = serde_json::json!({
         "elevation_mask_deg": 10.0,
         "sigma": sigma,
-        "fde": {"method": method, "max_exclusions": 2},
+        "fde": {"method": fde, "max_exclusions": 2},
         "protection": "araim",
         "hal_m": p.hal_m,
+        "araim": {"p_sat": p_sat},
     });
     Ok(MonitorSpec {
         kind: MonitorKind::Gnss,
