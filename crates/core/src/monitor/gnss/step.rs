@@ -108,7 +108,8 @@ fn integrity(monitor: &GnssMonitor, levels: Option<(f64, f64)>, unresolved: bool
     };
     Integrity {
         state,
-        protection_level: if hpl.is_finite() { hpl } else { f64::MAX },
+        // Unknown (no fix, or the budget used up by unmonitored modes): NaN, null on the wire.
+        protection_level: if hpl.is_finite() { hpl } else { f64::NAN },
         alert_limit: monitor.config.hal_m,
     }
 }
