@@ -134,7 +134,7 @@ impl AlarmWriter {
 async fn run(pool: Pool, mut rx: mpsc::Receiver<Pending>) {
     let mut batch = Vec::with_capacity(GROUP);
     while rx.recv_many(&mut batch, GROUP).await > 0 {
-        match commit(&pool, &batch).await {
+        match super::retry_transient("alarm commit", || commit(&pool, &batch)).await {
             Ok(done) => {
                 for (pending, done) in batch.drain(..).zip(done) {
                     let _ = pending.reply.send(Ok(done));
@@ -144,9 +144,9 @@ async fn run(pool: Pool, mut rx: mpsc::Receiver<Pending>) {
                 let message = e.to_string();
                 tracing::error!(error = %message, writes = batch.len(), "alarm commit failed");
                 for pending in batch.drain(..) {
-                    let _ = pending.reply.send(Err(StoreError::Corrupt(format!(
-                        "alarm commit failed: {message}"
-                    ))));
+                    let _ = pending
+                        .reply
+                        .send(Err(StoreError::Write(format!("alarm commit: {message}"))));
                 }
             }
         }

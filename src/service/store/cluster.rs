@@ -181,13 +181,16 @@ pub(super) async fn renew(
     owner: &str,
     expires_ms: i64,
 ) -> Result<Vec<(String, i64)>, StoreError> {
-    Ok(with_pool!(pool, p => sqlx::query_as(
-        "UPDATE leases SET expires_ms = $2 WHERE owner = $1 AND expires_ms > 0 RETURNING session, epoch",
-    )
-    .bind(owner)
-    .bind(expires_ms)
-    .fetch_all(p)
-    .await?))
+    let renewal = || async {
+        with_pool!(pool, p => sqlx::query_as(
+            "UPDATE leases SET expires_ms = $2 WHERE owner = $1 AND expires_ms > 0 RETURNING session, epoch",
+        )
+        .bind(owner)
+        .bind(expires_ms)
+        .fetch_all(p)
+        .await)
+    };
+    Ok(super::retry_transient("lease renewal", renewal).await?)
 }
 
 /// Gives a lease up at once (a drain or a handover): the next node takes it without
@@ -249,7 +252,9 @@ impl CheckpointWriter {
 async fn run_checkpoints(pool: Pool, mut rx: mpsc::Receiver<(Fence, Checkpoint, CheckpointReply)>) {
     let mut batch = Vec::with_capacity(CHECKPOINT_GROUP);
     while rx.recv_many(&mut batch, CHECKPOINT_GROUP).await > 0 {
-        match commit_checkpoints(&pool, &batch).await {
+        match super::retry_transient("checkpoint commit", || commit_checkpoints(&pool, &batch))
+            .await
+        {
             Ok(held) => {
                 for ((fence, _, reply), held) in batch.drain(..).zip(held) {
                     let answer = if held {
@@ -264,8 +269,8 @@ async fn run_checkpoints(pool: Pool, mut rx: mpsc::Receiver<(Fence, Checkpoint, 
                 let message = e.to_string();
                 tracing::error!(error = %message, checkpoints = batch.len(), "checkpoint commit failed");
                 for (_, _, reply) in batch.drain(..) {
-                    let _ = reply.send(Err(StoreError::Corrupt(format!(
-                        "checkpoint commit failed: {message}"
+                    let _ = reply.send(Err(StoreError::Write(format!(
+                        "checkpoint commit: {message}"
                     ))));
                 }
             }

@@ -51,10 +51,47 @@ pub enum StoreError {
     /// A stored row could not be decoded.
     #[error("corrupt stored row: {0}")]
     Corrupt(String),
+    /// A group commit (alarms, checkpoints) failed: the database's reason, shared by every
+    /// write of the group.
+    #[error("write failed: {0}")]
+    Write(String),
     /// The write was for a session whose lease this node no longer holds under the
     /// epoch it carried (docs/deployment.md): another node owns the session now.
     #[error("session '{0}' is owned by another node now (lease fenced)")]
     Fenced(String),
+}
+
+/// How many more times a group commit that lost a deadlock or a serialisation conflict
+/// is run: Postgres rolls such a transaction back whole and expects the client to run it
+/// again (nodes' alarm, checkpoint and lease writes lock lease rows in different orders).
+const TRANSIENT_RETRIES: u32 = 4;
+
+/// Whether `e` is a conflict that running the whole transaction again resolves:
+/// Postgres' `deadlock_detected` (40P01) and `serialization_failure` (40001).
+fn transient(e: &sqlx::Error) -> bool {
+    e.as_database_error()
+        .and_then(|d| d.code())
+        .is_some_and(|c| c == "40P01" || c == "40001")
+}
+
+/// Runs `attempt` (one whole transaction) again while it fails with a transient conflict,
+/// at most [`TRANSIENT_RETRIES`] more times, after pauses of 10, 20, 40, 80 ms.
+async fn retry_transient<T, F, Fut>(what: &str, mut attempt: F) -> Result<T, sqlx::Error>
+where
+    F: FnMut() -> Fut,
+    Fut: std::future::Future<Output = Result<T, sqlx::Error>>,
+{
+    let mut retries = 0;
+    loop {
+        match attempt().await {
+            Err(e) if transient(&e) && retries < TRANSIENT_RETRIES => {
+                retries += 1;
+                tracing::warn!(error = %e, retry = retries, "{what}: transient conflict, run again");
+                tokio::time::sleep(Duration::from_millis(5 << retries)).await;
+            }
+            other => return other,
+        }
+    }
 }
 
 /// The format version written with every stored session spec (`"format"` in the row's
@@ -657,6 +694,72 @@ fn alarm_from_row(row: AlarmRow) -> Result<AlarmRecord, StoreError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A database error with a given SQLSTATE, as a Postgres server would send it.
+    #[derive(Debug)]
+    struct Sqlstate(&'static str);
+
+    impl std::fmt::Display for Sqlstate {
+        fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            write!(f, "SQLSTATE {}", self.0)
+        }
+    }
+
+    impl std::error::Error for Sqlstate {}
+
+    impl sqlx::error::DatabaseError for Sqlstate {
+        fn message(&self) -> &str {
+            self.0
+        }
+        fn code(&self) -> Option<std::borrow::Cow<'_, str>> {
+            Some(self.0.into())
+        }
+        fn as_error(&self) -> &(dyn std::error::Error + Send + Sync + 'static) {
+            self
+        }
+        fn as_error_mut(&mut self) -> &mut (dyn std::error::Error + Send + Sync + 'static) {
+            self
+        }
+        fn into_error(self: Box<Self>) -> Box<dyn std::error::Error + Send + Sync + 'static> {
+            self
+        }
+        fn kind(&self) -> sqlx::error::ErrorKind {
+            sqlx::error::ErrorKind::Other
+        }
+    }
+
+    /// Runs `retry_transient` over attempts that fail with `codes` in turn, then succeed;
+    /// the outcome and how many attempts ran.
+    async fn attempts(codes: &[&'static str]) -> (Result<u32, String>, usize) {
+        let tried = std::sync::atomic::AtomicUsize::new(0);
+        let out = retry_transient("test", || async {
+            let k = tried.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+            match codes.get(k) {
+                Some(code) => Err(sqlx::Error::Database(Box::new(Sqlstate(code)))),
+                None => Ok(7),
+            }
+        })
+        .await;
+        (out.map_err(|e| e.to_string()), tried.into_inner())
+    }
+
+    #[tokio::test]
+    async fn a_deadlock_or_serialisation_conflict_runs_the_transaction_again_and_nothing_else_does()
+    {
+        // A deadlock, then a serialisation failure: the third attempt commits.
+        assert_eq!(attempts(&["40P01", "40001"]).await, (Ok(7), 3));
+        // A unique violation is not transient: returned at once.
+        let (out, tried) = attempts(&["23505"]).await;
+        assert_eq!(
+            (out.unwrap_err(), tried),
+            ("error returned from database: SQLSTATE 23505".to_owned(), 1)
+        );
+        // Four retries at most: the fifth deadlock is returned.
+        let (out, tried) = attempts(&["40P01"; 5]).await;
+        assert!(out.unwrap_err().contains("40P01"));
+        assert_eq!(tried, 5);
+        assert_eq!(attempts(&["40P01"; 4]).await, (Ok(7), 5));
+    }
 
     fn alarm(session: &str, t: f64) -> AlarmRecord {
         AlarmRecord {
