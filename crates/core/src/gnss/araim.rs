@@ -22,6 +22,8 @@
 
 mod modes;
 mod pl;
+#[cfg(test)]
+mod pl_tests;
 mod subsets;
 #[cfg(test)]
 mod tests;
