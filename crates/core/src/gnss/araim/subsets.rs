@@ -119,7 +119,7 @@ impl Nominal {
         let per = 3 * self.g.len();
         let n0 = self.normal();
         let mut out = Subsets {
-            gains: vec![0.0; (modes.len() + 1) * per],
+            gains: Vec::with_capacity((modes.len() + 1) * per),
             sigma: Vec::with_capacity(modes.len() + 1),
             sigma_ss: Vec::with_capacity(modes.len() + 1),
             bias: Vec::with_capacity(modes.len() + 1),
@@ -129,6 +129,8 @@ impl Nominal {
         let inverse = n0.cholesky().map(|c| c.inverse());
         let all_clocks = self.clocks_of(0);
         let mut spread = vec![0.0; self.g.len()];
+        // The rows of S_0, once solved (the downdates start from them).
+        let mut all_in_view: Vec<f64> = Vec::new();
         let masks = std::iter::once(0u64).chain(modes.iter().map(|md| md.excluded_mask));
         for (k, mask) in masks.enumerate() {
             // One satellite out and no clock lost: a rank-one downdate of N_0⁻¹.
@@ -138,20 +140,24 @@ impl Nominal {
                 (Some(inv), true) => self.rank_one(inv, j),
                 _ => None,
             };
-            let (done, rest) = out.gains.split_at_mut(out.sigma.len() * per);
-            let rows = &mut rest[..per];
-            let solved = match (downdate, done.get(..per)) {
-                (Some(r), Some(all_in_view)) => {
-                    Some((r.sigma, r.gains(self, rows, all_in_view, j, &mut spread)))
-                }
+            let start = out.gains.len();
+            let solved = match downdate {
+                Some(r) if k > 0 => Some((
+                    r.sigma,
+                    r.push_gains(self, &mut out.gains, &all_in_view, j, &mut spread),
+                )),
                 _ => self.subset(&n0, mask).map(|(x, sig)| {
-                    self.fill_gains(rows, &x, mask);
-                    let all_in_view = done.get(..per).unwrap_or(&*rows);
-                    (sig, self.separation(rows, all_in_view))
+                    self.push_gains(&mut out.gains, &x, mask);
+                    let rows = &out.gains[start..];
+                    let s0 = if k == 0 { rows } else { &all_in_view[..] };
+                    (sig, self.separation(rows, s0))
                 }),
             };
             match solved {
                 Some((sig, (sigma_ss, bias))) => {
+                    if k == 0 {
+                        all_in_view.extend_from_slice(&out.gains[..per]);
+                    }
                     out.sigma.push(sig);
                     out.sigma_ss.push(sigma_ss);
                     out.bias.push(bias);
@@ -163,7 +169,6 @@ impl Nominal {
                 None => p_nm += modes[k - 1].p_fault,
             }
         }
-        out.gains.truncate(out.sigma.len() * per);
         out.p_not_monitored = p_nm;
         Ok(out)
     }
@@ -231,23 +236,23 @@ impl Nominal {
         sig.iter().all(|s| s.is_finite()).then_some((x, sig))
     }
 
-    /// Writes the ENU rows of `S_k`, `S_k(q, i) = w_i (N_k⁻¹ g_i)_q` (0 for excluded
-    /// satellites), into `rows` (`3 n` long).
-    fn fill_gains(&self, rows: &mut [f64], x: &SMatrix<f64, M, 3>, mask: u64) {
-        let n = self.g.len();
-        for (q, row) in rows.chunks_exact_mut(n).enumerate() {
+    /// Appends the ENU rows of `S_k`, `S_k(q, i) = w_i (N_k⁻¹ g_i)_q` (0 for excluded
+    /// satellites), to `gains`.
+    fn push_gains(&self, gains: &mut Vec<f64>, x: &SMatrix<f64, M, 3>, mask: u64) {
+        for q in 0..3 {
             let (xe, xn, xu) = (x[(0, q)], x[(1, q)], x[(2, q)]);
             let mut xc = [0.0; MAX_CLOCKS];
             for (c, v) in xc.iter_mut().enumerate() {
                 *v = x[(3 + c, q)];
             }
+            let start = gains.len();
             let sats = self.g.iter().zip(&self.w).zip(&self.clock);
-            for (s, ((gi, w), &c)) in row.iter_mut().zip(sats) {
-                *s = w * (xe * gi[0] + xn * gi[1] + xu * gi[2] + xc[c]);
-            }
+            gains.extend(
+                sats.map(|((gi, w), &c)| w * (xe * gi[0] + xn * gi[1] + xu * gi[2] + xc[c])),
+            );
             let mut excluded = mask;
             while excluded != 0 {
-                row[excluded.trailing_zeros() as usize] = 0.0;
+                gains[start + excluded.trailing_zeros() as usize] = 0.0;
                 excluded &= excluded - 1;
             }
         }
@@ -288,15 +293,15 @@ struct RankOne {
 }
 
 impl RankOne {
-    /// Writes the rows of `S_k` (satellite `i` left out) into `rows` from those of
+    /// Appends the rows of `S_k` (satellite `i` left out) to `gains` from those of
     /// `S_0`, and returns the subset's separation σ and bias. With `v_l = w_l g_lᵀ u`,
     /// `S_k(q, l) = S_0(q, l) + scale u_q v_l` for `l ≠ i` (and 0 at `i`), so
     /// `σ_ss,q² = (scale u_q)² Σ_{l≠i} v_l² σ²_acc,l + S_0(q, i)² σ²_acc,i`: one sum
     /// for the three axes. `v` is scratch, one entry per satellite.
-    fn gains(
+    fn push_gains(
         &self,
         nominal: &Nominal,
-        rows: &mut [f64],
+        gains: &mut Vec<f64>,
         all_in_view: &[f64],
         i: usize,
         v: &mut [f64],
@@ -319,12 +324,11 @@ impl RankOne {
             .sum();
         let mut sigma_ss = [0.0; 3];
         let mut bias = [0.0; 3];
-        let axes = rows.chunks_exact_mut(n).zip(all_in_view.chunks_exact(n));
-        for (q, (row, s0)) in axes.enumerate() {
+        for (q, s0) in all_in_view.chunks_exact(n).enumerate() {
             let f = self.scale * u[q];
-            for ((s, a), vl) in row.iter_mut().zip(s0).zip(&*v) {
-                *s = a + f * vl;
-            }
+            let start = gains.len();
+            gains.extend(s0.iter().zip(&*v).map(|(a, vl)| a + f * vl));
+            let row = &mut gains[start..];
             row[i] = 0.0;
             sigma_ss[q] = (f * f * spread + s0[i] * s0[i] * nominal.var_acc[i]).sqrt();
             bias[q] = row
