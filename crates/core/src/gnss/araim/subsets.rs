@@ -128,7 +128,8 @@ impl Nominal {
         };
         let inverse = n0.cholesky().map(|c| c.inverse());
         let all_clocks = self.clocks_of(0);
-        let mut spread = vec![0.0; self.g.len()];
+        // Scratch for each downdate's `v_l = w_l g_lᵀ u`.
+        let mut v = vec![0.0; self.g.len()];
         // The rows of S_0, once solved (the downdates start from them).
         let mut all_in_view: Vec<f64> = Vec::new();
         let masks = std::iter::once(0u64).chain(modes.iter().map(|md| md.excluded_mask));
@@ -144,7 +145,7 @@ impl Nominal {
             let solved = match downdate {
                 Some(r) if k > 0 => Some((
                     r.sigma,
-                    r.push_gains(self, &mut out.gains, &all_in_view, j, &mut spread),
+                    r.push_gains(self, &mut out.gains, &all_in_view, j, &mut v),
                 )),
                 _ => self.subset(&n0, mask).map(|(x, sig)| {
                     self.push_gains(&mut out.gains, &x, mask);
