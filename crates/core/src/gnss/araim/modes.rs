@@ -136,7 +136,10 @@ pub(super) fn determine(
 
 /// `n` choose `r` (the number of combinations [`for_each_combination`] visits), saturating.
 fn binomial(n: usize, r: usize) -> usize {
-    (0..r.min(n)).fold(1usize, |c, k| c.saturating_mul(n - k) / (k + 1))
+    if r > n {
+        return 0;
+    }
+    (0..r).fold(1usize, |c, k| c.saturating_mul(n - k) / (k + 1))
 }
 
 /// Calls `f` with every `r`-element combination of `0..n`, in lexicographic order.
@@ -167,9 +170,14 @@ mod tests {
         let mut count = 0;
         for_each_combination(7, 3, |_| count += 1);
         assert_eq!(count, 35);
+    }
+
+    #[test]
+    fn the_reserved_combinations_are_the_binomial_coefficient() {
         assert_eq!(binomial(7, 3), 35);
         assert_eq!(binomial(32, 1), 32);
         assert_eq!(binomial(66, 3), 45_760);
+        assert_eq!(binomial(2, 3), 0);
     }
 
     #[test]
