@@ -4,14 +4,16 @@
 //! levels, and with solution-separation exclusion. Also the whole monitor's rate over
 //! a stream of such epochs (docs/performance.md, "GNSS epoch").
 //!
-//! Run: `cargo bench --bench gnss_step`
+//! Run: `cargo bench --bench gnss_step`; for instruction counts, a fixed number of steps
+//! under callgrind: `GNSS_STEP_COUNT=200 GNSS_STEP_CASE=step_30_sats_greedy_araim
+//! valgrind --tool=callgrind <the bench binary>` (see [`fixed_count`]).
 
 // criterion_group! defines a public function it cannot document.
 #![allow(missing_docs)]
 
 use std::hint::black_box;
 
-use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use criterion::{Criterion, Throughput, criterion_group};
 use nalgebra::Vector3;
 use navguard_core::detect::{PolicyConfig, ThresholdSpec};
 use navguard_core::epoch::{Constellation, Epoch, GnssRawBlock, SatId, SatObs};
@@ -92,11 +94,9 @@ fn monitor_for(config: serde_json::Value) -> Box<dyn Monitor> {
     monitor::build(&spec, &NoModels).expect("monitor")
 }
 
-fn bench(c: &mut Criterion) {
-    let epochs: Vec<Epoch> = (0..64).map(epoch).collect();
-    let mut group = c.benchmark_group("gnss_monitor");
-    group.throughput(Throughput::Elements(1));
-    let cases = [
+/// The monitor configurations benched, by name.
+fn cases() -> [(&'static str, serde_json::Value); 3] {
+    [
         ("step_30_sats_greedy_araim", serde_json::json!({})),
         (
             "step_30_sats_greedy_slope",
@@ -106,8 +106,14 @@ fn bench(c: &mut Criterion) {
             "step_30_sats_solution_separation_araim",
             serde_json::json!({"fde": {"method": "solution_separation"}}),
         ),
-    ];
-    for (name, config) in cases {
+    ]
+}
+
+fn bench(c: &mut Criterion) {
+    let epochs: Vec<Epoch> = (0..64).map(epoch).collect();
+    let mut group = c.benchmark_group("gnss_monitor");
+    group.throughput(Throughput::Elements(1));
+    for (name, config) in cases() {
         let mut m = monitor_for(config);
         let first = m.step(&epochs[0]).expect("step");
         assert_eq!(first.tests.len(), 1, "the raim test runs");
@@ -122,5 +128,34 @@ fn bench(c: &mut Criterion) {
     group.finish();
 }
 
+/// A fixed amount of work instead of criterion's timed runs, for instruction counts:
+/// with `GNSS_STEP_COUNT=n` (and `GNSS_STEP_CASE=<name>` to pick one case) each case's
+/// monitor takes its first epoch and then `n` more steps, as in the bench; the count at
+/// `n = 0` is the set-up to subtract.
+fn fixed_count(n: usize, only: Option<&str>) {
+    let epochs: Vec<Epoch> = (0..64).map(epoch).collect();
+    for (name, config) in cases() {
+        if only.is_some_and(|o| o != name) {
+            continue;
+        }
+        let mut m = monitor_for(config);
+        m.step(&epochs[0]).expect("step");
+        for k in 1..=n {
+            black_box(m.step(black_box(&epochs[k % epochs.len()])).expect("step"));
+        }
+    }
+}
+
 criterion_group!(benches, bench);
-criterion_main!(benches);
+
+fn main() {
+    if let Some(n) = std::env::var("GNSS_STEP_COUNT")
+        .ok()
+        .and_then(|v| v.parse().ok())
+    {
+        fixed_count(n, std::env::var("GNSS_STEP_CASE").ok().as_deref());
+        return;
+    }
+    benches();
+    Criterion::default().configure_from_args().final_summary();
+}

@@ -22,6 +22,8 @@
 
 mod modes;
 mod pl;
+#[cfg(test)]
+mod pl_tests;
 mod subsets;
 #[cfg(test)]
 mod tests;
@@ -364,7 +366,6 @@ impl AraimModel {
             solvable,
         );
         let subsets = nominal.solve_subsets(&set.modes, set.p_not_monitored)?;
-        let (sigma_ss, bias) = subsets.separations(&nominal, sats);
 
         // K_fa: the false-alert budget split over the N_ss modes, two-sided; east and
         // north share P_FA,HOR ([B15] and ADD "solution separation threshold tests").
@@ -374,7 +375,8 @@ impl AraimModel {
             q_inv(params.p_fa_hor / (4.0 * n_ss)),
             q_inv(params.p_fa_vert / (2.0 * n_ss)),
         ];
-        let thresholds: Vec<[f64; 3]> = sigma_ss
+        let thresholds: Vec<[f64; 3]> = subsets
+            .sigma_ss
             .iter()
             .map(|s| [k_fa[0] * s[0], k_fa[1] * s[1], k_fa[2] * s[2]])
             .collect();
@@ -383,8 +385,8 @@ impl AraimModel {
             modes: subsets.modes,
             gains: subsets.gains,
             sigma: subsets.sigma,
-            sigma_ss,
-            bias,
+            sigma_ss: subsets.sigma_ss,
+            bias: subsets.bias,
             thresholds,
             k_fa,
             p_not_monitored: subsets.p_not_monitored,

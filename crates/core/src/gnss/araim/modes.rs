@@ -93,13 +93,16 @@ pub(super) fn determine(
     let ln_p0: f64 = events.iter().map(|e| (-e.p).ln_1p()).sum();
     let p0 = ln_p0.exp();
     let mut p_nm = -ln_p0.exp_m1() + p_unmonitorable;
-    let mut merged: Vec<FaultMode> = Vec::new();
+    let mut merged: Vec<FaultMode> = Vec::with_capacity(events.len());
     let mut order = 0;
     // Odds p_e / (1 − p_e): the probability of exactly the combination C is p0 Π_C odds.
     let odds: Vec<f64> = events.iter().map(|e| e.p / (1.0 - e.p)).collect();
     while p_nm > p_thres && order < max_order.min(events.len()) {
         order += 1;
-        let mut combos: Vec<(f64, u64)> = Vec::new();
+        // Sized for the order's combinations (a hint, capped: a large `max_order` must
+        // not reserve memory up front).
+        let mut combos: Vec<(f64, u64)> =
+            Vec::with_capacity(binomial(events.len(), order).min(4096));
         for_each_combination(events.len(), order, |idx| {
             let p = p0 * idx.iter().map(|&j| odds[j]).product::<f64>();
             let mask = idx.iter().fold(0u64, |m, &j| m | events[j].mask);
@@ -131,6 +134,14 @@ pub(super) fn determine(
     }
 }
 
+/// `n` choose `r` (the number of combinations [`for_each_combination`] visits), saturating.
+fn binomial(n: usize, r: usize) -> usize {
+    if r > n {
+        return 0;
+    }
+    (0..r).fold(1usize, |c, k| c.saturating_mul(n - k) / (k + 1))
+}
+
 /// Calls `f` with every `r`-element combination of `0..n`, in lexicographic order.
 fn for_each_combination(n: usize, r: usize, mut f: impl FnMut(&[usize])) {
     if r == 0 || r > n {
@@ -159,6 +170,14 @@ mod tests {
         let mut count = 0;
         for_each_combination(7, 3, |_| count += 1);
         assert_eq!(count, 35);
+    }
+
+    #[test]
+    fn the_reserved_combinations_are_the_binomial_coefficient() {
+        assert_eq!(binomial(7, 3), 35);
+        assert_eq!(binomial(32, 1), 32);
+        assert_eq!(binomial(66, 3), 45_760);
+        assert_eq!(binomial(2, 3), 0);
     }
 
     #[test]

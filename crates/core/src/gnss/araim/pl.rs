@@ -38,23 +38,57 @@ pub fn lhs(terms: &[PlTerm], l: f64) -> f64 {
         .sum()
 }
 
+/// What a term may hold at most, once it is left out of the halving: at most
+/// `SKIP_SHARE · rhs / n` each, so all of them together at most `SKIP_SHARE · rhs`.
+const SKIP_SHARE: f64 = 1e-3;
+
+/// Relative margin of the kept-terms comparisons over the rounding of a sum of positive
+/// terms (a few ulps per term): within it the whole left-hand side decides.
+const SUM_MARGIN: f64 = 1e-9;
+
 /// Solves `lhs(L) = rhs` by halving the bracket until it is at most `tol` wide and
 /// returns its upper end (so `lhs(PL) ≤ rhs`: the conservative side). The bracket is
 /// Blanch et al. 2015's: no term may exceed `rhs` (lower bound), and all terms at most
 /// `rhs / n` suffice (upper bound). `rhs ≤ 0` (the unmonitored modes use up the whole
-/// budget) gives an infinite PL. (Regula falsi on `ln lhs` was tried: it moves one end
-/// close to the root but seldom narrows the bracket below `tol`, and was no faster.)
+/// budget) gives an infinite PL.
+///
+/// Every halving point is at or above the bracket's lower end `lo`, where `Q` of each
+/// term is largest; a term whose argument there is past `Q⁻¹(SKIP_SHARE · rhs /
+/// (n coef))` stays below that share wherever the halving looks, so it is bounded once
+/// (the sum of those bounds, `dropped`) and not evaluated again. A midpoint is then
+/// decided by the kept terms alone when `kept > rhs` or `kept + dropped < rhs` (each by
+/// [`SUM_MARGIN`]), and by the whole sum otherwise: every decision, and so the PL, is
+/// the one plain halving of the whole sum makes. (Regula falsi on `ln lhs` was tried: it
+/// moves one end close to the root but seldom narrows the bracket below `tol`, and was
+/// no faster.)
 pub fn solve(terms: &[PlTerm], rhs: f64, tol: f64) -> f64 {
     if rhs <= 0.0 || terms.is_empty() {
         return f64::INFINITY;
     }
-    let (mut lo, mut hi) = bracket(terms, rhs);
+    let bracket = Bracket::new(terms, rhs);
+    let (mut lo, mut hi) = (bracket.lo, bracket.hi);
     if lo >= hi {
         return hi;
     }
+    let mut kept: Vec<PlTerm> = Vec::with_capacity(terms.len());
+    let mut dropped = 0.0;
+    for t in terms {
+        match bracket.of(t.coef) {
+            Some(k) if (lo - t.offset) / t.sigma >= k.skip => dropped += k.skip_bound,
+            _ => kept.push(*t),
+        }
+    }
     while hi - lo > tol {
         let mid = 0.5 * (lo + hi);
-        if lhs(terms, mid) > rhs {
+        let part = lhs(&kept, mid);
+        let above = if part > rhs * (1.0 + SUM_MARGIN) {
+            true
+        } else if (part + dropped) * (1.0 + SUM_MARGIN) <= rhs {
+            false
+        } else {
+            lhs(terms, mid) > rhs
+        };
+        if above {
             lo = mid;
         } else {
             hi = mid;
@@ -63,37 +97,91 @@ pub fn solve(terms: &[PlTerm], rhs: f64, tol: f64) -> f64 {
     hi
 }
 
-/// Blanch et al. 2015's bracket of the PL: `Q⁻¹` is taken once per distinct coefficient
-/// (the fault modes share a few: 2, P_sat, P_const and their products).
-fn bracket(terms: &[PlTerm], rhs: f64) -> (f64, f64) {
-    let n = terms.len() as f64;
-    let mut seen: Vec<(f64, f64, f64)> = Vec::with_capacity(4);
-    let (mut lo, mut hi) = (0.0_f64, 0.0_f64);
-    for t in terms {
-        let (k_lo, k_hi) = match seen.iter().find(|s| s.0 == t.coef) {
-            Some(&(_, a, b)) => (a, b),
-            None => {
-                let k_lo = if t.coef > rhs {
-                    q_inv(rhs / t.coef)
-                } else {
-                    f64::NEG_INFINITY
-                };
-                let share = rhs / (n * t.coef);
-                let k_hi = if share < 1.0 {
-                    q_inv(share).max(0.0)
-                } else {
-                    0.0
-                };
-                seen.push((t.coef, k_lo, k_hi));
-                (k_lo, k_hi)
-            }
+/// The quantiles of one coefficient: the bracket's (`Q⁻¹(rhs / coef)` and
+/// `Q⁻¹(rhs / (n coef))`) and the skipping threshold with its bound.
+#[derive(Debug, Clone, Copy)]
+struct Quantiles {
+    /// `Q⁻¹(rhs / coef)`, −∞ when `coef ≤ rhs` (the term alone never reaches `rhs`).
+    lower: f64,
+    /// `max(Q⁻¹(rhs / (n coef)), 0)`.
+    upper: f64,
+    /// `Q⁻¹(SKIP_SHARE · rhs / (n coef))`, −∞ when the term can never exceed that.
+    skip: f64,
+    /// `coef · Q(skip)`: the most a skipped term holds.
+    skip_bound: f64,
+}
+
+/// Blanch et al. 2015's bracket of the PL, and the quantiles it took: `Q⁻¹` is taken once
+/// per distinct coefficient (the fault modes share a few: 2, P_sat, P_const and their
+/// products).
+struct Bracket {
+    /// No term may exceed `rhs` alone.
+    lo: f64,
+    /// Every term at most `rhs / n`.
+    hi: f64,
+    /// Each distinct coefficient and its quantiles.
+    seen: Vec<(f64, Quantiles)>,
+}
+
+impl Bracket {
+    fn new(terms: &[PlTerm], rhs: f64) -> Self {
+        let n = terms.len() as f64;
+        let mut b = Bracket {
+            lo: 0.0,
+            hi: 0.0,
+            seen: Vec::with_capacity(4),
         };
-        if k_lo.is_finite() {
-            lo = lo.max(t.offset + k_lo * t.sigma);
+        for t in terms {
+            let k = match b.seen.iter().find(|s| s.0 == t.coef) {
+                Some(&(_, k)) => k,
+                None => {
+                    let k = Quantiles::of(t.coef, rhs, n);
+                    b.seen.push((t.coef, k));
+                    k
+                }
+            };
+            if k.lower.is_finite() {
+                b.lo = b.lo.max(t.offset + k.lower * t.sigma);
+            }
+            b.hi = b.hi.max(t.offset + k.upper * t.sigma);
         }
-        hi = hi.max(t.offset + k_hi * t.sigma);
+        b
     }
-    (lo, hi)
+
+    /// The quantiles of a coefficient of the terms the bracket was built on (`None` for
+    /// a NaN coefficient, which never compares equal).
+    fn of(&self, coef: f64) -> Option<Quantiles> {
+        self.seen.iter().find(|s| s.0 == coef).map(|s| s.1)
+    }
+}
+
+impl Quantiles {
+    fn of(coef: f64, rhs: f64, n: f64) -> Self {
+        let lower = if coef > rhs {
+            q_inv(rhs / coef)
+        } else {
+            f64::NEG_INFINITY
+        };
+        let share = rhs / (n * coef);
+        let upper = if share < 1.0 {
+            q_inv(share).max(0.0)
+        } else {
+            0.0
+        };
+        let small = SKIP_SHARE * share;
+        let (skip, skip_bound) = if small < 1.0 {
+            let k = q_inv(small);
+            (k, coef * q(k))
+        } else {
+            (f64::NEG_INFINITY, coef)
+        };
+        Quantiles {
+            lower,
+            upper,
+            skip,
+            skip_bound,
+        }
+    }
 }
 
 #[cfg(test)]
