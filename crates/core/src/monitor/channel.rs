@@ -189,6 +189,31 @@ struct ChannelState {
 
 impl ChannelState {
     fn new(config: ChannelConfig, tests: TestIndices) -> Result<Self, LearnError> {
+        let terms = Self::model_terms(&config)?;
+        Self::with_terms(config, tests, terms)
+    }
+
+    /// The factors of a stored batch model's variance term, per component (empty unless
+    /// the residual scale is `predictive`): O(N³) each, so built once per monitor.
+    fn model_terms(config: &ChannelConfig) -> Result<Arc<[Option<ModelTerm>]>, LearnError> {
+        match (&config.predictor, config.residual_scale) {
+            (PredictorConfig::Stored(models), ResidualScale::Predictive) => models
+                .iter()
+                .map(|m| match &**m {
+                    AnyModel::LsSvm(m) => m.model_term().map(Some),
+                    _ => Ok(None),
+                })
+                .collect(),
+            _ => Ok(Arc::from(Vec::new())),
+        }
+    }
+
+    /// A fresh channel with the variance factors `terms` already built.
+    fn with_terms(
+        config: ChannelConfig,
+        tests: TestIndices,
+        terms: Arc<[Option<ModelTerm>]>,
+    ) -> Result<Self, LearnError> {
         let predictor = match &config.predictor {
             PredictorConfig::Stored(models) => Predictor::Stored(models.clone()),
             PredictorConfig::Online(p) => Predictor::Online(
@@ -196,16 +221,6 @@ impl ChannelState {
                     .map(|_| OnlineLsSvm::new(p.clone()))
                     .collect::<Result<_, _>>()?,
             ),
-        };
-        let terms = match (&config.predictor, config.residual_scale) {
-            (PredictorConfig::Stored(models), ResidualScale::Predictive) => models
-                .iter()
-                .map(|m| match &**m {
-                    AnyModel::LsSvm(m) => m.model_term().map(Some),
-                    _ => Ok(None),
-                })
-                .collect::<Result<_, _>>()?,
-            _ => Arc::from(Vec::new()),
         };
         Ok(ChannelState {
             terms,
@@ -699,7 +714,9 @@ impl Monitor for ChannelMonitor {
 
     fn reset(&mut self) {
         for ch in &mut self.channels {
-            if let Ok(fresh) = ChannelState::new(ch.config.clone(), ch.tests) {
+            // The variance factors derive from the stored models, which a reset keeps.
+            let terms = ch.terms.clone();
+            if let Ok(fresh) = ChannelState::with_terms(ch.config.clone(), ch.tests, terms) {
                 *ch = fresh;
             }
         }
