@@ -32,6 +32,10 @@
 //!   `c.stuck` (variance collapse of the raw values, its own `p_fa`, on by default,
 //!   docs/methods.md §M21) and `c.drift` (a longer-window batch-means mean test on the
 //!   residual, off by default). All run under the monitor's policy.
+//! - `residual_scale` (default `"raw"`): with `"predictive"` the main and drift tests see
+//!   the residual over `√(1 + γ m(x))`, its predictive σ relative to the noise level
+//!   (docs/methods.md §M9a, §M14: short fault-free bursts, at the cost of a persistent
+//!   bias's flagged epochs).
 //!
 //! Per epoch and channel: ŷ_k from the history, `r_k = y_k − ŷ_k`, the tests, the policy.
 //! **Learning** (the online window's sample, the tests' variances and the stuck test's
@@ -275,9 +279,10 @@ impl ChannelState {
                 .iter()
                 .map(|w| {
                     let f = w.predict(x)?;
-                    let s = match predictive {
-                        true => scale(w.params().gamma, w.model_term(x)?),
-                        false => 1.0,
+                    let s = if predictive {
+                        scale(w.params().gamma, w.model_term(x)?)
+                    } else {
+                        1.0
                     };
                     Some((f, s))
                 })
