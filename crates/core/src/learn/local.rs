@@ -18,6 +18,7 @@ use super::cv::{self, CvParams, CvReport, Hyper, Search};
 use super::lssvm::{Prepared, train_rmse};
 use super::lssvm_exact::{self as exact, ExactScale};
 use super::lssvm_solve as solve;
+use super::variance::ModelTerm;
 use super::{Dataset, Fitted, Kernel, LearnError, NoProgress, Progress, TrainingMetrics};
 
 /// `params` of an `lw-lssvm` model (RBF kernel only: the width is what is localised).
@@ -163,6 +164,19 @@ impl LwLsSvmModel {
 
     /// `f(x)` in original units (NaN if the local system cannot be solved).
     pub fn predict_one(&self, x: &[f64]) -> f64 {
+        self.predict_with_term(x).0
+    }
+
+    /// γ of every local fit.
+    pub fn gamma(&self) -> f64 {
+        self.gamma
+    }
+
+    /// `f(x)` in original units and the model term `m(x)` of the local fit that answered
+    /// it (docs/methods.md §M9a; its variance is `σ_e² (1 + γ m(x))`), both NaN if the
+    /// local system cannot be solved. Costs what [`LwLsSvmModel::predict_one`] costs plus
+    /// one forward substitution.
+    pub fn predict_with_term(&self, x: &[f64]) -> (f64, f64) {
         let mut z: Vec<f64> = (0..self.dim)
             .map(|j| x.get(j).copied().unwrap_or(f64::NAN))
             .collect();
@@ -173,10 +187,11 @@ impl LwLsSvmModel {
             dim: self.dim,
         };
         let nb = local.neighbours(&z, self.k, None);
-        let f = local
+        let (f, m) = local
             .predict(&nb, &z, self.gamma, self.sigma2, self.d_floor)
-            .unwrap_or(f64::NAN);
-        self.y_scale.invert(0, f)
+            .map(|(f, term)| (f, term.at(&z)))
+            .unwrap_or((f64::NAN, f64::NAN));
+        (self.y_scale.invert(0, f), m)
     }
 }
 
@@ -219,7 +234,8 @@ impl Local<'_> {
         }
     }
 
-    /// The local LS-SVM's prediction at `z` (training units), docs/methods.md §M10.
+    /// The local LS-SVM's prediction at `z` (training units), docs/methods.md §M10, and
+    /// the factor of the local fit, which answers its model term (§M9a).
     fn predict(
         &self,
         nb: &Neighbours,
@@ -227,7 +243,7 @@ impl Local<'_> {
         gamma: f64,
         sigma2: f64,
         d_floor: f64,
-    ) -> Result<f64, LearnError> {
+    ) -> Result<(f64, ModelTerm), LearnError> {
         let l = &nb.dist2;
         let (l_min, l_max) = l.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &v| {
             (lo.min(v), hi.max(v))
@@ -247,8 +263,10 @@ impl Local<'_> {
             rows.extend_from_slice(&self.rows[i * dim..(i + 1) * dim]);
         }
         let y: Vec<f64> = nb.idx.iter().map(|&i| self.y[i]).collect();
-        let sol = solve::fit(&rows, dim, &y, &kernel, gamma)?;
-        Ok(solve::evaluate(&rows, dim, &sol.alpha, sol.b, &kernel, z))
+        let term = ModelTerm::new(rows, dim, kernel, gamma)?;
+        let sol = solve::two_solve(term.factor(), &y);
+        let f = solve::evaluate(term.rows(), dim, &sol.alpha, sol.b, &kernel, z);
+        Ok((f, term))
     }
 }
 
@@ -296,7 +314,7 @@ fn tune(
                 for (nb, &i) in nbs.iter().zip(&fold.val) {
                     let z = &p.rows[i * p.dim..(i + 1) * p.dim];
                     out[gi] += match local.predict(nb, z, g, sigma2, params.d_floor) {
-                        Ok(f) => (f - p.y[i]).powi(2),
+                        Ok((f, _)) => (f - p.y[i]).powi(2),
                         Err(_) => f64::INFINITY,
                     };
                 }
@@ -420,6 +438,44 @@ mod tests {
             rmse(&|x| local.predict_one(x)),
         );
         assert!(l < 0.5 * g, "local {l} vs global {g}");
+    }
+
+    #[test]
+    fn the_variance_term_equals_the_gp_posterior_of_the_local_fit() {
+        use crate::learn::variance::bordered_reference;
+        let xs: Vec<Vec<f64>> = (0..90)
+            .map(|i| vec![(i as f64 * 0.37).sin() * 2.0, (i as f64 * 0.11).cos()])
+            .collect();
+        let ys: Vec<f64> = xs.iter().map(|r| r[0] * r[1]).collect();
+        let m = LwLsSvmParams {
+            k: 15,
+            ..LwLsSvmParams::new(50.0, 2.0)
+        }
+        .fit(&Dataset::new(&xs, Some(&ys)).unwrap())
+        .unwrap();
+        for q in [[0.3, 0.2], [1.7, -0.4], [-1.1, 0.9], [5.0, 5.0]] {
+            let z: Vec<f64> = (0..2).map(|j| m.x_scale.apply_one(j, q[j])).collect();
+            // The 15 nearest training rows by brute force, and the §M10 width.
+            let mut by_dist: Vec<(f64, &[f64])> = m
+                .rows
+                .chunks_exact(2)
+                .map(|r| ((r[0] - z[0]).powi(2) + (r[1] - z[1]).powi(2), r))
+                .collect();
+            by_dist.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let near = &by_dist[..15];
+            let (lo, hi) = (near[0].0, near[14].0);
+            let mean = near.iter().map(|p| p.0).sum::<f64>() / 15.0;
+            let d = ((lo / hi * std::f64::consts::FRAC_PI_2).sin() * mean).max(1e-12 * mean);
+            let rows: Vec<f64> = near.iter().flat_map(|p| p.1.iter().copied()).collect();
+            let kernel = Kernel::Rbf { sigma2: 2.0 * d };
+            let reference = bordered_reference(&rows, 2, kernel, 50.0, &z);
+            let (f, got) = m.predict_with_term(&q);
+            assert_eq!(f, m.predict_one(&q));
+            assert!(
+                (got - reference).abs() <= 1e-9 * reference,
+                "{q:?}: {got:e} vs {reference:e}"
+            );
+        }
     }
 
     #[test]

@@ -17,6 +17,7 @@ use super::cv::{self, CvParams, CvReport, Hyper, Search};
 pub use super::kernel::KernelKind;
 use super::lssvm_exact::{self as exact, ExactScale};
 use super::lssvm_solve as solve;
+use super::variance::ModelTerm;
 use super::{
     Dataset, Fitted, Kernel, LearnError, NoProgress, Progress, Standardizer, TrainingMetrics,
 };
@@ -233,6 +234,24 @@ impl LsSvmModel {
     /// Bias b (training units).
     pub fn bias(&self) -> f64 {
         self.b
+    }
+
+    /// The factor that answers this model's predictive-variance term (docs/methods.md
+    /// §M9a): one O(N³) factorisation of `Ω + I/γ`, kept beside the model by its user.
+    pub fn model_term(&self) -> Result<ModelTerm, LearnError> {
+        ModelTerm::new(self.support.clone(), self.dim, self.kernel(), self.gamma)
+    }
+
+    /// The model term `m(x)` of the prediction at `x` (original units), with `term` from
+    /// [`LsSvmModel::model_term`]: its variance is `σ_e² (1 + γ m(x))`.
+    pub fn variance_term(&self, term: &ModelTerm, x: &[f64]) -> f64 {
+        let z: Vec<f64> = (0..self.dim)
+            .map(|j| {
+                self.x_scale
+                    .apply_one(j, x.get(j).copied().unwrap_or(f64::NAN))
+            })
+            .collect();
+        term.at(&z)
     }
 
     /// `f(x)` in original units. `x` must have [`LsSvmModel::input_dim`] values (extra

@@ -281,3 +281,33 @@ fn bench_system_matches_numpy_golden_numbers() {
         );
     }
 }
+
+#[test]
+fn the_variance_term_equals_the_gp_posterior_in_training_units() {
+    use crate::learn::variance::bordered_reference;
+    let (x, y) = sample(80, 0.2, 37);
+    let data = Dataset::new(&x, Some(&y)).unwrap();
+    for params in [raw(20.0, 0.7), LsSvmParams::new(200.0, 1.3)] {
+        let model = params.fit(&data).unwrap();
+        let term = model.model_term().unwrap();
+        for q in [
+            x[0].clone(),
+            x[41].clone(),
+            vec![0.3, -0.2],
+            vec![6.0, -5.0],
+        ] {
+            let z: Vec<f64> = q
+                .iter()
+                .enumerate()
+                .map(|(j, v)| model.x_scale.apply_one(j, *v))
+                .collect();
+            let reference =
+                bordered_reference(&model.support, 2, model.kernel(), model.gamma(), &z);
+            let got = model.variance_term(&term, &q);
+            assert!(
+                (got - reference).abs() <= 1e-9 * reference,
+                "{q:?}: {got:e} vs {reference:e}"
+            );
+        }
+    }
+}

@@ -23,6 +23,7 @@ pub mod online;
 pub mod outlier;
 pub mod scale;
 pub mod svm;
+pub mod variance;
 
 pub use dataset::Dataset;
 pub use kernel::{Kernel, KernelKind};

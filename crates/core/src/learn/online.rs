@@ -438,6 +438,33 @@ impl OnlineLsSvm {
         }
     }
 
+    /// The model term `m(x)` of the prediction at `x` (docs/methods.md §M9a; its variance
+    /// is `σ_e² (1 + γ m(x))`), from the inverse the window already keeps: `kᵀPk` over
+    /// the upper triangle plus the pending rank-1 term, and `ηᵀk`, `1ᵀη` for the bias,
+    /// so O(N²) like the slide. `None` when [`OnlineLsSvm::predict`] gives none.
+    pub fn model_term(&self, x: &[f64]) -> Option<f64> {
+        if self.len < 2 || x.len() != self.dim {
+            return None;
+        }
+        let (n, d) = (self.params.window, self.dim);
+        let m = self.len;
+        let k: Vec<f64> = self.xs[..m * d]
+            .chunks_exact(d)
+            .map(|xi| self.kernel.eval(xi, x))
+            .collect();
+        let mut quad = 0.0;
+        for (i, ki) in k.iter().enumerate() {
+            let row = &self.p[i * n + i..i * n + m];
+            quad += ki * (ki * row[0] + 2.0 * solve::dot(&row[1..], &k[i + 1..]));
+        }
+        if self.pending_s != 0.0 {
+            quad += solve::dot(&k, &self.pending_u[..m]).powi(2) / self.pending_s;
+        }
+        let a = solve::dot(&k, &self.eta[..m]);
+        let c: f64 = self.eta.iter().sum();
+        Some((self.kernel.eval(x, x) - quad + (1.0 - a) * (1.0 - a) / c).max(0.0))
+    }
+
     /// `f(x) = Σ αᵢ K(xᵢ, x) + b`, or `None` until the window holds at least two
     /// samples or when `x` has the wrong dimension.
     pub fn predict(&self, x: &[f64]) -> Option<f64> {
@@ -616,6 +643,37 @@ mod tests {
         let expected = solve::evaluate(&xs, 3, &alpha, b, &w.kernel, &x);
         assert!((w.predict(&x).unwrap() - expected).abs() < 1e-10);
         assert_eq!(ys.len(), 10);
+    }
+
+    #[test]
+    fn the_variance_term_equals_the_gp_posterior_of_the_window_while_it_fills_and_slides() {
+        use crate::learn::variance::bordered_reference;
+        // refresh 7 puts re-factorisations between the checks; the pending rank-1 term
+        // is present on every check after the window is full.
+        let params = OnlineParams {
+            window: 25,
+            gamma: 30.0,
+            sigma2: 2.0,
+            refresh: 7,
+        };
+        let mut w = OnlineLsSvm::new(params).unwrap();
+        for k in 0..400 {
+            let (x, y) = series(k);
+            w.push(&x, y).unwrap();
+            if w.len() < 2 || k % 13 != 0 {
+                continue;
+            }
+            let (xs, _) = w.window();
+            for query in [series(k + 1).0, [2.0, -1.0, 0.5], [9.0, 9.0, 9.0]] {
+                let reference = bordered_reference(&xs, 3, w.kernel, 30.0, &query);
+                let got = w.model_term(&query).unwrap();
+                assert!(
+                    (got - reference).abs() <= 1e-9 * reference,
+                    "k {k}: {got:e} vs {reference:e}"
+                );
+            }
+        }
+        assert_eq!(w.model_term(&[1.0]), None);
     }
 
     #[test]

@@ -32,6 +32,10 @@
 //!   `c.stuck` (variance collapse of the raw values, its own `p_fa`, on by default,
 //!   docs/methods.md §M21) and `c.drift` (a longer-window batch-means mean test on the
 //!   residual, off by default). All run under the monitor's policy.
+//! - `residual_scale` (default `"raw"`): with `"predictive"` the main and drift tests see
+//!   the residual over `√(1 + γ m(x))`, its predictive σ relative to the noise level
+//!   (docs/methods.md §M9a, §M14: short fault-free bursts, at the cost of a persistent
+//!   bias's flagged epochs).
 //!
 //! Per epoch and channel: ŷ_k from the history, `r_k = y_k − ŷ_k`, the tests, the policy.
 //! **Learning** (the online window's sample, the tests' variances and the stuck test's
@@ -50,6 +54,8 @@
 //! prediction that is not finite fails the step (state unchanged).
 
 mod config;
+#[cfg(test)]
+mod lockin_tests;
 mod saved;
 #[cfg(test)]
 mod tests;
@@ -60,8 +66,8 @@ use std::sync::Arc;
 pub use config::{
     ChannelConfig, ChannelConfigWire, ChannelMonitorConfig, ChannelWire, DEFAULT_DRIFT_WINDOWS,
     DEFAULT_EMBEDDING, DEFAULT_GUARD, DEFAULT_MAX_FREEZE, DEFAULT_N, DEFAULT_OUTLIER_C, DriftWire,
-    MainTestConfig, ModelIds, OutlierWire, PredictorConfig, PredictorWire, StuckConfig, StuckWire,
-    Toggle, VarianceKind,
+    MainTestConfig, ModelIds, OutlierWire, PredictorConfig, PredictorWire, ResidualScale,
+    StuckConfig, StuckWire, Toggle, VarianceKind,
 };
 
 use super::{
@@ -75,6 +81,7 @@ use crate::epoch::Epoch;
 use crate::filter::kalman::FilterError;
 use crate::learn::online::OnlineLsSvm;
 use crate::learn::outlier::OutlierFilter;
+use crate::learn::variance::ModelTerm;
 use crate::learn::{AnyModel, LearnError};
 use config::learn_field;
 use nalgebra::{DMatrix, DVector};
@@ -178,10 +185,39 @@ struct ChannelState {
     /// The predictor learns again after `max_freeze` frozen epochs, until the channel is
     /// healthy (module doc).
     relearning: bool,
+    /// Per component, the factor answering a stored batch LS-SVM's predictive-variance
+    /// term (built once from the model when the residual scale is `predictive`; `None`
+    /// otherwise). Shared: derived from the model, never changed.
+    terms: Arc<[Option<ModelTerm>]>,
 }
 
 impl ChannelState {
     fn new(config: ChannelConfig, tests: TestIndices) -> Result<Self, LearnError> {
+        let terms = Self::model_terms(&config)?;
+        Self::with_terms(config, tests, terms)
+    }
+
+    /// The factors of a stored batch model's variance term, per component (empty unless
+    /// the residual scale is `predictive`): O(N³) each, so built once per monitor.
+    fn model_terms(config: &ChannelConfig) -> Result<Arc<[Option<ModelTerm>]>, LearnError> {
+        match (&config.predictor, config.residual_scale) {
+            (PredictorConfig::Stored(models), ResidualScale::Predictive) => models
+                .iter()
+                .map(|m| match &**m {
+                    AnyModel::LsSvm(m) => m.model_term().map(Some),
+                    _ => Ok(None),
+                })
+                .collect(),
+            _ => Ok(Arc::from(Vec::new())),
+        }
+    }
+
+    /// A fresh channel with the variance factors `terms` already built.
+    fn with_terms(
+        config: ChannelConfig,
+        tests: TestIndices,
+        terms: Arc<[Option<ModelTerm>]>,
+    ) -> Result<Self, LearnError> {
         let predictor = match &config.predictor {
             PredictorConfig::Stored(models) => Predictor::Stored(models.clone()),
             PredictorConfig::Online(p) => Predictor::Online(
@@ -191,6 +227,7 @@ impl ChannelState {
             ),
         };
         Ok(ChannelState {
+            terms,
             filters: config
                 .outlier_c
                 .map(|c| vec![OutlierFilter::new(c); config.dim]),
@@ -213,11 +250,44 @@ impl ChannelState {
             .then(|| self.history.iter().flatten().copied().collect())
     }
 
-    /// ŷ_k per component, when the predictor can predict.
-    fn predict(&self, x: &[f64]) -> Option<Vec<f64>> {
+    /// ŷ_k per component, when the predictor can predict, with the residual's scale per
+    /// component: `√(1 + γ m(x))` under the `predictive` residual scale (docs/methods.md
+    /// §M9a; 1 for a model kind without a variance), else 1.
+    fn predict(&self, x: &[f64]) -> Option<(Vec<f64>, Vec<f64>)> {
+        let predictive = self.config.residual_scale == ResidualScale::Predictive;
+        let scale = |gamma: f64, m: f64| (1.0 + gamma * m).sqrt();
         match &self.predictor {
-            Predictor::Stored(models) => Some(models.iter().map(|m| m.predict_one(x)).collect()),
-            Predictor::Online(windows) => windows.iter().map(|w| w.predict(x)).collect(),
+            Predictor::Stored(models) => Some(
+                models
+                    .iter()
+                    .enumerate()
+                    .map(|(i, m)| match (&**m, predictive) {
+                        (AnyModel::LwLsSvm(lw), true) => {
+                            let (f, term) = lw.predict_with_term(x);
+                            (f, scale(lw.gamma(), term))
+                        }
+                        (AnyModel::LsSvm(ls), true) => {
+                            let term = self.terms.get(i).and_then(Option::as_ref);
+                            let s = term.map_or(1.0, |t| scale(ls.gamma(), ls.variance_term(t, x)));
+                            (ls.predict_one(x), s)
+                        }
+                        _ => (m.predict_one(x), 1.0),
+                    })
+                    .unzip(),
+            ),
+            Predictor::Online(windows) => windows
+                .iter()
+                .map(|w| {
+                    let f = w.predict(x)?;
+                    let s = if predictive {
+                        scale(w.params().gamma, w.model_term(x)?)
+                    } else {
+                        1.0
+                    };
+                    Some((f, s))
+                })
+                .collect::<Option<Vec<_>>>()
+                .map(|v| v.into_iter().unzip()),
         }
     }
 
@@ -300,7 +370,8 @@ struct Pending {
     windows: Option<Vec<OnlineLsSvm>>,
     /// Filters after filtering (None: restart them when the channel is not healthy).
     filters: Option<Vec<OutlierFilter>>,
-    /// The residual, when the predictor's residuals are tested.
+    /// The residual as the tests see it (over its predictive scale when that is on), when
+    /// the predictor's residuals are tested.
     residual: Option<Vec<f64>>,
     /// Every test of the channel was healthy this epoch.
     healthy: bool,
@@ -445,20 +516,22 @@ impl ChannelState {
         y: &[f64],
         report: &mut StepReport,
     ) -> Result<ResidualStatistics, StepError> {
-        let Some(yhat) = x.and_then(|x| self.predict(x)) else {
+        let Some((yhat, scale)) = x.and_then(|x| self.predict(x)) else {
             return Ok(ResidualStatistics::default());
         };
-        if yhat.iter().any(|v| !v.is_finite()) {
+        if yhat.iter().chain(&scale).any(|v| !v.is_finite()) {
             return Err(StepError::Filter(FilterError::NonFinite(
                 "channel prediction",
             )));
         }
         let r: Vec<f64> = y.iter().zip(&yhat).map(|(a, b)| a - b).collect();
+        // What the tests see: the residual over its predictive scale (1 when raw).
+        let tested: Vec<f64> = r.iter().zip(&scale).map(|(r, s)| r / s).collect();
         let (mut residual, mut main_value, mut drift_value) = (None, None, None);
         if self.ready() {
-            main_value = self.main.evaluate(&r)?;
+            main_value = self.main.evaluate(&tested)?;
             if let Some(d) = &self.drift {
-                drift_value = match d.evaluate(&r) {
+                drift_value = match d.evaluate(&tested) {
                     Ok(v) => v.map(|v| v.value),
                     Err(WindowError::Singular) => None,
                     Err(_) => {
@@ -468,7 +541,7 @@ impl ChannelState {
                     }
                 };
             }
-            residual = Some(r.clone());
+            residual = Some(tested);
         }
         report.prediction.insert(self.config.name.clone(), yhat);
         report.residual.insert(self.config.name.clone(), r);
@@ -646,7 +719,9 @@ impl Monitor for ChannelMonitor {
 
     fn reset(&mut self) {
         for ch in &mut self.channels {
-            if let Ok(fresh) = ChannelState::new(ch.config.clone(), ch.tests) {
+            // The variance factors derive from the stored models, which a reset keeps.
+            let terms = ch.terms.clone();
+            if let Ok(fresh) = ChannelState::with_terms(ch.config.clone(), ch.tests, terms) {
                 *ch = fresh;
             }
         }

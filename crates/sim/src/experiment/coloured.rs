@@ -26,7 +26,9 @@ use navguard_core::detect::{Health, PolicyConfig};
 use navguard_core::epoch::Epoch;
 use navguard_core::learn::LearnError;
 use navguard_core::learn::online::OnlineParams;
-use navguard_core::monitor::channel::{ChannelConfigWire, PredictorWire, Toggle, VarianceKind};
+use navguard_core::monitor::channel::{
+    ChannelConfigWire, PredictorWire, ResidualScale, Toggle, VarianceKind,
+};
 
 /// The channel's name.
 pub const CHANNEL: &str = "y";
@@ -89,10 +91,13 @@ pub struct ColouredCase {
     pub guard: usize,
     /// Longest freeze of the predictor, epochs (0: never relearn).
     pub max_freeze: usize,
+    /// How the residual is scaled before the tests (`None`: the channel's default, raw).
+    pub residual_scale: Option<ResidualScale>,
 }
 
-/// The cases: both variances on AR(1) and on white noise, and the calibrated one without
-/// the guard.
+/// The cases: both variances on AR(1) and on white noise, the calibrated one with the
+/// guard and other freeze limits, and the batch-means ones with the residual over its
+/// predictive σ (docs/methods.md §M9a).
 pub fn cases(p: &ColouredParams) -> Vec<ColouredCase> {
     let c = |label, phi, variance, guard, max_freeze| ColouredCase {
         label,
@@ -100,6 +105,12 @@ pub fn cases(p: &ColouredParams) -> Vec<ColouredCase> {
         variance,
         guard,
         max_freeze,
+        residual_scale: None,
+    };
+    let predictive = |case: ColouredCase, label| ColouredCase {
+        label,
+        residual_scale: Some(ResidualScale::Predictive),
+        ..case
     };
     let (g, f) = (
         navguard_core::monitor::channel::DEFAULT_GUARD,
@@ -115,6 +126,9 @@ pub fn cases(p: &ColouredParams) -> Vec<ColouredCase> {
         c("AR(1) SD f∞", p.phi, SD, g, 0),
         c("white SD", 0.0, SD, g, f),
         c("white BM", 0.0, BM, g, f),
+        predictive(c("", p.phi, BM, g, f), "AR(1) BM pred"),
+        predictive(c("", p.phi, BM, g, 0), "AR(1) BM f∞ pred"),
+        predictive(c("", 0.0, BM, g, f), "white BM pred"),
     ]
 }
 
@@ -181,6 +195,7 @@ fn config(p: &ColouredParams, case: &ColouredCase) -> Result<ChannelConfigWire, 
     channel.variance = Some(case.variance);
     channel.guard = Some(case.guard);
     channel.max_freeze = Some(case.max_freeze);
+    channel.residual_scale = case.residual_scale;
     channel.stuck = Some(Toggle::On(true));
     Ok(ChannelConfigWire {
         channels: vec![channel],

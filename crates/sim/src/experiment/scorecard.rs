@@ -31,6 +31,12 @@
 //!   protection level ([`score`]: entering `isolated` an alarm, entering `suspect` a
 //!   warning). `FAR / p_fa` compares the false-alarm rate with the nominal rate the
 //!   threshold was set for ([`Scorecard::with_p_fa`]).
+//! - *Bursts*: the lengths of the maximal runs of consecutive alarming clear epochs (a
+//!   run ends at a healthy epoch, a fault or recovery epoch, or a gap in time, where
+//!   pooled draws meet). Printed as their mean and 99th percentile beside what
+//!   independent exceedances at the measured rate `q` would give: a geometric length,
+//!   `P(L = l) = q^(l−1)(1 − q)`, mean `1/(1 − q)`, 99th percentile
+//!   `⌈ln 0.01 / ln q⌉` (docs/methods.md §M14).
 
 use std::fmt::Write as _;
 
@@ -95,6 +101,8 @@ pub struct Scorecard {
     pub clear_warnings: usize,
     /// The nominal per-epoch false-alarm probability of the test, when it has one.
     pub p_fa: Option<f64>,
+    /// Lengths of the runs of consecutive alarming clear epochs, epochs, in time order.
+    pub clear_bursts: Vec<usize>,
 }
 
 impl Scorecard {
@@ -117,6 +125,33 @@ impl Scorecard {
     /// Warnings per fault-free hour.
     pub fn warnings_per_hour(&self) -> Option<f64> {
         (self.clear_hours > 0.0).then(|| self.clear_warnings as f64 / self.clear_hours)
+    }
+
+    /// Mean fault-free burst length, epochs (`None` without bursts).
+    pub fn burst_mean(&self) -> Option<f64> {
+        let b = &self.clear_bursts;
+        (!b.is_empty()).then(|| b.iter().sum::<usize>() as f64 / b.len() as f64)
+    }
+
+    /// 99th percentile of the fault-free burst lengths (nearest rank), epochs.
+    pub fn burst_p99(&self) -> Option<usize> {
+        let mut b = self.clear_bursts.clone();
+        b.sort_unstable();
+        let rank = (0.99 * b.len() as f64).ceil() as usize;
+        b.get(rank.max(1) - 1).copied()
+    }
+
+    /// Mean and 99th percentile of the burst length independent exceedances at this
+    /// card's false-alarm rate `q` would give (geometric, module doc).
+    pub fn independent_bursts(&self) -> Option<(f64, usize)> {
+        let q = self.false_alarm_rate?;
+        if !(q > 0.0 && q < 1.0) {
+            return None;
+        }
+        Some((
+            1.0 / (1.0 - q),
+            ((0.01f64).ln() / q.ln()).ceil().max(1.0) as usize,
+        ))
     }
 
     /// Largest recovery time, or `None` when no fault ended or one never recovered.
@@ -237,7 +272,34 @@ pub fn score_test(
         clear_alarms: logged(Severity::Alarm),
         clear_warnings: logged(Severity::Warning),
         p_fa: None,
+        clear_bursts: bursts(trace, clear),
     }
+}
+
+/// The runs of consecutive alarming epochs among those `clear` accepts (module doc); a
+/// gap in time longer than twice the trace's shortest step ends a run.
+fn bursts(trace: &[(f64, Health)], clear: impl Fn(f64) -> bool) -> Vec<usize> {
+    let step = trace
+        .windows(2)
+        .map(|w| w[1].0 - w[0].0)
+        .filter(|d| *d > 0.0)
+        .fold(f64::INFINITY, f64::min);
+    let (mut out, mut run, mut last_t) = (Vec::new(), 0usize, f64::NEG_INFINITY);
+    for &(t, h) in trace {
+        let continues = t - last_t <= 2.0 * step;
+        if run > 0 && !(continues && clear(t) && alarms(h)) {
+            out.push(run);
+            run = 0;
+        }
+        if clear(t) && alarms(h) {
+            run += 1;
+        }
+        last_t = t;
+    }
+    if run > 0 {
+        out.push(run);
+    }
+    out
 }
 
 /// An epoch *alarms* when its health is not healthy.
@@ -327,12 +389,14 @@ pub fn render(cards: &[Scorecard]) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "{:<8} {:<16} {:>9} {:>9} {:>8} {:>8} {:>7} {:>9} {:>8} {:>10} {:>9} {:>12} {:>9}",
+        "{:<8} {:<16} {:>9} {:>9} {:>8} {:>11} {:>11} {:>8} {:>7} {:>9} {:>8} {:>10} {:>9} {:>12} {:>9}",
         "test",
         "policy",
         "TPR",
         "FAR",
         "FAR/p_fa",
+        "burst m/p99",
+        "indep m/p99",
         "alarms/h",
         "warn/h",
         "MDR",
@@ -357,13 +421,19 @@ pub fn render(cards: &[Scorecard]) -> String {
         }
         let _ = writeln!(
             s,
-            "{:<8} {:<16} {:>9} {:>9} {:>8} {:>8} {:>7} {:>9} {:>8} {:>10} {:>9} {:>12} {:>9}",
+            "{:<8} {:<16} {:>9} {:>9} {:>8} {:>11} {:>11} {:>8} {:>7} {:>9} {:>8} {:>10} {:>9} {:>12} {:>9}",
             c.detector,
             c.policy,
             pct(c.true_positive_rate),
             pct(c.false_alarm_rate),
             c.far_over_p_fa()
                 .map_or_else(|| "—".to_owned(), |v| format!("{v:.2}×")),
+            match (c.burst_mean(), c.burst_p99()) {
+                (Some(m), Some(p)) => format!("{m:.2}/{p}"),
+                _ => "—".to_owned(),
+            },
+            c.independent_bursts()
+                .map_or_else(|| "—".to_owned(), |(m, p)| format!("{m:.2}/{p}")),
             per_hour(c.alarms_per_hour()),
             per_hour(c.warnings_per_hour()),
             pct(c.missed_detection_rate),
@@ -397,6 +467,34 @@ mod tests {
                 (i as f64, h)
             })
             .collect()
+    }
+
+    #[test]
+    fn bursts_are_the_runs_of_clear_alarms_beside_the_geometric_law() {
+        let c = score("y", "classic", &trace("ss.iii..s"), &[], None);
+        assert_eq!(c.clear_bursts, vec![2, 3, 1]);
+        assert_eq!(c.burst_mean(), Some(2.0));
+        assert_eq!(c.burst_p99(), Some(3));
+        // q = 6/9: mean 1/(1 − q) = 3, p99 ⌈ln 0.01 / ln(2/3)⌉ = ⌈11.36⌉ = 12.
+        let (mean, p99) = c.independent_bursts().unwrap();
+        assert!((mean - 3.0).abs() < 1e-12);
+        assert_eq!(p99, 12);
+        // A fault splits a run, and so does a gap in time (two draws laid end to end).
+        let cut = score(
+            "y",
+            "classic",
+            &trace("sss.ss"),
+            &[FaultWindow {
+                start: 2.0,
+                end: 3.0,
+            }],
+            None,
+        );
+        assert_eq!(cut.clear_bursts, vec![2, 2]);
+        let mut pooled = trace("ss");
+        pooled.extend(trace("ss").into_iter().map(|(t, h)| (t + 100.0, h)));
+        let gap = score("y", "classic", &pooled, &[], None);
+        assert_eq!(gap.clear_bursts, vec![2, 2]);
     }
 
     #[test]

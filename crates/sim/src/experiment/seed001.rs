@@ -30,7 +30,8 @@ use navguard_core::learn::online::{OnlineLsSvm, OnlineParams};
 use navguard_core::learn::outlier::OutlierFilter;
 use navguard_core::learn::{Dataset, LearnError, ModelKind, ModelParams};
 use navguard_core::monitor::channel::{
-    ChannelConfigWire, DEFAULT_GUARD, DEFAULT_MAX_FREEZE, PredictorWire, Toggle, VarianceKind,
+    ChannelConfigWire, DEFAULT_GUARD, DEFAULT_MAX_FREEZE, PredictorWire, ResidualScale, Toggle,
+    VarianceKind,
 };
 
 /// What to run.
@@ -113,12 +114,16 @@ pub struct Seed001Case {
     pub policy: PolicyConfig,
     /// Longest freeze of the online predictor, epochs (0: never relearn).
     pub max_freeze: usize,
+    /// How the residual is scaled before the tests (`None`: the channel's default, raw).
+    pub residual_scale: Option<ResidualScale>,
 }
 
 /// Part 2's configurations: the paper's (each residual against a threshold, the
 /// successive-difference variance, learning whenever the test passes), then the
 /// calibrated monitor's defaults (windows 1 and 10 by batch means, the stuck test, guard
-/// 10) under the classic and the counters policy, and counters without the guard.
+/// 10) under the classic and the counters policy, counters with the guard and without the
+/// freeze limit, and the classic and counters defaults with the residual over its
+/// predictive σ (docs/methods.md §M9a).
 pub fn cases(p: &Seed001Params) -> Vec<Seed001Case> {
     let (classic, counters) = (PolicyConfig::Classic, PolicyConfig::counters_default());
     let f = DEFAULT_MAX_FREEZE;
@@ -130,6 +135,12 @@ pub fn cases(p: &Seed001Params) -> Vec<Seed001Case> {
         guard,
         policy,
         max_freeze,
+        residual_scale: None,
+    };
+    let predictive = |case: Seed001Case, label| Seed001Case {
+        label,
+        residual_scale: Some(ResidualScale::Predictive),
+        ..case
     };
     vec![
         Seed001Case {
@@ -140,11 +151,17 @@ pub fn cases(p: &Seed001Params) -> Vec<Seed001Case> {
             guard: 0,
             policy: PolicyConfig::Classic,
             max_freeze: 0,
+            residual_scale: Some(ResidualScale::Raw),
         },
         calibrated("BM classic", DEFAULT_GUARD, classic, f),
         calibrated("BM counters", DEFAULT_GUARD, counters, f),
         calibrated("BM counters g10", 10, counters, f),
         calibrated("BM counters f∞", DEFAULT_GUARD, counters, 0),
+        predictive(calibrated("", DEFAULT_GUARD, classic, f), "BM classic pred"),
+        predictive(
+            calibrated("", DEFAULT_GUARD, counters, f),
+            "BM counters pred",
+        ),
     ]
 }
 
@@ -297,6 +314,7 @@ fn case_config(p: &Seed001Params, case: &Seed001Case) -> Result<ChannelConfigWir
     channel.stuck = Some(Toggle::On(case.stuck));
     channel.guard = Some(case.guard);
     channel.max_freeze = Some(case.max_freeze);
+    channel.residual_scale = case.residual_scale;
     Ok(ChannelConfigWire {
         channels: vec![channel],
     })

@@ -105,6 +105,10 @@ pub struct ChannelWire {
     /// channel is not healthy (default [`DEFAULT_MAX_FREEZE`]; 0: never).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_freeze: Option<usize>,
+    /// How the residual is scaled before the main and drift tests (default `raw`;
+    /// [`ResidualScale`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub residual_scale: Option<ResidualScale>,
 }
 
 impl ChannelWire {
@@ -125,6 +129,7 @@ impl ChannelWire {
             drift: None,
             guard: None,
             max_freeze: None,
+            residual_scale: None,
         }
     }
 }
@@ -140,6 +145,24 @@ pub enum VarianceKind {
     /// Seed 000 eq. 16's successive-difference variance (docs/methods.md §M14): blind
     /// to slow components, kept so experiments can show both.
     SuccessiveDifference,
+}
+
+/// How a channel's residual is scaled before its main and drift tests (docs/methods.md
+/// §M14, §M9a).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ResidualScale {
+    /// The residual as it is (the default: docs/methods.md §M14 gives the measured
+    /// trade-off that keeps it).
+    #[default]
+    Raw,
+    /// Divided by `√(1 + γ m(x))`, the predictive standard deviation over the noise
+    /// level (docs/methods.md §M9a): a prediction the model is unsure of (an input far
+    /// from what it learned) weighs less. The tests' own healthy variance plays the noise
+    /// level `σ_e²`. Ends the self-sustaining bursts of a frozen online window, at the
+    /// cost of most of a persistent bias's flagged epochs (docs/methods.md §M14); with a
+    /// stored `lssvm` model it costs O(N²) per epoch in the training-set size N.
+    Predictive,
 }
 
 /// `true`, `false` or an object of settings.
@@ -323,6 +346,8 @@ pub struct ChannelConfig {
     pub guard: usize,
     /// Longest freeze of an online predictor, epochs (0: no limit).
     pub max_freeze: usize,
+    /// How the residual is scaled before the main and drift tests.
+    pub residual_scale: ResidualScale,
 }
 
 impl ChannelConfig {
@@ -594,6 +619,7 @@ impl ChannelMonitorConfig {
                 Some(g) => in_range(format!("{at}.max_freeze"), g, 0, MAX_EPOCHS)?,
                 None => DEFAULT_MAX_FREEZE,
             };
+            let residual_scale = c.residual_scale.unwrap_or_default();
             channels.push(ChannelConfig {
                 name: TestName::from(c.name.as_str()),
                 dim,
@@ -605,6 +631,7 @@ impl ChannelMonitorConfig {
                 drift: parse_drift(&at, c, dim)?,
                 guard,
                 max_freeze,
+                residual_scale,
             });
         }
         check_names(&channels)?;

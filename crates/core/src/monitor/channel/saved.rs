@@ -123,6 +123,7 @@ impl ChannelState {
             quiet: saved.quiet,
             frozen: saved.frozen,
             relearning: saved.relearning,
+            terms: self.terms.clone(),
         })
     }
 }

@@ -182,16 +182,24 @@ fn stored_model_predictor_detects_a_step_and_not_the_clean_signal() {
     let train_series = signal(300, usize::MAX, 0.0, 3);
     let (x, y) = embed_series(&train_series, 5);
     let data = Dataset::new(&x, Some(&y)).unwrap();
-    let params =
-        ModelParams::from_json(ModelKind::LsSvm, &json!({"gamma": 10.0, "sigma2": 5.0})).unwrap();
-    let model = train(&params, None, &data, &NoProgress).unwrap().model;
-    let models: HashMap<String, Arc<AnyModel>> = HashMap::from([("m".to_owned(), Arc::new(model))]);
-    let config = json!({"channels": [{"name": "s", "predictor": {"model": "m"}}]});
-    let mut m = crate::monitor::build(&spec(config.clone()), &models).unwrap();
-    assert!(alarms(m.as_mut(), &signal(400, usize::MAX, 0.0, 4)).is_empty());
-    let mut m = crate::monitor::build(&spec(config), &models).unwrap();
-    let a = alarms(m.as_mut(), &signal(400, 300, 1.0, 4));
-    assert!(a.first().is_some_and(|&k| (300..303).contains(&k)), "{a:?}");
+    // Both stored kinds, with the raw residual and over its predictive σ.
+    for kind in [ModelKind::LsSvm, ModelKind::LwLsSvm] {
+        let params = ModelParams::from_json(kind, &json!({"gamma": 10.0, "sigma2": 5.0})).unwrap();
+        let model = train(&params, None, &data, &NoProgress).unwrap().model;
+        let models: HashMap<String, Arc<AnyModel>> =
+            HashMap::from([("m".to_owned(), Arc::new(model))]);
+        for scale in ["raw", "predictive"] {
+            let config = json!({"channels": [{"name": "s", "residual_scale": scale,
+                "predictor": {"model": "m"}}]});
+            let mut m = crate::monitor::build(&spec(config.clone()), &models).unwrap();
+            let clean = alarms(m.as_mut(), &signal(400, usize::MAX, 0.0, 4));
+            assert!(clean.is_empty(), "{kind:?} {scale}: {clean:?}");
+            let mut m = crate::monitor::build(&spec(config), &models).unwrap();
+            let a = alarms(m.as_mut(), &signal(400, 300, 1.0, 4));
+            let at_once = a.first().is_some_and(|&k| (300..303).contains(&k));
+            assert!(at_once, "{kind:?} {scale}: {a:?}");
+        }
+    }
 }
 
 #[test]
