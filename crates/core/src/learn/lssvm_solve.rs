@@ -144,11 +144,11 @@ fn factor_panel(a: &mut [f64], n: usize, j0: usize, nb: usize) -> Result<(), Lea
     Ok(())
 }
 
-/// Solves `L Lᵀ x = b` in place, `l` holding the factor from [`cholesky`].
-pub fn cholesky_solve(l: &DMatrix<f64>, b: &mut [f64]) {
+/// Solves `L z = b` in place (`l` the factor from [`cholesky`]), column-oriented:
+/// a contiguous axpy down each column.
+pub fn forward_solve(l: &DMatrix<f64>, b: &mut [f64]) {
     let n = l.nrows();
     let s = l.as_slice();
-    // Forward: L z = b, column-oriented (contiguous axpy down each column).
     for j in 0..n {
         let col = &s[j * n..(j + 1) * n];
         let zj = b[j] / col[j];
@@ -157,6 +157,13 @@ pub fn cholesky_solve(l: &DMatrix<f64>, b: &mut [f64]) {
             *bi -= lij * zj;
         }
     }
+}
+
+/// Solves `L Lᵀ x = b` in place, `l` holding the factor from [`cholesky`].
+pub fn cholesky_solve(l: &DMatrix<f64>, b: &mut [f64]) {
+    let n = l.nrows();
+    let s = l.as_slice();
+    forward_solve(l, b);
     // Backward: Lᵀ x = z, row j of Lᵀ is column j of L (contiguous dot).
     for j in (0..n).rev() {
         let col = &s[j * n..(j + 1) * n];

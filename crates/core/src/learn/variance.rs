@@ -41,7 +41,7 @@ impl ModelTerm {
         let mut l = solve::regularised_kernel(&rows, dim, &kernel, gamma);
         solve::cholesky(&mut l)?;
         let mut w = vec![1.0; l.nrows()];
-        forward_solve(&l, &mut w);
+        solve::forward_solve(&l, &mut w);
         let c = solve::dot(&w, &w);
         Ok(ModelTerm {
             rows,
@@ -70,25 +70,10 @@ impl ModelTerm {
             .chunks_exact(self.dim)
             .map(|xi| self.kernel.eval(xi, z))
             .collect();
-        forward_solve(&self.l, &mut v);
+        solve::forward_solve(&self.l, &mut v);
         let a = solve::dot(&self.w, &v);
         let kxx = self.kernel.eval(z, z);
         (kxx - solve::dot(&v, &v) + (1.0 - a) * (1.0 - a) / self.c).max(0.0)
-    }
-}
-
-/// Solves `L z = b` in place (`L` lower triangular, column-major as [`solve::cholesky`]
-/// leaves it).
-fn forward_solve(l: &DMatrix<f64>, b: &mut [f64]) {
-    let n = l.nrows();
-    let s = l.as_slice();
-    for j in 0..n {
-        let col = &s[j * n..(j + 1) * n];
-        let zj = b[j] / col[j];
-        b[j] = zj;
-        for (bi, lij) in b[j + 1..].iter_mut().zip(&col[j + 1..]) {
-            *bi -= lij * zj;
-        }
     }
 }
 
