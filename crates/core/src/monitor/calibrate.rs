@@ -61,6 +61,9 @@ pub struct TestSample {
     pub tails: Vec<f64>,
     /// Σ statistic and Σ dof over the epochs, for the noise scale.
     pub sums: (f64, f64),
+    /// The test's own threshold spec before the run (a guard's `p_fa`, such as the stuck
+    /// test's, or a per-test setting); `None` when it follows the monitor's.
+    pub own_spec: Option<ThresholdSpec>,
 }
 
 impl TestSample {
@@ -88,6 +91,14 @@ pub enum Proposal {
     TooShort {
         /// Epochs needed.
         needed: usize,
+    },
+    /// The data's level would lower the threshold of a test with its own, stricter spec
+    /// (a guard): it is left as it is.
+    Stricter {
+        /// The level the data would give.
+        p_fa: f64,
+        /// The test's own spec, kept.
+        own: ThresholdSpec,
     },
 }
 
@@ -148,6 +159,14 @@ impl From<&TestCalibration> for CalibrationLine {
                     c.epochs
                 )),
             ),
+            Proposal::Stricter { p_fa, own } => (
+                None,
+                None,
+                Some(format!(
+                    "kept: the data's level (p_fa {p_fa:.3e}) would lower the threshold below the test's own ({})",
+                    describe(own)
+                )),
+            ),
         };
         CalibrationLine {
             test: c.test.clone(),
@@ -160,6 +179,14 @@ impl From<&TestCalibration> for CalibrationLine {
             refused,
             noise_scale: c.noise_scale,
         }
+    }
+}
+
+/// A threshold spec as a reader would write it.
+fn describe(spec: ThresholdSpec) -> String {
+    match spec {
+        ThresholdSpec::PFa(p) => format!("p_fa {p:e}"),
+        ThresholdSpec::Threshold(t) => format!("threshold {t}"),
     }
 }
 
@@ -184,12 +211,7 @@ pub fn sample(
 ) -> Result<Vec<TestSample>, CalibrateError> {
     monitor.reset();
     let bank = monitor.tests_mut();
-    let out_of_reach = ThresholdSpec::Threshold(OUT_OF_REACH);
-    // A raw threshold is valid for every dof, so these cannot fail.
-    let _ = bank.set_spec(out_of_reach);
-    for i in 0..bank.slots().len() {
-        let _ = bank.set_test_spec(i, Some(out_of_reach));
-    }
+    // Each test's own spec is read before the run puts every threshold out of reach.
     let samples: Vec<TestSample> = bank
         .slots()
         .iter()
@@ -198,8 +220,15 @@ pub fn sample(
             dof: s.dof,
             tails: Vec::new(),
             sums: (0.0, 0.0),
+            own_spec: s.own_spec,
         })
         .collect();
+    let out_of_reach = ThresholdSpec::Threshold(OUT_OF_REACH);
+    // A raw threshold is valid for every dof, so these cannot fail.
+    let _ = bank.set_spec(out_of_reach);
+    for i in 0..bank.slots().len() {
+        let _ = bank.set_test_spec(i, Some(out_of_reach));
+    }
     // A test with its own policy and threshold (a protection level against its alert
     // limit) is not a χ² test: nothing to calibrate.
     let calibrated: Vec<bool> = bank.slots().iter().map(|s| !s.own_policy).collect();
@@ -266,10 +295,20 @@ pub fn calibrate(
         }
         // The level: the k-th smallest tail (an epoch fails when its tail is below it).
         let level = sorted[k - 1].clamp(1e-300, 0.5);
-        proposal = Proposal::Calibrated {
-            p_fa: level,
-            threshold: chi2::threshold(dof, level).unwrap_or(f64::NAN),
-            below: k - 1,
+        let threshold = chi2::threshold(dof, level).unwrap_or(f64::NAN);
+        proposal = match sample.own_spec {
+            // A guard's threshold is never lowered below the one its own spec gives.
+            Some(own @ ThresholdSpec::PFa(p)) if level > p => {
+                Proposal::Stricter { p_fa: level, own }
+            }
+            Some(own @ ThresholdSpec::Threshold(t)) if threshold < t => {
+                Proposal::Stricter { p_fa: level, own }
+            }
+            _ => Proposal::Calibrated {
+                p_fa: level,
+                threshold,
+                below: k - 1,
+            },
         };
     }
     Ok(TestCalibration {
@@ -379,6 +418,7 @@ mod tests {
                 dof: 1,
                 tails,
                 sums: (0.0, 0.0),
+                own_spec: None,
             };
             let Proposal::Calibrated { p_fa, .. } = calibrate(&s, 0.01, 0.95).unwrap().proposal
             else {
@@ -387,5 +427,49 @@ mod tests {
             over += usize::from(p_fa > 0.01);
         }
         assert!(over <= 20, "{over} of 200 above the rate asked");
+    }
+
+    #[test]
+    fn a_guards_threshold_is_never_lowered_below_its_own() {
+        // Tails uniform on (0, 1): at far 0.01 over 5,000 epochs the level is about 0.006
+        // (below far: the 95 % bound on the true rate).
+        let mut rng = StdRng::seed_from_u64(3);
+        let tails: Vec<f64> = (0..5000)
+            .map(|_| rand::Rng::random::<f64>(&mut rng))
+            .collect();
+        let with = |own_spec| TestSample {
+            test: "c.stuck".into(),
+            dof: 1,
+            tails: tails.clone(),
+            sums: (0.0, 0.0),
+            own_spec,
+        };
+        let level = match calibrate(&with(None), 0.01, 0.95).unwrap().proposal {
+            Proposal::Calibrated { p_fa, .. } => p_fa,
+            other => panic!("{other:?}"),
+        };
+        assert!((0.005..0.01).contains(&level), "{level}");
+        // A guard with its own p_fa 1e-6 (the stuck test's) keeps it: the data's level
+        // would lower its threshold from 23.9 to about 7.6.
+        let guard = ThresholdSpec::PFa(1e-6);
+        let c = calibrate(&with(Some(guard)), 0.01, 0.95).unwrap();
+        assert_eq!(
+            c.proposal,
+            Proposal::Stricter {
+                p_fa: level,
+                own: guard
+            }
+        );
+        let line = CalibrationLine::from(&c);
+        assert_eq!((line.p_fa, line.threshold), (None, None));
+        assert!(line.refused.unwrap().starts_with("kept:"));
+        // A raw threshold of its own above the data's is kept too; one below is raised.
+        let high = calibrate(&with(Some(ThresholdSpec::Threshold(20.0))), 0.01, 0.95).unwrap();
+        assert!(matches!(high.proposal, Proposal::Stricter { .. }));
+        let low = calibrate(&with(Some(ThresholdSpec::Threshold(2.0))), 0.01, 0.95).unwrap();
+        assert!(matches!(low.proposal, Proposal::Calibrated { p_fa, .. } if p_fa == level));
+        // An own p_fa looser than the data's level does not stop the proposal.
+        let loose = calibrate(&with(Some(ThresholdSpec::PFa(0.05))), 0.01, 0.95).unwrap();
+        assert!(matches!(loose.proposal, Proposal::Calibrated { .. }));
     }
 }
