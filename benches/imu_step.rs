@@ -10,39 +10,19 @@
 // criterion_group! defines a public function it cannot document.
 #![allow(missing_docs)]
 
+#[path = "../tests/common/drive.rs"]
+mod drive_data;
+
 use std::hint::black_box;
-use std::path::Path;
 use std::time::{Duration, Instant};
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use nalgebra::Vector3;
 use navguard_core::epoch::Epoch;
 use navguard_core::monitor::{self, NoModels};
-use navguard_formats::imu_csv::{self, ImuCsvLayout};
-use navguard_formats::{rtklib_pos, timetag};
-use navguard_sim::experiment::drive::{self, DriveData, DriveParams};
-
-/// The drive as the experiment reads it.
-fn read_drive() -> DriveData {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/drive");
-    let samples = imu_csv::read_imu_csv(&dir.join("imu_1934.csv"), &ImuCsvLayout::default())
-        .expect("the drive's IMU CSV");
-    let tag = timetag::read_tag(&dir.join("imu_1934.csv.tag")).expect("its time tag");
-    let imu = imu_csv::to_epochs_tagged(&samples, &tag, -0.125);
-    let reference = rtklib_pos::read_pos(&dir.join("gnss_1934_sf.pos"))
-        .expect("the drive's RTK solution")
-        .iter()
-        .map(|f| drive::RefFix {
-            t: f.t,
-            lla: f.lla,
-            vel: Vector3::from(f.vel.unwrap_or_default()),
-        })
-        .collect();
-    DriveData { imu, reference }
-}
+use navguard_sim::experiment::drive::{self, DriveParams};
 
 fn bench(c: &mut Criterion) {
-    let data = read_drive();
+    let data = drive_data::read_drive();
     let params = DriveParams {
         outages: Vec::new(),
         ..DriveParams::default()

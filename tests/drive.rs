@@ -13,39 +13,19 @@
 
 mod common;
 
+#[path = "common/drive.rs"]
+mod drive_data;
+
 use std::path::Path;
 
 use common::*;
-use nalgebra::Vector3;
 use navguard::service::Limits;
 use navguard::service::wire::{self, epoch_to_wire, parse_frame, result_frame};
 use navguard_core::epoch::Epoch;
 use navguard_core::monitor::{self, NoModels};
 use navguard_core::session::{AlarmLevel, Seat, SessionCore};
-use navguard_formats::imu_csv::{self, ImuCsvLayout};
-use navguard_formats::{rtklib_pos, timetag};
-use navguard_sim::experiment::drive::{self, DriveData, DriveParams, FaultKind};
+use navguard_sim::experiment::drive::{self, DriveParams, FaultKind};
 use serde_json::{Value, json};
-
-/// The drive as `navguard experiment drive` reads it: the IMU on GPS time through its
-/// tag, the logger's 0.125 s latency removed; the RTK solution as the reference.
-fn read_drive() -> DriveData {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/drive");
-    let samples =
-        imu_csv::read_imu_csv(&dir.join("imu_1934.csv"), &ImuCsvLayout::default()).unwrap();
-    let tag = timetag::read_tag(&dir.join("imu_1934.csv.tag")).unwrap();
-    let imu = imu_csv::to_epochs_tagged(&samples, &tag, -0.125);
-    let reference = rtklib_pos::read_pos(&dir.join("gnss_1934_sf.pos"))
-        .unwrap()
-        .iter()
-        .map(|f| drive::RefFix {
-            t: f.t,
-            lla: f.lla,
-            vel: Vector3::from(f.vel.unwrap()),
-        })
-        .collect();
-    DriveData { imu, reference }
-}
 
 /// Epochs through the ingest wire format and back, as a server gets them.
 fn through_the_wire(epochs: Vec<Epoch>) -> Result<Vec<Epoch>, String> {
@@ -54,7 +34,7 @@ fn through_the_wire(epochs: Vec<Epoch>) -> Result<Vec<Epoch>, String> {
 
 #[test]
 fn the_drive_meets_its_accuracy_and_fault_targets() {
-    let data = read_drive();
+    let data = drive_data::read_drive();
     let params = DriveParams {
         seeds: vec![1, 2],
         outages: vec![150.0],
@@ -187,7 +167,7 @@ fn session_body(id: &str, params: &DriveParams, record: bool) -> Value {
 // Over 80 lines: one scenario in the order it happens; its steps share its state.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_drive_through_a_server_gives_the_in_process_results_bit_for_bit() {
-    let data = read_drive();
+    let data = drive_data::read_drive();
     let params = DriveParams::default();
     // The file holds the epochs as built; the session core in-process and the server
     // both get them as parsed from it (a second trip through degrees would not give
