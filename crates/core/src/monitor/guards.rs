@@ -140,6 +140,12 @@ pub struct GuardConfig {
     pub stuck: Option<StuckConfig>,
 }
 
+/// Whether `test` is a drift or stuck guard of another test (`<test>.drift`,
+/// `<test>.stuck`), as opposed to a monitor's main test.
+pub fn is_guard(test: &str) -> bool {
+    test.ends_with(".drift") || test.ends_with(".stuck")
+}
+
 /// `path.field`, or `field` at the root.
 fn at(path: &str, field: &str) -> String {
     if path.is_empty() {

@@ -17,6 +17,10 @@
 //! correlated (windowed tests especially), so the bound is optimistic by the ratio of
 //! real to effective samples; the report states the count used.
 //!
+//! This module's replay is the out-of-reach one; [`live`] searches the level again with
+//! the threshold in reach and checks it on held-out epochs, which is what the CLI and the
+//! REST route run.
+//!
 //! The proposal is returned as the test's own `p_fa` (the level `u*`: each dof then gets
 //! `F⁻¹_χ²(dof)(1 − u*)`) and, for the test's primary dof, the equivalent raw threshold,
 //! beside the χ² threshold at `p_fa = far` it replaces and the rate that one would give
@@ -40,6 +44,17 @@ pub enum CalibrateError {
     /// The requested rate or confidence is not in (0, 1).
     #[error("{0} must lie in (0, 1)")]
     Range(&'static str),
+    /// An option of a live calibration is out of its range.
+    #[error("{0}")]
+    Option(String),
+    /// A test asked for is not one of the monitor's calibratable tests.
+    #[error("no calibratable test '{name}' (the monitor's: {known})")]
+    UnknownTest {
+        /// The name asked for.
+        name: String,
+        /// The monitor's calibratable tests.
+        known: String,
+    },
     /// A monitor failed numerically on an epoch.
     #[error("epoch {index}: {source}")]
     Step {
@@ -100,6 +115,40 @@ pub enum Proposal {
         /// The test's own spec, kept.
         own: ThresholdSpec,
     },
+    /// Exceedances come in runs of consecutive epochs (mean length `burst`), so the data
+    /// hold fewer independent chances than epochs: too few for the rate asked ([`live`]).
+    Bursty {
+        /// Epochs of the calibration part needed at that burst length.
+        needed: usize,
+        /// Mean length of a run of exceedances.
+        burst: f64,
+    },
+    /// Replayed with the candidate threshold in reach, no level kept the rate within
+    /// `far` on the calibration epochs ([`live`]).
+    NoFixedPoint {
+        /// Replays tried.
+        replays: usize,
+    },
+    /// The level calibrated on the first part of the data fails the held-out part more
+    /// often than the transfer limit allows ([`live`]).
+    NoTransfer {
+        /// The level calibrated.
+        p_fa: f64,
+        /// The share of held-out epochs it fails.
+        rate: f64,
+        /// The transfer limit, a multiple of `far`.
+        limit: f64,
+    },
+}
+
+/// How a proposal did on held-out epochs ([`live`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Holdout {
+    /// Held-out epochs on which the test ran.
+    pub epochs: usize,
+    /// The share of them the proposal fails (live thresholds, so learning freezes as it
+    /// would in operation).
+    pub rate: f64,
 }
 
 /// The calibration of one test.
@@ -119,6 +168,11 @@ pub struct TestCalibration {
     pub proposal: Proposal,
     /// [`TestSample::noise_scale`].
     pub noise_scale: Option<f64>,
+    /// Replays with the candidate threshold in reach ([`live`]; 0 for an out-of-reach
+    /// calibration alone).
+    pub replays: usize,
+    /// The proposal on held-out epochs, when checked ([`live`]).
+    pub holdout: Option<Holdout>,
 }
 
 /// One test's calibration as reported (CLI table, JSON and the REST answer).
@@ -143,6 +197,16 @@ pub struct CalibrationLine {
     /// `sqrt(Σ statistic / Σ dof)`: the factor on the measurement σ that makes the mean
     /// statistic its dof (docs/methods.md §M25).
     pub noise_scale: Option<f64>,
+    /// Replays of the calibration epochs with the candidate threshold in reach (the
+    /// fixed-point search); absent for an out-of-reach calibration.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub replays: Option<usize>,
+    /// Held-out epochs on which the proposal was measured; absent when none were held out.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub holdout_epochs: Option<usize>,
+    /// The share of held-out epochs the proposal fails.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub holdout_rate: Option<f64>,
 }
 
 impl From<&TestCalibration> for CalibrationLine {
@@ -167,6 +231,28 @@ impl From<&TestCalibration> for CalibrationLine {
                     describe(own)
                 )),
             ),
+            Proposal::Bursty { needed, burst } => (
+                None,
+                None,
+                Some(format!(
+                    "too short for bursts: exceedances come in runs of {burst:.1} epochs on average, so the rate asked needs at least {needed} calibration epochs ({} here)",
+                    c.epochs
+                )),
+            ),
+            Proposal::NoFixedPoint { replays } => (
+                None,
+                None,
+                Some(format!(
+                    "no fixed point: in {replays} replays with the threshold in reach, no level kept the rate asked"
+                )),
+            ),
+            Proposal::NoTransfer { p_fa, rate, limit } => (
+                None,
+                None,
+                Some(format!(
+                    "does not transfer: the level calibrated on the first part (p_fa {p_fa:.3e}) fails {rate:.3e} of the held-out epochs, above {limit} × the rate asked"
+                )),
+            ),
         };
         CalibrationLine {
             test: c.test.clone(),
@@ -178,6 +264,9 @@ impl From<&TestCalibration> for CalibrationLine {
             threshold,
             refused,
             noise_scale: c.noise_scale,
+            replays: (c.replays > 0).then_some(c.replays),
+            holdout_epochs: c.holdout.map(|h| h.epochs),
+            holdout_rate: c.holdout.map(|h| h.rate),
         }
     }
 }
@@ -262,6 +351,28 @@ pub fn epochs_needed(far: f64, confidence: f64) -> usize {
     ((1.0 - confidence).ln() / (1.0 - far).ln()).ceil() as usize
 }
 
+/// How many of `n` epochs may fall below a level whose true rate is at most `far` with
+/// `confidence`: `k − 1` for the largest `k` with `P(Bin(n, far) ≥ k) ≥ confidence`
+/// (`k = 1` holds once `n` reaches [`epochs_needed`]).
+pub fn allowed_below(n: usize, far: f64, confidence: f64) -> usize {
+    let Ok(bin) = Binomial::new(far, n as u64) else {
+        return 0;
+    };
+    let mut k = 1;
+    while k < n && 1.0 - bin.cdf(k as u64) >= confidence {
+        k += 1;
+    }
+    k - 1
+}
+
+/// The `k`-th smallest of `tails` (1-based), clamped to a usable level: an epoch fails
+/// when its tail is below it.
+fn level_at(tails: &[f64], k: usize) -> f64 {
+    let mut sorted = tails.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    sorted[(k - 1).min(sorted.len() - 1)].clamp(1e-300, 0.5)
+}
+
 /// Proposes a threshold for one test at false-alarm rate `far` with `confidence`.
 pub fn calibrate(
     sample: &TestSample,
@@ -285,16 +396,8 @@ pub fn calibrate(
     let needed = epochs_needed(far, confidence);
     let mut proposal = Proposal::TooShort { needed };
     if n >= needed {
-        let mut sorted = sample.tails.clone();
-        sorted.sort_by(f64::total_cmp);
-        // Largest k with P(Bin(n, far) ≥ k) ≥ confidence; k = 1 holds since n ≥ needed.
-        let bin = Binomial::new(far, n as u64).expect("far in (0, 1)");
-        let mut k = 1;
-        while k < n && 1.0 - bin.cdf(k as u64) >= confidence {
-            k += 1;
-        }
-        // The level: the k-th smallest tail (an epoch fails when its tail is below it).
-        let level = sorted[k - 1].clamp(1e-300, 0.5);
+        let k = allowed_below(n, far, confidence) + 1;
+        let level = level_at(&sample.tails, k);
         let threshold = chi2::threshold(dof, level).unwrap_or(f64::NAN);
         proposal = match sample.own_spec {
             // A guard's threshold is never lowered below the one its own spec gives.
@@ -319,157 +422,12 @@ pub fn calibrate(
         chi2_rate,
         proposal,
         noise_scale: sample.noise_scale(),
+        replays: 0,
+        holdout: None,
     })
 }
 
+pub mod live;
+
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::detect::PolicyConfig;
-    use crate::monitor::linear::{LinearConfig, LinearConfigWire, LinearMonitor};
-    use rand::SeedableRng;
-    use rand::rngs::StdRng;
-    use rand_distr::{Distribution, StandardNormal};
-
-    /// A random walk seen in white noise of σ = `scale` while the model says σ = 1:
-    /// λ = r²/S with the model's S is `scale²`-inflated once the filter has converged.
-    fn run(scale: f64, epochs: usize, seed: u64) -> Vec<TestSample> {
-        let config = LinearConfig::try_from(LinearConfigWire {
-            f: vec![vec![1.0]],
-            h: vec![vec![1.0]],
-            q: vec![vec![1e-8]],
-            r: vec![vec![1.0]],
-            x0: vec![0.0],
-            p0: vec![vec![1e-8]],
-            b: None,
-            drift: None,
-            stuck: None,
-        })
-        .unwrap();
-        let mut m =
-            LinearMonitor::new(config, PolicyConfig::Classic, ThresholdSpec::default()).unwrap();
-        let mut rng = StdRng::seed_from_u64(seed);
-        let data: Vec<Epoch> = (0..epochs)
-            .map(|k| {
-                let e: f64 = StandardNormal.sample(&mut rng);
-                Epoch {
-                    t: k as f64,
-                    z: Some(vec![scale * e]),
-                    ..Default::default()
-                }
-            })
-            .collect();
-        sample(&mut m, &data).unwrap()
-    }
-
-    #[test]
-    fn a_mis_scaled_model_gets_the_scaled_threshold() {
-        // Noise √2 × what the model says: λ ~ 2 χ²(1), so the threshold for a rate of
-        // 1e-3 is 2 × 10.828 = 21.66 (the χ² one, 10.83, would fail ≈ 2.1 % of epochs).
-        for seed in [1, 2, 3] {
-            let samples = run(2f64.sqrt(), 100_000, seed);
-            let c = calibrate(&samples[0], 1e-3, 0.95).unwrap();
-            assert_eq!(c.epochs, 100_000);
-            assert!((c.chi2_threshold - 10.8276).abs() < 1e-3);
-            assert!((c.chi2_rate - 0.0209).abs() < 0.002, "{}", c.chi2_rate);
-            let Proposal::Calibrated {
-                threshold, below, ..
-            } = c.proposal
-            else {
-                panic!("calibrated");
-            };
-            // The conservative order statistic sits a little above the true quantile.
-            assert!(
-                (21.0..24.5).contains(&threshold),
-                "seed {seed}: {threshold}"
-            );
-            assert!(below < 100, "{below}");
-        }
-    }
-
-    #[test]
-    fn too_little_data_is_refused_saying_how_much_is_needed() {
-        assert_eq!(epochs_needed(1e-4, 0.95), 29_956);
-        let samples = run(1.0, 1000, 4);
-        let c = calibrate(&samples[0], 1e-4, 0.95).unwrap();
-        assert_eq!(c.proposal, Proposal::TooShort { needed: 29_956 });
-        assert_eq!(
-            calibrate(&samples[0], 0.0, 0.95),
-            Err(CalibrateError::Range("far"))
-        );
-        assert_eq!(
-            calibrate(&samples[0], 0.1, 1.0),
-            Err(CalibrateError::Range("confidence"))
-        );
-    }
-
-    #[test]
-    fn the_proposed_level_keeps_the_rate_below_far_at_the_stated_confidence() {
-        // Uniform tails (a well-tuned model): the level's true rate is the level itself.
-        // Over 200 data sets of 5,000 epochs at far 0.01, at most ≈ 5 % may exceed it.
-        let mut rng = StdRng::seed_from_u64(9);
-        let mut over = 0;
-        for _ in 0..200 {
-            let tails: Vec<f64> = (0..5000)
-                .map(|_| rand::Rng::random::<f64>(&mut rng))
-                .collect();
-            let s = TestSample {
-                test: "t".into(),
-                dof: 1,
-                tails,
-                sums: (0.0, 0.0),
-                own_spec: None,
-            };
-            let Proposal::Calibrated { p_fa, .. } = calibrate(&s, 0.01, 0.95).unwrap().proposal
-            else {
-                panic!()
-            };
-            over += usize::from(p_fa > 0.01);
-        }
-        assert!(over <= 20, "{over} of 200 above the rate asked");
-    }
-
-    #[test]
-    fn a_guards_threshold_is_never_lowered_below_its_own() {
-        // Tails uniform on (0, 1): at far 0.01 over 5,000 epochs the level is about 0.006
-        // (below far: the 95 % bound on the true rate).
-        let mut rng = StdRng::seed_from_u64(3);
-        let tails: Vec<f64> = (0..5000)
-            .map(|_| rand::Rng::random::<f64>(&mut rng))
-            .collect();
-        let with = |own_spec| TestSample {
-            test: "c.stuck".into(),
-            dof: 1,
-            tails: tails.clone(),
-            sums: (0.0, 0.0),
-            own_spec,
-        };
-        let level = match calibrate(&with(None), 0.01, 0.95).unwrap().proposal {
-            Proposal::Calibrated { p_fa, .. } => p_fa,
-            other => panic!("{other:?}"),
-        };
-        assert!((0.005..0.01).contains(&level), "{level}");
-        // A guard with its own p_fa 1e-6 (the stuck test's) keeps it: the data's level
-        // would lower its threshold from 23.9 to about 7.6.
-        let guard = ThresholdSpec::PFa(1e-6);
-        let c = calibrate(&with(Some(guard)), 0.01, 0.95).unwrap();
-        assert_eq!(
-            c.proposal,
-            Proposal::Stricter {
-                p_fa: level,
-                own: guard
-            }
-        );
-        let line = CalibrationLine::from(&c);
-        assert_eq!((line.p_fa, line.threshold), (None, None));
-        assert!(line.refused.unwrap().starts_with("kept:"));
-        // A raw threshold of its own above the data's is kept too; one below is raised.
-        let high = calibrate(&with(Some(ThresholdSpec::Threshold(20.0))), 0.01, 0.95).unwrap();
-        assert!(matches!(high.proposal, Proposal::Stricter { .. }));
-        let low = calibrate(&with(Some(ThresholdSpec::Threshold(2.0))), 0.01, 0.95).unwrap();
-        assert!(matches!(low.proposal, Proposal::Calibrated { p_fa, .. } if p_fa == level));
-        // An own p_fa looser than the data's level does not stop the proposal.
-        let loose = calibrate(&with(Some(ThresholdSpec::PFa(0.05))), 0.01, 0.95).unwrap();
-        assert!(matches!(loose.proposal, Proposal::Calibrated { .. }));
-    }
-}
+mod tests;
