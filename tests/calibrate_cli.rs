@@ -57,14 +57,21 @@ async fn calibrate_proposes_the_known_threshold_and_its_body_applies_by_put() {
         String::from_utf8_lossy(&run.stderr)
     );
     let report: Value = serde_json::from_slice(&run.stdout).unwrap();
-    let test = &report[0]["tests"][0];
+    // The main test only, calibrated on the first half and checked on the second.
+    let tests = report[0]["tests"].as_array().unwrap();
+    assert_eq!(tests.len(), 1, "{report}");
+    let test = &tests[0];
     assert_eq!(
         (test["test"].as_str(), test["epochs"].as_u64()),
-        (Some("residual"), Some(50_000))
+        (Some("residual"), Some(25_000))
     );
+    assert_eq!(test["holdout_epochs"], 25_000, "{test}");
+    assert!(test["holdout_rate"].as_f64().unwrap() <= 2e-3, "{test}");
     let threshold = test["threshold"].as_f64().unwrap();
+    // The 17th-largest of 25,000 statistics: its rate is Beta(17, 24984), 6.8e-4 ± 1.7e-4,
+    // so the threshold lies about 2 × 11.5, and above 2 × 13.5 with probability < 1e-4.
     assert!(
-        (20.5..25.0).contains(&threshold),
+        (20.5..27.0).contains(&threshold),
         "{threshold} vs 2 × 10.83"
     );
     // The χ² threshold it replaces fails ≈ 2 % of these epochs, 20× the rate asked.
@@ -113,7 +120,7 @@ fn calibrate_refuses_data_too_short_for_the_rate_and_says_how_much_it_needs() {
     assert!(!run.status.success());
     let stdout = String::from_utf8_lossy(&run.stdout);
     assert!(
-        stdout.contains("refused: too short: 2000 epochs, the rate asked needs at least 29956"),
+        stdout.contains("refused: too short: 2000 epochs, the rate asked needs at least 59912"),
         "{stdout}"
     );
     let stderr = String::from_utf8_lossy(&run.stderr);

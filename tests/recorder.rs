@@ -394,5 +394,16 @@ async fn calibration_over_rest_uses_the_sessions_recording() {
             .unwrap()
             .contains("needs at least")
     );
+    // Calibrated on the first half, measured on the second; a test nobody has is refused.
+    assert_eq!(test["holdout_epochs"], 10_000, "{test}");
+    assert!(test["holdout_rate"].as_f64().unwrap() <= 2e-3, "{test}");
+    let resp = reqwest::get(format!(
+        "{base}/api/v1/sessions/cal/calibration?far=1e-3&tests=residual,nope"
+    ))
+    .await
+    .unwrap();
+    assert_eq!(resp.status(), 422);
+    let v: Value = resp.json().await.unwrap();
+    assert!(v.to_string().contains("'nope'"), "{v}");
     server.shutdown().await;
 }

@@ -1,8 +1,9 @@
 //! `navguard calibrate FILE.jsonl --session-spec SPEC.json --far 1e-4`: replays
 //! fault-free data in-process through a session's monitors and proposes, per test, the
-//! threshold that gives the requested false-alarm rate on it (docs/methods.md §M25),
-//! beside the χ² threshold it replaces; `--out` writes the proposals as `PUT …/threshold`
-//! bodies, one per monitor.
+//! threshold that gives the requested false-alarm rate on it with the threshold live
+//! (docs/methods.md §M25), beside the χ² threshold it replaces, and checks it on a
+//! held-out part of the data; `--out` writes the proposals as `PUT …/threshold` bodies,
+//! one per monitor.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -18,7 +19,8 @@ use navguard::service::store::Store;
 use navguard::service::train::Models;
 use navguard::service::wire::{CreateSession, TestThresholdSpec, calibrated_tests, parse_frame};
 use navguard_core::epoch::Epoch;
-use navguard_core::monitor::calibrate::{self, CalibrationLine};
+use navguard_core::monitor::calibrate::CalibrationLine;
+use navguard_core::monitor::calibrate::live::{LiveOptions, calibrate_live};
 use navguard_core::monitor::{self, ModelSource, NoModels};
 
 /// Flags of `navguard calibrate`.
@@ -35,6 +37,18 @@ pub(crate) struct CalibrateArgs {
     /// Confidence that the true rate at the proposed threshold is at most `--far`.
     #[arg(long, default_value_t = 0.95)]
     confidence: f64,
+    /// Tests to calibrate, by name (comma-separated or repeated); default each monitor's
+    /// main tests (not the `.drift`/`.stuck` guards). A monitor without any of them is
+    /// skipped.
+    #[arg(long, value_delimiter = ',')]
+    tests: Vec<String>,
+    /// The share of the epochs, at the end, held out to check the proposal on (0: none).
+    #[arg(long, default_value_t = 0.5)]
+    holdout: f64,
+    /// Refuse a proposal that fails more than this multiple of `--far` of the held-out
+    /// epochs.
+    #[arg(long, default_value_t = 2.0)]
+    max_transfer: f64,
     /// A navguard store to take trained models from (for `channel`, `rimu`, `tacan`):
     /// a SQLite file or a `postgres://` URL.
     #[arg(long)]
@@ -116,7 +130,16 @@ pub(crate) async fn run(args: CalibrateArgs) -> anyhow::Result<()> {
         let mut m = monitor_spec(wire)
             .and_then(|spec| monitor::build(&spec, &*models))
             .map_err(|e| anyhow::anyhow!("monitors[{i}]: {e}"))?;
-        let tests = calibrate::calibrate_monitor(&mut *m, &epochs, args.far, args.confidence)
+        let Some(options) = options(&args, &mut *m) else {
+            continue;
+        };
+        eprintln!(
+            "calibrating monitor '{}' on {} epochs (the last {:.0} % held out)…",
+            wire.name,
+            epochs.len(),
+            100.0 * options.holdout
+        );
+        let tests = calibrate_live(&mut *m, &epochs, &options)
             .map_err(|e| anyhow::anyhow!("monitor '{}': {e}", wire.name))?;
         let body = PutBody {
             tests: calibrated_tests(&tests),
@@ -128,6 +151,13 @@ pub(crate) async fn run(args: CalibrateArgs) -> anyhow::Result<()> {
             monitor: wire.name.clone(),
             tests,
         });
+    }
+    if let Some(name) = args
+        .tests
+        .iter()
+        .find(|&n| !reports.iter().any(|r| r.tests.iter().any(|t| &t.test == n)))
+    {
+        bail!("no monitor of the session has a calibratable test '{name}'");
     }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&reports)?);
@@ -151,6 +181,30 @@ pub(crate) async fn run(args: CalibrateArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// The live options for one monitor: with `--tests`, only those of its tests (`None` when
+/// it has none of them).
+fn options(args: &CalibrateArgs, m: &mut dyn monitor::Monitor) -> Option<LiveOptions> {
+    let mut options = LiveOptions {
+        holdout: args.holdout,
+        max_transfer: args.max_transfer,
+        ..LiveOptions::new(args.far, args.confidence)
+    };
+    if !args.tests.is_empty() {
+        let bank = m.tests_mut();
+        let mine: Vec<String> = args
+            .tests
+            .iter()
+            .filter(|t| bank.index_of(t).is_some())
+            .cloned()
+            .collect();
+        if mine.is_empty() {
+            return None;
+        }
+        options.tests = Some(mine);
+    }
+    Some(options)
 }
 
 fn render(reports: &[MonitorReport], far: f64, epochs: usize) -> String {
@@ -183,6 +237,16 @@ fn render(reports: &[MonitorReport], far: f64, epochs: usize) -> String {
                 th,
                 t.noise_scale.map_or("—".into(), |k| format!("{k:.3}"))
             );
+            if let (Some(n), Some(rate)) = (t.holdout_epochs, t.holdout_rate) {
+                let _ = writeln!(
+                    s,
+                    "{:<12} {:<14} live replays: {}; held out: {rate:.3e} of {n} epochs ({:.2}× far)",
+                    "",
+                    "",
+                    t.replays.unwrap_or(0),
+                    rate / far
+                );
+            }
             if let Some(why) = &t.refused {
                 let _ = writeln!(s, "{:<12} {:<14} refused: {why}", "", "");
             }

@@ -27,7 +27,8 @@ use crate::service::session::spec::build_monitors;
 use crate::service::store::{RecordedFrame, Store};
 use crate::service::wire::{TestThresholdSpec, calibrated_tests, parse_frame};
 use navguard_core::epoch::Epoch;
-use navguard_core::monitor::calibrate::{self, CalibrationLine};
+use navguard_core::monitor::calibrate::CalibrationLine;
+use navguard_core::monitor::calibrate::live::{LiveOptions, calibrate_live};
 use navguard_core::session::history::HistoryView;
 
 /// Frames read from the store per chunk of the response.
@@ -171,6 +172,47 @@ pub struct CalibrationQuery {
     /// The recorded stream to replay (default the latest).
     #[serde(default, deserialize_with = "query_integer_opt")]
     stream: Option<u64>,
+    /// Tests to calibrate, comma-separated (default each monitor's main tests).
+    tests: Option<String>,
+    /// Share of the epochs, at the end, held out to check the proposal (default 0.5).
+    holdout: Option<f64>,
+    /// Largest held-out rate accepted, a multiple of `far` (default 2).
+    max_transfer: Option<f64>,
+}
+
+impl CalibrationQuery {
+    /// The live options, checked, and the test names asked for.
+    fn options(&self) -> Result<(LiveOptions, Vec<String>), ApiError> {
+        let confidence = self.confidence.unwrap_or(0.95);
+        if !(self.far > 0.0 && self.far < 1.0) {
+            return Err(ApiError::invalid("far", "must lie in (0, 1)"));
+        }
+        if !(confidence > 0.0 && confidence < 1.0) {
+            return Err(ApiError::invalid("confidence", "must lie in (0, 1)"));
+        }
+        let mut options = LiveOptions::new(self.far, confidence);
+        if let Some(h) = self.holdout {
+            if !(0.0..=0.9).contains(&h) {
+                return Err(ApiError::invalid("holdout", "must lie in [0, 0.9]"));
+            }
+            options.holdout = h;
+        }
+        if let Some(t) = self.max_transfer {
+            if !(t >= 1.0 && t.is_finite()) {
+                return Err(ApiError::invalid("max_transfer", "must be a number ≥ 1"));
+            }
+            options.max_transfer = t;
+        }
+        let names: Vec<String> = self
+            .tests
+            .iter()
+            .flat_map(|t| t.split(','))
+            .map(str::trim)
+            .filter(|t| !t.is_empty())
+            .map(str::to_owned)
+            .collect();
+        Ok((options, names))
+    }
 }
 
 /// One monitor's calibration and the `PUT …/threshold` body that applies it.
@@ -212,23 +254,18 @@ async fn recorded_epochs(store: &Store, id: &str, stream: u64) -> Result<Vec<Epo
     Ok(epochs)
 }
 
-/// `GET /api/v1/sessions/{id}/calibration?far=&confidence=&stream=`: `navguard calibrate`
-/// over the session's own recording (docs/methods.md §M25): its recorded stream replayed
-/// through its monitors as they are configured now, with every threshold out of reach,
-/// and per test the threshold that gives `far` on that data (with the `PUT` body). The
-/// recording should be fault-free; the replay runs on the blocking pool.
+/// `GET /api/v1/sessions/{id}/calibration?far=&confidence=&stream=&tests=&holdout=&max_transfer=`:
+/// `navguard calibrate` over the session's own recording (docs/methods.md §M25): its
+/// recorded stream replayed through its monitors as they are configured now, with the
+/// candidate threshold live, and per test the threshold that gives `far` on that data
+/// and how it does on the held-out end of it (with the `PUT` body). The recording should
+/// be fault-free; the replays run on the blocking pool.
 pub async fn calibration(
     State(state): State<AppState>,
     Path(id): Path<String>,
     ApiQuery(q): ApiQuery<CalibrationQuery>,
 ) -> Result<Json<CalibrationView>, ApiError> {
-    let confidence = q.confidence.unwrap_or(0.95);
-    if !(q.far > 0.0 && q.far < 1.0) {
-        return Err(ApiError::invalid("far", "must lie in (0, 1)"));
-    }
-    if !(confidence > 0.0 && confidence < 1.0) {
-        return Err(ApiError::invalid("confidence", "must lie in (0, 1)"));
-    }
+    let (options, names) = q.options()?;
     let handle = state
         .registry
         .get(&id)
@@ -250,15 +287,37 @@ pub async fn calibration(
     };
     let epochs = recorded_epochs(&state.store, &id, stream).await?;
     let models = state.models.clone();
-    let far = q.far;
+    let (far, confidence) = (options.far, options.confidence);
     let answer = tokio::task::spawn_blocking(move || {
         let monitors = build_monitors(&stored, &*models)?;
         let mut out = BTreeMap::new();
         for (name, mut m) in monitors {
-            let tests = calibrate::calibrate_monitor(&mut *m, &epochs, far, confidence)
+            let mut options = options.clone();
+            if !names.is_empty() {
+                let bank = m.tests_mut();
+                let mine: Vec<String> = names
+                    .iter()
+                    .filter(|t| bank.index_of(t).is_some())
+                    .cloned()
+                    .collect();
+                if mine.is_empty() {
+                    continue;
+                }
+                options.tests = Some(mine);
+            }
+            let tests = calibrate_live(&mut *m, &epochs, &options)
                 .map_err(|e| SessionError::invalid(name.clone(), e.to_string()))?;
             let put = BTreeMap::from([("tests", calibrated_tests(&tests))]);
             out.insert(name, MonitorCalibrationView { tests, put });
+        }
+        if let Some(missing) = names.iter().find(|n| {
+            !out.values()
+                .any(|m: &MonitorCalibrationView| m.tests.iter().any(|t| &t.test == *n))
+        }) {
+            return Err(SessionError::invalid(
+                "tests",
+                format!("no monitor of the session has a calibratable test '{missing}'"),
+            ));
         }
         Ok::<_, SessionError>((out, epochs.len()))
     })
