@@ -36,6 +36,9 @@ enum Command {
     Loadgen(cli::loadgen::LoadgenArgs),
     /// Propose per-test thresholds for a false-alarm rate from fault-free recorded epochs.
     Calibrate(cli::calibrate::CalibrateArgs),
+    /// Issue tokens for the tokens file: hash a secret, or make a new one.
+    #[command(subcommand)]
+    Token(cli::token::TokenCommand),
     /// Rerun a paper's experiment in-process: print its table, write its figures.
     #[command(subcommand)]
     Experiment(cli::experiment::ExperimentCommand),
@@ -49,9 +52,13 @@ struct ServeArgs {
     /// SQLite database file (created if missing), or a Postgres URL `postgres://user[:password]@host[:port]/database`.
     #[arg(long, env = "NAVGUARD_DB", default_value = "navguard.db")]
     db: PathBuf,
-    /// Bearer token required on every /api route and socket.
+    /// Bearer token with every scope (named "default"), required on every /api route and socket.
     #[arg(long, env = "NAVGUARD_TOKEN", hide_env_values = true)]
     token: Option<String>,
+    /// Tokens file (JSON): named tokens with scopes, stored as SHA-256 hashes; read
+    /// again when it changes and on SIGHUP (docs/deployment.md, Tokens and scopes).
+    #[arg(long, env = "NAVGUARD_TOKENS_FILE")]
+    tokens_file: Option<PathBuf>,
     /// Largest ingest frame, bytes.
     #[arg(long, env = "NAVGUARD_MAX_FRAME_BYTES", default_value_t = Limits::default().max_frame_bytes)]
     max_frame_bytes: usize,
@@ -166,6 +173,7 @@ impl ServeArgs {
             db_path: self.db,
             // A blank token is refused at start rather than read as "no token".
             token: self.token,
+            tokens_file: self.tokens_file,
             limits: Limits {
                 max_frame_bytes: self.max_frame_bytes,
                 max_batch_epochs: self.max_batch_epochs,
@@ -213,6 +221,28 @@ async fn wait_for_stop() -> anyhow::Result<()> {
     Ok(())
 }
 
+/// SIGHUP reads the tokens file again (it is also read when its mtime changes).
+fn reload_tokens_on_sighup(server: &service::Server) {
+    #[cfg(unix)]
+    {
+        let tokens = server.state().tokens.clone();
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup()) {
+            Ok(mut hup) => {
+                tokio::spawn(async move {
+                    while hup.recv().await.is_some() {
+                        tokens.reload();
+                    }
+                });
+            }
+            Err(e) => {
+                tracing::warn!(error = %e, "no SIGHUP handler; the tokens file is still read when it changes")
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    let _ = server;
+}
+
 async fn serve(args: ServeArgs) -> anyhow::Result<()> {
     let config = args.into_config();
     let db = navguard::service::store::display_db(&config.db_path);
@@ -221,6 +251,7 @@ async fn serve(args: ServeArgs) -> anyhow::Result<()> {
         "navguard listening on http://{} (store: {db}); dashboard at http://{}/",
         server.addr, server.addr
     );
+    reload_tokens_on_sighup(&server);
     wait_for_stop().await?;
     println!(
         "shutting down: handing sessions over (cluster), closing sockets and flushing the store"
@@ -265,6 +296,7 @@ async fn run() -> anyhow::Result<()> {
         Some(Command::Replay(args)) => cli::replay::run(args).await,
         Some(Command::Loadgen(args)) => cli::loadgen::run(args).await,
         Some(Command::Calibrate(args)) => cli::calibrate::run(args).await,
+        Some(Command::Token(command)) => cli::token::run(command),
         Some(Command::Experiment(command)) => cli::experiment::run(command),
         None => serve(cli.serve).await,
     }

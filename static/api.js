@@ -72,6 +72,19 @@ export async function request(method, path, body) {
 
 export const get = (path) => request("GET", path);
 
+/**
+ * The token's name and scopes (`GET api/v1/whoami`); null from a server without
+ * that route (which has no scopes: everything is allowed).
+ */
+export async function whoami() {
+  try {
+    return await get("api/v1/whoami");
+  } catch (e) {
+    if (e instanceof HttpError && e.status === 404) return null;
+    throw e;
+  }
+}
+
 /** ws(s)://…/path?token=… for a socket route. */
 export function socketUrl(path) {
   const url = new URL(path, document.baseURI);

@@ -4,7 +4,7 @@
 // stats messages a second from each session would otherwise each cost a
 // layout). The loop times itself; `window.navguardPerf()` reports it.
 
-import { onAuthNeeded, onReachability, setToken } from "./api.js";
+import { onAuthNeeded, onReachability, setToken, whoami } from "./api.js";
 import { Live } from "./live.js";
 import { OverviewView } from "./overview.js";
 import { SessionView } from "./session.js";
@@ -86,7 +86,21 @@ authForm.addEventListener("submit", (ev) => {
   setStatus("loading", "Connecting with the token\u2026");
   live.restart();
   route();
+  applyScopes();
 });
+
+// ------------------------------------------------------------------ scopes
+
+// Controls marked `data-needs="SCOPE"` are hidden (app.css) while the body has the
+// class `lacks-SCOPE`: the token cannot use them (the server would answer 403).
+const SCOPES = ["ingest", "read", "operate", "admin"];
+async function applyScopes() {
+  let me;
+  try { me = await whoami(); } catch (_) { return; /* a 401 asks for the token, which calls this again */ }
+  const has = new Set(me ? me.scopes : SCOPES);
+  for (const s of SCOPES) document.body.classList.toggle("lacks-" + s, !has.has(s));
+  $("whoami").textContent = me && me.name !== "anonymous" ? "Token “" + me.name + "”: " + me.scopes.join(", ") : "";
+}
 
 // ------------------------------------------------------------------ render loop
 
@@ -127,4 +141,5 @@ window.navguardLive = live;
 
 route();
 live.start();
+applyScopes();
 requestAnimationFrame(frame);

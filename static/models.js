@@ -65,7 +65,7 @@ export class ModelsView {
     } else {
       status = el("span", null, m.status);
     }
-    const del = el("button", { type: "button", "data-model": m.id }, m.status === "training" ? "Cancel" : "Delete");
+    const del = el("button", { type: "button", "data-model": m.id, "data-needs": "admin" }, m.status === "training" ? "Cancel" : "Delete");
     del.addEventListener("click", async () => {
       del.disabled = true;
       try { await request("DELETE", "api/v1/models/" + encodeURIComponent(m.id)); } catch (_) { /* reload shows the truth */ }

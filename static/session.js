@@ -210,7 +210,7 @@ export class SessionView {
       });
       const policy = el("span", { class: "muted policy" });
       const controlsSlot = el("div", { class: "controls-slot" });
-      const toggle = el("button", { type: "button", "aria-expanded": "false", "data-control": "toggle", "data-monitor": m.name }, "Threshold & policy\u2026");
+      const toggle = el("button", { type: "button", "aria-expanded": "false", "data-control": "toggle", "data-monitor": m.name, "data-needs": "operate" }, "Threshold & policy\u2026");
       toggle.addEventListener("click", () => {
         const open = toggle.getAttribute("aria-expanded") !== "true";
         toggle.setAttribute("aria-expanded", String(open));

@@ -777,6 +777,38 @@ async fn the_dashboard_shows_a_faulty_replay_and_applies_a_threshold_change() {
         js(&client, "return sessionStorage.getItem('navguard.token');").await,
         "s3cret"
     );
+    server.shutdown().await;
+
+    // 10. A read-only token from a tokens file: the page names it and hides the
+    // threshold controls, which it may not use.
+    let tokens = dir.path().join("tokens.json");
+    let hash = navguard::service::tokens::to_hex(&navguard::service::tokens::hash_secret("r3ad"));
+    let entry = json!({"name": "wall-screen", "hash": hash, "scopes": ["read"]});
+    std::fs::write(&tokens, json!({ "tokens": [entry] }).to_string()).unwrap();
+    let mut config = navguard::service::ServiceConfig::new(addr, &db);
+    config.token = Some("s3cret".into());
+    config.tokens_file = Some(tokens);
+    let server = navguard::service::start(config).await.expect("restarts");
+    js(
+        &client,
+        "sessionStorage.setItem('navguard.token', 'r3ad'); return true;",
+    )
+    .await;
+    client
+        .goto(&format!("{http}/#/session/ship"))
+        .await
+        .unwrap();
+    client.refresh().await.unwrap();
+    wait_js(
+        &client,
+        r#"(() => {
+             const b = document.querySelector('button[data-control="toggle"]');
+             return b !== null && getComputedStyle(b).display === 'none'
+               && document.getElementById('whoami').textContent.includes('wall-screen');
+           })()"#,
+        "the threshold controls hidden from a read-only token",
+    )
+    .await;
 
     client.close().await.unwrap();
     server.shutdown().await;

@@ -404,11 +404,13 @@ struct LoggingServer {
 }
 
 impl LoggingServer {
-    fn start(db: &std::path::Path, token: &str) -> Self {
+    fn start(db: &std::path::Path, token: &str, tokens_file: &std::path::Path) -> Self {
         use std::io::BufRead;
         let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_navguard"))
             .args(["--bind", "127.0.0.1:0", "--token", token, "--db"])
             .arg(db)
+            .arg("--tokens-file")
+            .arg(tokens_file)
             .env("RUST_LOG", "debug")
             .env("NO_COLOR", "1")
             .stdout(std::process::Stdio::piped())
@@ -448,6 +450,11 @@ impl LoggingServer {
         }
     }
 
+    /// The output so far.
+    fn text(&self) -> String {
+        self.output.lock().unwrap().clone()
+    }
+
     fn stop(mut self) -> String {
         let _ = self.child.kill();
         let _ = self.child.wait();
@@ -461,7 +468,14 @@ impl LoggingServer {
 async fn the_token_never_reaches_the_debug_log() {
     let dir = tempfile::tempdir().unwrap();
     let token = "tok-9f8e7d6c";
-    let server = LoggingServer::start(&dir.path().join("d.db"), token);
+    // A token of the tokens file, which may read but not create.
+    let file_secret = "file-5b4a3c2d";
+    let tokens = dir.path().join("tokens.json");
+    let hash =
+        navguard::service::tokens::to_hex(&navguard::service::tokens::hash_secret(file_secret));
+    let entry = json!({"name": "reader", "hash": hash, "scopes": ["read"]});
+    std::fs::write(&tokens, json!({"tokens": [entry]}).to_string()).unwrap();
+    let server = LoggingServer::start(&dir.path().join("d.db"), token, &tokens);
     let base = format!("http://{}", server.addr);
     let c = reqwest::Client::new();
     let resp = c
@@ -499,6 +513,51 @@ async fn the_token_never_reaches_the_debug_log() {
             .0,
         404
     );
+    // The file's token: allowed, refused for its scope, on a socket, and unknown after a
+    // SIGHUP has read the file again without it.
+    let resp = c
+        .get(format!("{base}/api/v1/whoami"))
+        .bearer_auth(file_secret)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), 200);
+    let resp = c
+        .delete(format!("{base}/api/v1/sessions/log"))
+        .bearer_auth(file_secret)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), 403);
+    let url = format!(
+        "ws://{}/api/v1/sessions/log/events?token={file_secret}",
+        server.addr
+    );
+    let mut socket = connect(&url).await;
+    assert_eq!(recv(&mut socket).await["type"], "stats");
+    drop(socket);
+    std::fs::write(&tokens, json!({"tokens": []}).to_string()).unwrap();
+    let hup = std::process::Command::new("kill")
+        .args(["-HUP", &server.child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(hup.success());
+    let deadline = std::time::Instant::now() + PATIENCE;
+    while !server.text().contains("tokens file read") {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "SIGHUP read the file: {}",
+            server.text()
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let resp = c
+        .get(format!("{base}/api/v1/whoami?token={file_secret}"))
+        .bearer_auth(file_secret)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), 401, "revoked by the SIGHUP");
     let text = server.stop();
     assert!(
         text.contains("uri=/api/v1/sessions/log/events?token=REDACTED"),
@@ -511,6 +570,10 @@ async fn the_token_never_reaches_the_debug_log() {
     assert!(
         !text.contains(token),
         "the token leaked into the log: {text}"
+    );
+    assert!(
+        !text.contains(file_secret) && !text.contains(&hash),
+        "a file token or its hash leaked into the log: {text}"
     );
 }
 

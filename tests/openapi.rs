@@ -36,6 +36,10 @@ fn spec() -> Value {
 }
 
 async fn state(dir: &Path, token: Option<&str>) -> AppState {
+    state_with(dir, token, None).await
+}
+
+async fn state_with(dir: &Path, token: Option<&str>, tokens_file: Option<&Path>) -> AppState {
     let mut config = ServiceConfig::new("127.0.0.1:0".parse().unwrap(), dir.join("t.db"));
     config.token = token.map(str::to_owned);
     let store = Store::open(&config.db_path).await.unwrap();
@@ -44,6 +48,7 @@ async fn state(dir: &Path, token: Option<&str>) -> AppState {
         store,
         registry: Arc::new(Registry::default()),
         metrics: Arc::new(Metrics::default()),
+        tokens: Arc::new(navguard::service::tokens::Tokens::new(token, tokens_file).unwrap()),
         config: Arc::new(config),
         shutdown: tokio::sync::watch::channel(false).1,
         compute: navguard::service::compute::ComputePool::new(2),
@@ -539,6 +544,49 @@ async fn token_guards_exactly_the_operations_the_spec_secures() {
     }
 }
 
+#[tokio::test]
+async fn forbidden_answers_and_whoami_match_their_schemas() {
+    use navguard::service::tokens::{hash_secret, to_hex};
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("tokens.json");
+    let scopes = ["ingest", "read", "operate"];
+    let tokens: Vec<Value> = scopes
+        .iter()
+        .map(|s| json!({"name": s, "hash": to_hex(&hash_secret(s)), "scopes": [s]}))
+        .collect();
+    std::fs::write(&file, json!({ "tokens": tokens }).to_string()).unwrap();
+    let router = app(state_with(dir.path(), None, Some(&file)).await);
+    let contract = Contract {
+        router: router.clone(),
+        doc: spec(),
+    };
+    let mut refused = 0;
+    for (path, methods) in ROUTES {
+        for method in *methods {
+            let uri = concrete(path, "x");
+            for secret in scopes {
+                let bearer = format!("Bearer {secret}");
+                let answer = send(&router, method, &uri, &[("authorization", &bearer)], None).await;
+                if answer.status == 403 {
+                    refused += 1;
+                    contract.verify(method, path, &uri, &answer);
+                }
+            }
+        }
+    }
+    assert!(refused > 20, "{refused} refusals");
+    let answer = send(
+        &router,
+        "GET",
+        "/api/v1/whoami",
+        &[("authorization", "Bearer read")],
+        None,
+    )
+    .await;
+    let me = contract.verify("GET", "/api/v1/whoami", "/api/v1/whoami", &answer);
+    assert_eq!(me["scopes"], json!(["read"]));
+}
+
 // Over 80 lines: a table of cases checked one after another.
 #[tokio::test]
 async fn rest_answers_match_their_schemas() {
@@ -554,6 +602,10 @@ async fn rest_answers_match_their_schemas() {
     c.call("GET", "/", "/", None).await;
     c.call("GET", "/metrics", "/metrics", None).await;
     c.call("GET", "/healthz", "/healthz", None).await;
+    let me = c
+        .call("GET", "/api/v1/whoami", "/api/v1/whoami", None)
+        .await;
+    assert_eq!(me["name"], "anonymous");
 
     let created = c
         .call("POST", sessions, sessions, Some(&session_body("s1", false)))

@@ -2,7 +2,8 @@
 //! ingest frames (JSON lines), `replay` streams such a file into a running
 //! server, `loadgen` puts simulated load on one and measures it (docs/performance.md),
 //! `calibrate` proposes thresholds from fault-free data, `convert` turns real receiver
-//! files into ingest frames, and `experiment` reruns the papers' experiments in-process.
+//! files into ingest frames, `experiment` reruns the papers' experiments in-process,
+//! and `token` issues entries for the tokens file.
 //! Thin: parsing flags, files, sockets and printing; the algorithms live in
 //! the library. `anyhow` is used here and in `main.rs` only.
 
@@ -16,6 +17,7 @@ pub(crate) mod http;
 pub(crate) mod loadgen;
 pub(crate) mod replay;
 pub(crate) mod simulate;
+pub(crate) mod token;
 
 use std::io::IsTerminal;
 use std::time::Duration;

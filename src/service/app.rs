@@ -9,7 +9,7 @@ use axum::middleware;
 use axum::routing::{MethodRouter, get, post};
 use tokio::sync::watch;
 
-use super::api::{alarms, chi2, features, health, models, recording, sessions, thresholds};
+use super::api::{alarms, chi2, features, health, models, recording, sessions, thresholds, whoami};
 use super::cluster::Cluster;
 use super::compute::ComputePool;
 use super::config::ServiceConfig;
@@ -18,6 +18,7 @@ use super::metrics::Metrics;
 use super::session::Registry;
 use super::session::actor::ActorDeps;
 use super::store::Store;
+use super::tokens::Tokens;
 use super::train::Models;
 use super::{auth, events, ingest};
 
@@ -32,6 +33,8 @@ pub struct AppState {
     pub metrics: Arc<Metrics>,
     /// Listen address, token and limits.
     pub config: Arc<ServiceConfig>,
+    /// The tokens the server accepts, with their scopes (`--token`, `--tokens-file`).
+    pub tokens: Arc<Tokens>,
     /// Flips to `true` when the server shuts down; sockets close on it.
     pub shutdown: watch::Receiver<bool>,
     /// Trained models and training jobs; the monitors' model source.
@@ -59,12 +62,14 @@ impl AppState {
 }
 
 /// Every route: path and methods. `app` builds the router from this table and
-/// the OpenAPI test checks the spec against it (and the router against it).
+/// the OpenAPI test checks the spec against it (and the router against it). What each
+/// needs (public, a token, a scope) is `access::ROUTE_ACCESS`.
 pub const ROUTES: &[(&str, &[&str])] = &[
     ("/", &["GET"]),
     ("/static/{file}", &["GET"]),
     ("/healthz", &["GET"]),
     ("/metrics", &["GET"]),
+    ("/api/v1/whoami", &["GET"]),
     ("/api/v1/sessions", &["GET", "POST"]),
     ("/api/v1/sessions/{id}", &["GET", "DELETE"]),
     ("/api/v1/sessions/{id}/stats", &["GET"]),
@@ -92,6 +97,7 @@ fn handlers(path: &str) -> MethodRouter<AppState> {
         "/static/{file}" => get(health::asset),
         "/healthz" => get(health::healthz),
         "/metrics" => get(health::metrics),
+        "/api/v1/whoami" => get(whoami::whoami),
         "/api/v1/sessions" => get(sessions::list).post(sessions::create),
         "/api/v1/sessions/{id}" => get(sessions::get).delete(sessions::delete),
         "/api/v1/sessions/{id}/stats" => get(sessions::stats),
@@ -138,7 +144,8 @@ pub fn app(state: AppState) -> Router {
             public = public.route(path, methods);
         }
     }
-    // Auth runs first (the outer layer), then a cluster node finds the session's owner.
+    // Auth and scopes run first (the outer layer), then a cluster node finds the
+    // session's owner.
     let api = api
         .route_layer(middleware::from_fn_with_state(
             state.clone(),
@@ -146,7 +153,7 @@ pub fn app(state: AppState) -> Router {
         ))
         .route_layer(middleware::from_fn_with_state(
             state.clone(),
-            auth::require_token,
+            auth::authorize,
         ));
     public
         .merge(api)

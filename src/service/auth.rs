@@ -1,8 +1,9 @@
-//! Bearer-token authentication for `/api` (docs/architecture.md §A5). REST takes
-//! `Authorization: Bearer TOKEN`; a WebSocket handshake on the two socket routes
+//! Bearer-token authentication and scopes for `/api` (docs/architecture.md §A5). REST
+//! takes `Authorization: Bearer TOKEN`; a WebSocket handshake on the two socket routes
 //! may instead offer the subprotocol `bearer.TOKEN` (beside `navguard`) or a
 //! `token` query parameter, since browsers cannot set headers on a WebSocket.
-//! The query token is redacted wherever a request target is logged.
+//! The query token is redacted wherever a request target is logged. Which scope each
+//! route needs is the table of `access.rs`; the tokens are `tokens.rs`'s.
 
 use axum::extract::{MatchedPath, Request, State};
 use axum::http::header::{AUTHORIZATION, CONNECTION, SEC_WEBSOCKET_PROTOCOL, UPGRADE};
@@ -10,13 +11,10 @@ use axum::http::{Method, Uri};
 use axum::middleware::Next;
 use axum::response::Response;
 
+use super::access::{self, Access, SessionRef};
 use super::app::AppState;
 use super::error::ApiError;
-
-/// Compares in time independent of where the strings differ.
-fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
-    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
-}
+use super::tokens::{Lookup, Principal, Tokens};
 
 /// The two socket routes, as the router matches them.
 pub const SOCKET_ROUTES: [&str; 2] = [
@@ -110,8 +108,17 @@ pub fn redacted_uri(uri: &Uri) -> String {
     out
 }
 
-/// Minimal percent-decoding for a token in a query string.
+/// Minimal percent-decoding for a token in a query string (`+` is a space).
 fn percent_decode(s: &str) -> String {
+    decode(s, true)
+}
+
+/// Percent-decoding of a path segment (`+` is itself), as the router decodes `{id}`.
+fn decode_segment(s: &str) -> String {
+    decode(s, false)
+}
+
+fn decode(s: &str, plus_is_space: bool) -> String {
     let bytes = s.as_bytes();
     let mut out = Vec::with_capacity(bytes.len());
     let mut i = 0;
@@ -126,7 +133,7 @@ fn percent_decode(s: &str) -> String {
                 }
                 _ => out.push(b'%'),
             },
-            b'+' => out.push(b' '),
+            b'+' if plus_is_space => out.push(b' '),
             b => out.push(b),
         }
         i += 1;
@@ -134,24 +141,97 @@ fn percent_decode(s: &str) -> String {
     String::from_utf8_lossy(&out).into_owned()
 }
 
-/// Middleware: passes the request on when no token is configured or a
-/// presented token matches; otherwise 401.
-pub async fn require_token(
+/// The caller of `req`: the first presented token that is known and in date; 401
+/// when there is none.
+fn authenticate(tokens: &Tokens, req: &Request) -> Result<Principal, ApiError> {
+    let now = super::now_ms();
+    for secret in presented_tokens(req) {
+        match tokens.lookup(&secret, now) {
+            Lookup::Valid(p) => return Ok(p),
+            // The name only: never the secret.
+            Lookup::Expired(name) => tracing::info!(token = %name, "expired token refused"),
+            Lookup::Unknown => {}
+        }
+    }
+    Err(ApiError::Unauthorized)
+}
+
+/// The session ids `req` addresses, as `session_ref` says where they are; `None`
+/// when it must name one and does not.
+fn named_sessions(req: &Request, session_ref: SessionRef) -> Option<Vec<String>> {
+    match session_ref {
+        SessionRef::None | SessionRef::Listed => Some(Vec::new()),
+        SessionRef::Path => {
+            let rest = req.uri().path().strip_prefix("/api/v1/sessions/")?;
+            let segment = rest.split('/').next()?;
+            Some(vec![decode_segment(segment)])
+        }
+        SessionRef::Query => {
+            let ids: Vec<String> = req
+                .uri()
+                .query()
+                .unwrap_or_default()
+                .split('&')
+                .filter_map(|pair| pair.split_once('='))
+                .filter(|(k, _)| percent_decode(k) == "session")
+                .map(|(_, v)| percent_decode(v))
+                .collect();
+            (!ids.is_empty()).then_some(ids)
+        }
+    }
+}
+
+/// Middleware: finds what the matched route needs (`access::access`), the caller
+/// (401 without a valid token when the server has tokens), and refuses with 403 a
+/// token without the scope, or limited to sessions the request does not name,
+/// before the handler runs (so the answer is the same whether the session exists).
+/// The handler finds the [`Principal`] in the request's extensions.
+pub async fn authorize(
     State(state): State<AppState>,
-    req: Request,
+    mut req: Request,
     next: Next,
 ) -> Result<Response, ApiError> {
-    let Some(expected) = state.config.token.as_deref() else {
+    let path = req
+        .extensions()
+        .get::<MatchedPath>()
+        .map(|p| p.as_str().to_owned())
+        .unwrap_or_default();
+    let (needs, session_ref) = access::access(&path, req.method().as_str());
+    if needs == Access::Public {
         return Ok(next.run(req).await);
-    };
-    if presented_tokens(&req)
-        .iter()
-        .any(|t| constant_time_eq(t.as_bytes(), expected.as_bytes()))
-    {
-        Ok(next.run(req).await)
-    } else {
-        Err(ApiError::Unauthorized)
     }
+    let principal = if state.tokens.required() {
+        authenticate(&state.tokens, &req)?
+    } else {
+        Principal::anonymous()
+    };
+    if let Access::Scope(scope) = needs {
+        if !principal.allows(scope) {
+            return Err(ApiError::Forbidden {
+                scope,
+                message: format!("token '{}' lacks the scope '{scope}'", principal.name),
+            });
+        }
+        if principal.sessions.is_some() {
+            let Some(ids) = named_sessions(&req, session_ref) else {
+                return Err(ApiError::Forbidden {
+                    scope,
+                    message: format!(
+                        "token '{}' is limited to some sessions: name one with ?session=ID",
+                        principal.name
+                    ),
+                });
+            };
+            if let Some(id) = ids.iter().find(|id| !principal.allows_session(id)) {
+                return Err(ApiError::Forbidden {
+                    scope,
+                    message: format!("token '{}' may not use session '{id}'", principal.name),
+                });
+            }
+        }
+    }
+    req.extensions_mut().insert(principal);
+    Ok(next.run(req).await)
 }
 
 #[cfg(test)]
@@ -183,9 +263,8 @@ mod tests {
     }
 
     #[test]
-    fn constant_time_comparison_is_equality() {
-        assert!(constant_time_eq(b"secret", b"secret"));
-        assert!(!constant_time_eq(b"secret", b"secreT"));
-        assert!(!constant_time_eq(b"secret", b"secrets"));
+    fn a_path_segment_keeps_its_plus_and_decodes_escapes() {
+        assert_eq!(decode_segment("veh+1%2D2"), "veh+1-2");
+        assert_eq!(percent_decode("veh+1"), "veh 1");
     }
 }

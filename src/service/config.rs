@@ -1,4 +1,4 @@
-//! Service configuration: where to listen, where to store, the token, and the limits.
+//! Service configuration: where to listen, where to store, the tokens, and the limits.
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -87,8 +87,11 @@ pub struct ServiceConfig {
     /// SQLite file (default `navguard.db`), or a `postgres://` / `postgresql://` URL
     /// (`store::postgres_url`).
     pub db_path: PathBuf,
-    /// Bearer token required on every `/api` route and socket, when set.
+    /// Bearer token with every scope (named `default`), when set.
     pub token: Option<String>,
+    /// The tokens file (`--tokens-file`): named tokens with scopes, read again when it
+    /// changes (service/tokens.rs).
+    pub tokens_file: Option<PathBuf>,
     /// Request limits.
     pub limits: Limits,
     /// Sessions record their frames unless they say `"record": false` (default off:
@@ -110,6 +113,7 @@ impl ServiceConfig {
             bind,
             db_path: db_path.into(),
             token: None,
+            tokens_file: None,
             limits: Limits::default(),
             record_default: false,
             retention: Retention::default(),

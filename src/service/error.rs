@@ -20,6 +20,15 @@ pub enum ApiError {
     /// 401: the bearer token is missing or wrong.
     #[error("missing or invalid bearer token")]
     Unauthorized,
+    /// 403 `forbidden`: a valid token without the scope the route needs, or limited to
+    /// other sessions; `scope` names the scope the route needs.
+    #[error("{message}")]
+    Forbidden {
+        /// The scope the route needs.
+        scope: crate::service::tokens::Scope,
+        /// Why (the token's name and what it lacks; never the secret).
+        message: String,
+    },
     /// 404: no such session, monitor, model or route.
     #[error("{0}")]
     NotFound(String),
@@ -78,6 +87,7 @@ impl ApiError {
         match self {
             ApiError::BadRequest(_) => (StatusCode::BAD_REQUEST, "bad_request"),
             ApiError::Unauthorized => (StatusCode::UNAUTHORIZED, "unauthorized"),
+            ApiError::Forbidden { .. } => (StatusCode::FORBIDDEN, "forbidden"),
             ApiError::NotFound(_) => (StatusCode::NOT_FOUND, "not_found"),
             ApiError::MethodNotAllowed(_) => (StatusCode::METHOD_NOT_ALLOWED, "method_not_allowed"),
             ApiError::UpgradeRequired(_) => (StatusCode::UPGRADE_REQUIRED, "upgrade_required"),
@@ -163,6 +173,9 @@ impl IntoResponse for ApiError {
         } = &self
         {
             error["field"] = json!(field);
+        }
+        if let ApiError::Forbidden { scope, .. } = &self {
+            error["scope"] = json!(scope.as_str());
         }
         if let ApiError::NotOwner {
             owner, location, ..

@@ -1,6 +1,7 @@
 //! The async edge: transport (axum), sessions (one actor each), persistence
 //! (sqlx), auth and limits. It calls the pure core; no algorithm lives here.
 
+pub mod access;
 pub mod api;
 pub mod app;
 pub mod auth;
@@ -15,6 +16,7 @@ pub mod metrics;
 mod serve;
 pub mod session;
 pub mod store;
+pub mod tokens;
 pub mod train;
 pub mod wire;
 
@@ -46,7 +48,7 @@ pub fn now_ms() -> i64 {
 pub enum StartError {
     /// docs/architecture.md §A5: a non-loopback address needs a token.
     #[error(
-        "refusing to bind {0} without a token: set --token or NAVGUARD_TOKEN, or bind a loopback address"
+        "refusing to bind {0} without a token: set --token (NAVGUARD_TOKEN) or --tokens-file (NAVGUARD_TOKENS_FILE), or bind a loopback address"
     )]
     OpenWithoutToken(SocketAddr),
     /// docs/architecture.md §A5: a token that is empty, only whitespace, or
@@ -55,6 +57,9 @@ pub enum StartError {
         "the token (--token or NAVGUARD_TOKEN) is {0}: give a non-blank token without surrounding whitespace, or none"
     )]
     BadToken(&'static str),
+    /// The tokens file could not be read or is invalid.
+    #[error("tokens file: {0}")]
+    Tokens(#[from] tokens::TokensError),
     /// The store could not be opened.
     #[error("store: {0}")]
     Store(#[from] StoreError),
@@ -89,7 +94,11 @@ pub async fn start(config: ServiceConfig) -> Result<Server, StartError> {
             return Err(StartError::BadToken("padded with whitespace"));
         }
     }
-    if !config.bind.ip().is_loopback() && config.token.is_none() {
+    let tokens = Arc::new(tokens::Tokens::new(
+        config.token.as_deref(),
+        config.tokens_file.as_deref(),
+    )?);
+    if !config.bind.ip().is_loopback() && !tokens.required() {
         return Err(StartError::OpenWithoutToken(config.bind));
     }
     let store = Store::open_with(&config.db_path, config.retention).await?;
@@ -105,6 +114,7 @@ pub async fn start(config: ServiceConfig) -> Result<Server, StartError> {
         registry: Arc::new(Registry::default()),
         metrics: Arc::default(),
         config: Arc::new(config),
+        tokens,
         shutdown: shutdown_rx,
         models,
         compute: compute::ComputePool::per_core(),

@@ -9,3 +9,4 @@ pub mod models;
 pub mod recording;
 pub mod sessions;
 pub mod thresholds;
+pub mod whoami;

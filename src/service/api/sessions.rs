@@ -1,8 +1,8 @@
 //! `/api/v1/sessions`: create, list, get, delete, and statistics.
 
-use axum::Json;
 use axum::extract::{Path, State};
 use axum::http::StatusCode;
+use axum::{Extension, Json};
 use serde::Serialize;
 use serde_json::Value;
 
@@ -14,6 +14,7 @@ use crate::service::now_ms;
 use crate::service::session::lifecycle;
 use crate::service::session::{SessionHandle, validate_session};
 use crate::service::store::StoredSession;
+use crate::service::tokens::Principal;
 use crate::service::wire::{CreateSession, MonitorSpecWire};
 use navguard_core::detect::{Health, ThresholdSpec};
 use navguard_core::session::SessionStats;
@@ -194,8 +195,13 @@ pub struct SessionList {
 }
 
 /// `GET /api/v1/sessions`: on a cluster node, every stored session (those another node
-/// runs with their spec and owner, without live test states).
-pub async fn list(State(state): State<AppState>) -> Result<Json<SessionList>, ApiError> {
+/// runs with their spec and owner, without live test states). A token limited to some
+/// sessions sees only those.
+pub async fn list(
+    State(state): State<AppState>,
+    principal: Option<Extension<Principal>>,
+) -> Result<Json<SessionList>, ApiError> {
+    let visible = |id: &str| principal.as_ref().is_none_or(|p| p.allows_session(id));
     let record_default = state.config.record_default;
     let Some(cluster) = &state.cluster else {
         return Ok(Json(SessionList {
@@ -203,12 +209,16 @@ pub async fn list(State(state): State<AppState>) -> Result<Json<SessionList>, Ap
                 .registry
                 .list()
                 .iter()
+                .filter(|h| visible(h.id()))
                 .map(|h| view(h, record_default))
                 .collect(),
         }));
     };
     let mut sessions = Vec::new();
     for stored in state.store.sessions().await? {
+        if !visible(&stored.id) {
+            continue;
+        }
         match state.registry.get(&stored.id) {
             Some(h) => {
                 let mut v = view(&h, record_default);
