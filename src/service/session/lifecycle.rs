@@ -51,7 +51,7 @@ pub async fn create(
 ) -> Result<SessionHandle, SessionError> {
     let id = stored.id.clone();
     let handle = match deps.cluster.clone() {
-        None => actor::spawn(stored, deps)?,
+        None => actor::spawn(stored, deps).await?,
         Some(cluster) => {
             if cluster.draining() {
                 return Err(SessionError::Unavailable(
@@ -64,7 +64,7 @@ pub async fn create(
                 epoch: 1,
             };
             let store = deps.store.clone();
-            let handle = actor::spawn_owned(stored, deps, fence, None)?;
+            let handle = actor::spawn_owned(stored, deps, fence, None).await?;
             let config = &cluster.config;
             let created = store
                 .create_lease(&id, cluster.node_id(), &config.advertise, cluster.expiry())
@@ -118,7 +118,7 @@ pub async fn take(
     checkpoint: Option<Checkpoint>,
 ) -> Result<SessionHandle, SessionError> {
     let id = stored.id.clone();
-    let handle = actor::spawn_owned(stored, deps, fence, checkpoint)?;
+    let handle = actor::spawn_owned(stored, deps, fence, checkpoint).await?;
     register(registry, handle, max_sessions)
         .await
         .map_err(|refused| match refused {
@@ -136,7 +136,7 @@ pub async fn restart(
     stored: StoredSession,
 ) -> Result<SessionHandle, SessionError> {
     let id = stored.id.clone();
-    let handle = actor::spawn(stored, deps)?;
+    let handle = actor::spawn(stored, deps).await?;
     register(registry, handle, usize::MAX)
         .await
         .map_err(|_| SessionError::Exists(id))

@@ -130,30 +130,45 @@ fn seats(monitors: NamedMonitors, stored: &StoredSession) -> Vec<Seat> {
 }
 
 /// Builds the monitors of `stored` and starts its actor.
-pub fn spawn(stored: StoredSession, deps: ActorDeps) -> Result<SessionHandle, SessionError> {
-    spawn_inner(stored, deps, None, None)
+pub async fn spawn(stored: StoredSession, deps: ActorDeps) -> Result<SessionHandle, SessionError> {
+    let monitors = build_blocking(&stored, &deps.models).await?;
+    spawn_inner(stored, monitors, deps, None, None)
+}
+
+/// Builds the monitors of `stored` on the blocking pool: a stored model under the
+/// predictive residual scale factorises its N × N training matrix (seconds at N = 5,000,
+/// docs/methods.md §M14), which must not hold a runtime worker.
+async fn build_blocking(
+    stored: &StoredSession,
+    models: &Arc<Models>,
+) -> Result<NamedMonitors, SessionError> {
+    let (stored, models) = (stored.clone(), models.clone());
+    tokio::task::spawn_blocking(move || build_monitors(&stored, &*models))
+        .await
+        .map_err(|e| SessionError::Unavailable(format!("building the monitors failed: {e}")))?
 }
 
 /// Starts the actor of a session this node holds the lease of (cluster), its state
 /// restored from `checkpoint` when there is one (docs/deployment.md, Failover). A
 /// checkpoint that cannot be restored (written by another version, another spec) is
 /// logged and the session starts afresh.
-pub fn spawn_owned(
+pub async fn spawn_owned(
     stored: StoredSession,
     deps: ActorDeps,
     fence: Fence,
     checkpoint: Option<Checkpoint>,
 ) -> Result<SessionHandle, SessionError> {
-    spawn_inner(stored, deps, Some(fence), checkpoint)
+    let monitors = build_blocking(&stored, &deps.models).await?;
+    spawn_inner(stored, monitors, deps, Some(fence), checkpoint)
 }
 
 fn spawn_inner(
     stored: StoredSession,
+    monitors: NamedMonitors,
     deps: ActorDeps,
     fence: Option<Fence>,
     checkpoint: Option<Checkpoint>,
 ) -> Result<SessionHandle, SessionError> {
-    let monitors = build_monitors(&stored, &*deps.models)?;
     let mut core = SessionCore::new(&stored.id, seats(monitors, &stored), deps.history_samples);
     let id = core.id().clone();
     let lease_epoch = fence.as_ref().map(|f| f.epoch);
