@@ -3,6 +3,8 @@
 //! those, every `$ref` resolves, and real REST answers and socket messages
 //! validate against the schemas the spec gives them.
 
+mod common;
+
 use std::collections::BTreeSet;
 use std::path::Path;
 use std::sync::Arc;
@@ -18,6 +20,8 @@ use navguard::service::metrics::Metrics;
 use navguard::service::session::Registry;
 use navguard::service::store::Store;
 use navguard::service::train::Models;
+
+use common::concrete;
 use serde_json::{Value, json};
 use tokio_tungstenite::tungstenite::{self, Message};
 use tower::ServiceExt;
@@ -54,24 +58,6 @@ async fn state_with(dir: &Path, token: Option<&str>, tokens_file: Option<&Path>)
         compute: navguard::service::compute::ComputePool::new(2),
         cluster: None,
     }
-}
-
-/// `/api/v1/sessions/{id}` → `/api/v1/sessions/x`.
-fn concrete(template: &str, value: &str) -> String {
-    let mut out = String::new();
-    let mut in_param = false;
-    for c in template.chars() {
-        match c {
-            '{' => {
-                in_param = true;
-                out.push_str(value);
-            }
-            '}' => in_param = false,
-            _ if in_param => {}
-            _ => out.push(c),
-        }
-    }
-    out
 }
 
 struct Answer {

@@ -56,24 +56,6 @@ async fn call(method: &str, url: &str, secret: Option<&str>, body: Option<&Value
     (status, resp.json().await.unwrap_or(Value::Null))
 }
 
-/// `/api/v1/sessions/{id}` → `/api/v1/sessions/x`.
-fn concrete(template: &str, value: &str) -> String {
-    let mut out = String::new();
-    let mut in_param = false;
-    for c in template.chars() {
-        match c {
-            '{' => {
-                in_param = true;
-                out.push_str(value);
-            }
-            '}' => in_param = false,
-            _ if in_param => {}
-            _ => out.push(c),
-        }
-    }
-    out
-}
-
 /// The 1-D cart of the README.
 fn cart(id: &str) -> Value {
     json!({"id": id, "monitors": [{

@@ -315,3 +315,21 @@ pub(crate) fn epochs(z: &[f64], from: usize) -> Vec<Value> {
         .map(|(i, z)| json!({"t": (from + i) as f64, "z": [z]}))
         .collect()
 }
+
+/// `/api/v1/sessions/{id}` → `/api/v1/sessions/x`.
+pub(crate) fn concrete(template: &str, value: &str) -> String {
+    let mut out = String::new();
+    let mut in_param = false;
+    for c in template.chars() {
+        match c {
+            '{' => {
+                in_param = true;
+                out.push_str(value);
+            }
+            '}' => in_param = false,
+            _ if in_param => {}
+            _ => out.push(c),
+        }
+    }
+    out
+}

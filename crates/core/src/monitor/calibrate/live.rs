@@ -21,7 +21,7 @@
 
 use super::{
     CalibrateError, CalibrationLine, Holdout, OUT_OF_REACH, Proposal, TestCalibration, TestSample,
-    allowed_below, calibrate, epochs_needed, level_at,
+    allowed_below, calibrate, epochs_needed, level_at, tail,
 };
 use crate::detect::{ThresholdSpec, chi2};
 use crate::epoch::Epoch;
@@ -338,12 +338,7 @@ fn replay(
             .step(epoch)
             .map_err(|source| CalibrateError::Step { index, source })?;
         for o in report.tests {
-            let v = o.statistic.value;
-            let tail = if v > 0.0 {
-                chi2::false_alarm_probability(o.statistic.dof, v).unwrap_or(0.0)
-            } else {
-                1.0
-            };
+            let (v, tail) = (o.statistic.value, tail(&o.statistic));
             let t = &mut tails[o.index];
             t.sums.0 += v;
             t.sums.1 += f64::from(o.statistic.dof);

@@ -327,12 +327,7 @@ pub fn sample(
             .step(epoch)
             .map_err(|source| CalibrateError::Step { index, source })?;
         for o in report.tests {
-            let v = o.statistic.value;
-            let tail = if v > 0.0 {
-                chi2::false_alarm_probability(o.statistic.dof, v).unwrap_or(0.0)
-            } else {
-                1.0
-            };
+            let (v, tail) = (o.statistic.value, tail(&o.statistic));
             let sample = &mut samples[o.index];
             sample.tails.push(tail);
             sample.sums.0 += v;
@@ -344,6 +339,15 @@ pub fn sample(
         .zip(calibrated)
         .filter_map(|(s, keep)| keep.then_some(s))
         .collect())
+}
+
+/// A statistic's upper-tail probability under the χ² law of its dof (1 for a zero).
+fn tail(statistic: &crate::detect::Statistic) -> f64 {
+    if statistic.value > 0.0 {
+        chi2::false_alarm_probability(statistic.dof, statistic.value).unwrap_or(0.0)
+    } else {
+        1.0
+    }
 }
 
 /// The smallest number of epochs that can support a rate of `far` at `confidence`.
