@@ -9,7 +9,7 @@ use super::spinner;
 
 use anyhow::{Context, bail};
 use navguard_sim::experiment::{
-    alarms, coloured, guards, ramp, seed000, seed001, seed002, seed003, seed004,
+    alarms, coloured, coloured_grid, guards, ramp, seed000, seed001, seed002, seed003, seed004,
 };
 
 /// The experiments.
@@ -51,24 +51,51 @@ pub(crate) struct ColouredArgs {
     /// Epochs per run.
     #[arg(long, default_value_t = 12_000)]
     pub epochs: usize,
+    /// Run the grid instead of the cases: φ 0.5, 0.7, 0.9, 0.95 × four signal forms ×
+    /// online and batch LS-SVM × raw and predictive residual, with steps and ramps.
+    #[arg(long)]
+    pub grid: bool,
+    /// Worker threads over the grid's cells.
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
+}
+
+/// What `experiment coloured` measured: the cases or the grid.
+#[derive(Debug)]
+pub(crate) enum ColouredOutput {
+    /// The default cases.
+    Cases(coloured::ColouredResult),
+    /// The grid (`--grid`).
+    Grid(coloured_grid::GridResult),
 }
 
 impl Experiment for ColouredArgs {
-    type Output = coloured::ColouredResult;
+    type Output = ColouredOutput;
     const TITLE: &'static str = "coloured";
 
     fn run(&self) -> anyhow::Result<Self::Output> {
-        let params = coloured::ColouredParams {
+        let base = coloured::ColouredParams {
             seed: self.seed,
             seeds: self.seeds,
             epochs: self.epochs,
             ..coloured::ColouredParams::default()
         };
-        Ok(coloured::run(params)?)
+        if !self.grid {
+            return Ok(ColouredOutput::Cases(coloured::run(base)?));
+        }
+        let params = coloured_grid::GridParams {
+            base,
+            threads: self.threads,
+            ..coloured_grid::GridParams::default()
+        };
+        Ok(ColouredOutput::Grid(coloured_grid::run(params)?))
     }
 
     fn render(output: &Self::Output) -> String {
-        coloured::render(output)
+        match output {
+            ColouredOutput::Cases(r) => coloured::render(r),
+            ColouredOutput::Grid(r) => coloured_grid::render(r),
+        }
     }
 }
 
