@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use super::spinner;
 
 use anyhow::{Context, bail};
+use navguard_core::monitor::channel::ResidualScale;
 use navguard_sim::experiment::{
     alarms, coloured, coloured_grid, guards, ramp, seed000, seed001, seed002, seed003, seed004,
 };
@@ -145,9 +146,30 @@ pub(crate) struct Seed000Args {
     /// Worker threads for the Monte Carlo.
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
+    /// How the channel's residual is scaled before its tests.
+    #[arg(long, value_enum, default_value_t = ScaleArg::Raw)]
+    pub residual_scale: ScaleArg,
     /// Directory for the SVG figures.
     #[arg(long, default_value = "target/experiments/seed000")]
     pub out_dir: PathBuf,
+}
+
+/// A channel's `residual_scale` on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum ScaleArg {
+    /// The residual as it is.
+    Raw,
+    /// Over the predictor's predictive σ (docs/methods.md §M9a).
+    Predictive,
+}
+
+impl From<ScaleArg> for ResidualScale {
+    fn from(s: ScaleArg) -> Self {
+        match s {
+            ScaleArg::Raw => ResidualScale::Raw,
+            ScaleArg::Predictive => ResidualScale::Predictive,
+        }
+    }
 }
 
 /// `navguard experiment seed001` flags.
@@ -499,6 +521,7 @@ impl Experiment for Seed000Args {
             seed: self.seed,
             runs: self.runs,
             threads: self.threads,
+            residual_scale: self.residual_scale.into(),
             ..seed000::Seed000Params::default()
         };
         Ok(seed000::run(params)?)
