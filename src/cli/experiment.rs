@@ -8,8 +8,9 @@ use std::path::{Path, PathBuf};
 use super::spinner;
 
 use anyhow::{Context, bail};
+use navguard_core::monitor::channel::ResidualScale;
 use navguard_sim::experiment::{
-    alarms, coloured, guards, ramp, seed000, seed001, seed002, seed003, seed004,
+    alarms, coloured, coloured_grid, guards, ramp, seed000, seed001, seed002, seed003, seed004,
 };
 
 /// The experiments.
@@ -51,24 +52,51 @@ pub(crate) struct ColouredArgs {
     /// Epochs per run.
     #[arg(long, default_value_t = 12_000)]
     pub epochs: usize,
+    /// Run the grid instead of the cases: φ 0.5, 0.7, 0.9, 0.95 × four signal forms ×
+    /// online and batch LS-SVM × raw and predictive residual, with steps and ramps.
+    #[arg(long)]
+    pub grid: bool,
+    /// Worker threads over the grid's cells.
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
+}
+
+/// What `experiment coloured` measured: the cases or the grid.
+#[derive(Debug)]
+pub(crate) enum ColouredOutput {
+    /// The default cases.
+    Cases(coloured::ColouredResult),
+    /// The grid (`--grid`).
+    Grid(coloured_grid::GridResult),
 }
 
 impl Experiment for ColouredArgs {
-    type Output = coloured::ColouredResult;
+    type Output = ColouredOutput;
     const TITLE: &'static str = "coloured";
 
     fn run(&self) -> anyhow::Result<Self::Output> {
-        let params = coloured::ColouredParams {
+        let base = coloured::ColouredParams {
             seed: self.seed,
             seeds: self.seeds,
             epochs: self.epochs,
             ..coloured::ColouredParams::default()
         };
-        Ok(coloured::run(params)?)
+        if !self.grid {
+            return Ok(ColouredOutput::Cases(coloured::run(base)?));
+        }
+        let params = coloured_grid::GridParams {
+            base,
+            threads: self.threads,
+            ..coloured_grid::GridParams::default()
+        };
+        Ok(ColouredOutput::Grid(coloured_grid::run(params)?))
     }
 
     fn render(output: &Self::Output) -> String {
-        coloured::render(output)
+        match output {
+            ColouredOutput::Cases(r) => coloured::render(r),
+            ColouredOutput::Grid(r) => coloured_grid::render(r),
+        }
     }
 }
 
@@ -118,9 +146,30 @@ pub(crate) struct Seed000Args {
     /// Worker threads for the Monte Carlo.
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
+    /// How the channel's residual is scaled before its tests.
+    #[arg(long, value_enum, default_value_t = ScaleArg::Raw)]
+    pub residual_scale: ScaleArg,
     /// Directory for the SVG figures.
     #[arg(long, default_value = "target/experiments/seed000")]
     pub out_dir: PathBuf,
+}
+
+/// A channel's `residual_scale` on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum ScaleArg {
+    /// The residual as it is.
+    Raw,
+    /// Over the predictor's predictive σ (docs/methods.md §M9a).
+    Predictive,
+}
+
+impl From<ScaleArg> for ResidualScale {
+    fn from(s: ScaleArg) -> Self {
+        match s {
+            ScaleArg::Raw => ResidualScale::Raw,
+            ScaleArg::Predictive => ResidualScale::Predictive,
+        }
+    }
 }
 
 /// `navguard experiment seed001` flags.
@@ -472,6 +521,7 @@ impl Experiment for Seed000Args {
             seed: self.seed,
             runs: self.runs,
             threads: self.threads,
+            residual_scale: self.residual_scale.into(),
             ..seed000::Seed000Params::default()
         };
         Ok(seed000::run(params)?)

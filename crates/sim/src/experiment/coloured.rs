@@ -158,6 +158,36 @@ pub struct ColouredResult {
 
 /// The signal of draw `seed` with noise coefficient `phi`, plus `step(k)`.
 pub fn signal(p: &ColouredParams, phi: f64, seed: u64, step: impl Fn(usize) -> f64) -> Vec<f64> {
+    signal_with(p, phi, Form::TONES_WANDER, seed, step)
+}
+
+/// Which parts of the signal are present beside the AR(1) noise.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Form {
+    /// The two tones.
+    pub tones: bool,
+    /// The Gauss–Markov wander.
+    pub wander: bool,
+}
+
+impl Form {
+    /// Tones, wander and noise: the signal of the default cases.
+    pub const TONES_WANDER: Form = Form {
+        tones: true,
+        wander: true,
+    };
+}
+
+/// The signal of draw `seed` with noise coefficient `phi` and the parts `form`, plus
+/// `fault(k)`. A part left out draws its random numbers all the same, so the noise of
+/// draw `seed` is the same in every form.
+pub fn signal_with(
+    p: &ColouredParams,
+    phi: f64,
+    form: Form,
+    seed: u64,
+    fault: impl Fn(usize) -> f64,
+) -> Vec<f64> {
     use std::f64::consts::TAU;
     let mut rng = StdRng::seed_from_u64(seed);
     let mut n = || -> f64 { StandardNormal.sample(&mut rng) };
@@ -170,12 +200,15 @@ pub fn signal(p: &ColouredParams, phi: f64, seed: u64, step: impl Fn(usize) -> f
             e = phi * e + p.noise_sigma * g * n();
             w = a * w + p.wander_sigma * q * n();
             let kf = k as f64;
-            3.0 * (TAU * kf / 173.0).sin() + 1.5 * (TAU * kf / 61.0 + 0.4).sin() + w + e + step(k)
+            let tones = 3.0 * (TAU * kf / 173.0).sin() + 1.5 * (TAU * kf / 61.0 + 0.4).sin();
+            let on = |b: bool| if b { 1.0 } else { 0.0 };
+            on(form.tones) * tones + on(form.wander) * w + e + fault(k)
         })
         .collect()
 }
 
-fn epochs(series: &[f64]) -> Vec<Epoch> {
+/// One epoch per value of `series`, 1 s apart, the value on channel [`CHANNEL`].
+pub fn epochs(series: &[f64]) -> Vec<Epoch> {
     series
         .iter()
         .enumerate()
@@ -208,7 +241,7 @@ fn onsets(p: &ColouredParams) -> Vec<usize> {
 }
 
 /// Each step lasts this many epochs.
-const STEP_LEN: usize = 20;
+pub const STEP_LEN: usize = 20;
 
 fn pool(traces: &[(f64, Vec<(f64, Health)>)]) -> Vec<(f64, Health)> {
     traces
@@ -275,7 +308,7 @@ pub fn run_case(p: &ColouredParams, case: &ColouredCase) -> Result<ColouredRow, 
 
 /// RMS of the residual over the run's tested epochs (fault-free): the σ a step is
 /// measured in.
-fn clean_residual_rms(trace: &ChannelTrace) -> f64 {
+pub fn clean_residual_rms(trace: &ChannelTrace) -> f64 {
     let r = &trace.residuals;
     let n = r.len().max(1) as f64;
     (r.iter().map(|v| v * v).sum::<f64>() / n).sqrt()

@@ -16,6 +16,8 @@
 //!   outlier filter on the `imu-channel` scenario.
 //! - [`ramp`]: docs/methods.md §M19's slow GNSS drift benchmark (with §M23's drift test).
 //! - [`coloured`]: T_a's false-alarm rate on coloured residuals, old and calibrated variance.
+//! - [`coloured_grid`]: the same signal over AR(1) coefficients, signal forms, predictors and
+//!   residual scales, against the channel targets (false alarms, steps, ramps).
 //! - [`alarms`]: alarms and warnings per fault-free hour of every test of a federated
 //!   session (ship seeds and the real track), and every injected fault alarmed.
 //! - [`guards`]: frozen GNSS fixes and small DVL biases, with and without the aids' drift
@@ -30,6 +32,7 @@
 
 pub mod alarms;
 pub mod coloured;
+pub mod coloured_grid;
 pub mod drive;
 pub mod guards;
 pub mod raim;

@@ -40,7 +40,7 @@ use navguard_core::learn::{
 };
 use navguard_core::monitor::channel::embed_series;
 use navguard_core::monitor::channel::{
-    ChannelConfigWire, ChannelWire, ModelIds, PredictorWire, VarianceKind,
+    ChannelConfigWire, ChannelWire, ModelIds, PredictorWire, ResidualScale, VarianceKind,
 };
 use navguard_core::monitor::{self, MonitorKind, MonitorSpec, Outputs};
 
@@ -77,6 +77,8 @@ pub struct Seed000Params {
     pub n: usize,
     /// Worker threads for the Monte Carlo (1 or 2 is sensible on this machine).
     pub threads: usize,
+    /// How the channel's residual is scaled before its tests (docs/methods.md §M9a).
+    pub residual_scale: ResidualScale,
 }
 
 impl Default for Seed000Params {
@@ -91,6 +93,7 @@ impl Default for Seed000Params {
             embedding: 5,
             n: navguard_core::detect::ta::DEFAULT_N,
             threads: 2,
+            residual_scale: ResidualScale::Raw,
         }
     }
 }
@@ -356,6 +359,7 @@ fn one_run(p: &Seed000Params, r: usize) -> Result<Vec<Vec<ChannelTrace>>, Experi
                 // The successive-difference warm-up (ignored under batch means).
                 min_differences: Some(30),
                 variance: Some(variance),
+                residual_scale: Some(p.residual_scale),
                 ..scalar_channel(
                     ads_gnss::CHANNEL,
                     p.embedding,
@@ -651,8 +655,18 @@ pub fn render(r: &Seed000Result) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "Seed 000 — ads-gnss, embedding {}, γ = {}, σ² = {} (standardised), LW k = {}, T_a n = {}, p_fa = {} (T_D = {:.4})\n",
-        p.embedding, p.gamma, p.sigma2, p.k, p.n, p.p_fa, r.threshold
+        "Seed 000 — ads-gnss, embedding {}, γ = {}, σ² = {} (standardised), LW k = {}, T_a n = {}, p_fa = {} (T_D = {:.4}), residual {}\n",
+        p.embedding,
+        p.gamma,
+        p.sigma2,
+        p.k,
+        p.n,
+        p.p_fa,
+        r.threshold,
+        match p.residual_scale {
+            ResidualScale::Raw => "raw",
+            ResidualScale::Predictive => "over its predictive σ",
+        }
     );
     render_prediction(&mut s, r);
     render_table2(&mut s, r);
