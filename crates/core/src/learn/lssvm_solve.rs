@@ -251,22 +251,22 @@ pub fn evaluate(
     kernel: &Kernel,
     x: &[f64],
 ) -> f64 {
-    let mut f = b;
+    rows.chunks_exact(d)
+        .zip(sol_alpha)
+        .fold(b, |f, (xi, a)| f + a * kernel_value(kernel, xi, x))
+}
+
+/// `K(xᵢ, x)` as [`evaluate`] sums it (the RBF through [`exp_nonpos`] with `1/σ²`), so a
+/// caller that keeps the kernel row gets the same prediction bit for bit.
+#[inline]
+pub fn kernel_value(kernel: &Kernel, xi: &[f64], x: &[f64]) -> f64 {
     match *kernel {
         Kernel::Rbf { sigma2 } => {
-            let inv = 1.0 / sigma2;
-            for (xi, a) in rows.chunks_exact(d).zip(sol_alpha) {
-                let d2: f64 = xi.iter().zip(x).map(|(p, q)| (p - q) * (p - q)).sum();
-                f += a * exp_nonpos(-d2 * inv);
-            }
+            let d2: f64 = xi.iter().zip(x).map(|(p, q)| (p - q) * (p - q)).sum();
+            exp_nonpos(-d2 * (1.0 / sigma2))
         }
-        Kernel::Linear => {
-            for (xi, a) in rows.chunks_exact(d).zip(sol_alpha) {
-                f += a * xi.iter().zip(x).map(|(p, q)| p * q).sum::<f64>();
-            }
-        }
+        Kernel::Linear => xi.iter().zip(x).map(|(p, q)| p * q).sum::<f64>(),
     }
-    f
 }
 
 /// The inverse of the matrix factorised as `L Lᵀ` in `l`, full and symmetric.

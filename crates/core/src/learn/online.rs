@@ -439,10 +439,17 @@ impl OnlineLsSvm {
     }
 
     /// The model term `m(x)` of the prediction at `x` (docs/methods.md §M9a; its variance
-    /// is `σ_e² (1 + γ m(x))`), from the inverse the window already keeps: `kᵀPk` over
-    /// the upper triangle plus the pending rank-1 term, and `ηᵀk`, `1ᵀη` for the bias,
-    /// so O(N²) like the slide. `None` when [`OnlineLsSvm::predict`] gives none.
+    /// is `σ_e² (1 + γ m(x))`); `None` when [`OnlineLsSvm::predict`] gives none. See
+    /// [`OnlineLsSvm::predict_with_term`].
     pub fn model_term(&self, x: &[f64]) -> Option<f64> {
+        self.predict_with_term(x).map(|(_, term)| term)
+    }
+
+    /// The prediction at `x` (bit for bit [`OnlineLsSvm::predict`]'s) and its model term
+    /// from the same kernel row: `kᵀPk` over the upper triangle of the inverse the window
+    /// keeps plus the pending rank-1 term, and `ηᵀk`, `1ᵀη` for the bias, so O(N²) like
+    /// the slide.
+    pub fn predict_with_term(&self, x: &[f64]) -> Option<(f64, f64)> {
         if self.len < 2 || x.len() != self.dim {
             return None;
         }
@@ -450,8 +457,12 @@ impl OnlineLsSvm {
         let m = self.len;
         let k: Vec<f64> = self.xs[..m * d]
             .chunks_exact(d)
-            .map(|xi| self.kernel.eval(xi, x))
+            .map(|xi| solve::kernel_value(&self.kernel, xi, x))
             .collect();
+        let f = k
+            .iter()
+            .zip(&self.alpha[..m])
+            .fold(self.b, |f, (ki, a)| f + a * ki);
         let mut quad = 0.0;
         for (i, ki) in k.iter().enumerate() {
             let row = &self.p[i * n + i..i * n + m];
@@ -462,7 +473,8 @@ impl OnlineLsSvm {
         }
         let a = solve::dot(&k, &self.eta[..m]);
         let c: f64 = self.eta.iter().sum();
-        Some((self.kernel.eval(x, x) - quad + (1.0 - a) * (1.0 - a) / c).max(0.0))
+        let term = (self.kernel.eval(x, x) - quad + (1.0 - a) * (1.0 - a) / c).max(0.0);
+        Some((f, term))
     }
 
     /// `f(x) = Σ αᵢ K(xᵢ, x) + b`, or `None` until the window holds at least two

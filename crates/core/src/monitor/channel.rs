@@ -278,13 +278,12 @@ impl ChannelState {
             Predictor::Online(windows) => windows
                 .iter()
                 .map(|w| {
-                    let f = w.predict(x)?;
-                    let s = if predictive {
-                        scale(w.params().gamma, w.model_term(x)?)
+                    if predictive {
+                        let (f, term) = w.predict_with_term(x)?;
+                        Some((f, scale(w.params().gamma, term)))
                     } else {
-                        1.0
-                    };
-                    Some((f, s))
+                        Some((w.predict(x)?, 1.0))
+                    }
                 })
                 .collect::<Option<Vec<_>>>()
                 .map(|v| v.into_iter().unzip()),
