@@ -502,10 +502,18 @@ async fn the_audit_log_filters_pages_and_shows_a_limited_token_only_its_sessions
     let mid = navguard::service::now_ms();
     tokio::time::sleep(std::time::Duration::from_millis(5)).await;
     for id in ["veh-1", "car-1"] {
-        let url = format!("{sessions}/{id}/monitors/position/threshold");
-        let body = json!({"threshold": 25.0});
-        let (status, _) = call("PUT", &url, Some(ANALYST), Some("tuning"), Some(&body)).await;
-        assert_eq!(status, 200);
+        // As through HAProxy: the client's own line, then the proxy's.
+        let resp = client()
+            .put(format!("{sessions}/{id}/monitors/position/threshold"))
+            .bearer_auth(ANALYST)
+            .header("X-Navguard-Reason", "tuning")
+            .header("X-Forwarded-For", "10.9.9.9")
+            .header("X-Forwarded-For", "192.0.2.7")
+            .json(&json!({"threshold": 25.0}))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(resp.status(), 200);
     }
     let (status, _) = call(
         "POST",
@@ -531,6 +539,16 @@ async fn the_audit_log_filters_pages_and_shows_a_limited_token_only_its_sessions
     let analyst = audit(&server, "actor=analyst").await;
     assert_eq!(analyst.len(), 2);
     assert!(analyst.iter().all(|e| e["reason"] == "tuning"));
+    assert!(
+        analyst
+            .iter()
+            .all(|e| e["forwarded_for"] == "10.9.9.9, 192.0.2.7"),
+        "{analyst:?}"
+    );
+    assert!(
+        all.iter()
+            .all(|e| e["actor"] == "analyst" || e["forwarded_for"].is_null())
+    );
     let since = audit(&server, &format!("since={mid}")).await;
     assert_eq!(since.len(), 3);
     assert!(since.iter().all(|e| e["at_ms"].as_i64().unwrap() >= mid));

@@ -71,6 +71,28 @@ pub fn reason(headers: &HeaderMap) -> Result<Option<String>, ApiError> {
     Ok((!text.is_empty()).then(|| text.to_owned()))
 }
 
+/// Longest `X-Forwarded-For` kept, characters (the end is kept: a proxy appends).
+const MAX_FORWARDED_CHARS: usize = 500;
+
+/// Every `X-Forwarded-For` line in order, joined with `, ` as one list (HAProxy's
+/// `option forwardfor` appends a line of its own after any the client sent), its last
+/// [`MAX_FORWARDED_CHARS`] characters; `None` without one.
+fn forwarded_for(headers: &HeaderMap) -> Option<String> {
+    let lines: Vec<&str> = headers
+        .get_all("x-forwarded-for")
+        .iter()
+        .filter_map(|v| v.to_str().ok())
+        .map(str::trim)
+        .filter(|v| !v.is_empty())
+        .collect();
+    if lines.is_empty() {
+        return None;
+    }
+    let list = lines.join(", ");
+    let skip = list.chars().count().saturating_sub(MAX_FORWARDED_CHARS);
+    Some(list.chars().skip(skip).collect())
+}
+
 /// The `{id}` segment of a session route's path, as sent (the handler's [`Change`] names
 /// the session otherwise).
 fn session_in_path(path: &str) -> Option<String> {
@@ -103,11 +125,7 @@ pub async fn record(State(state): State<AppState>, req: Request, next: Next) -> 
         .extensions()
         .get::<ConnectInfo<SocketAddr>>()
         .map(|c| c.0.to_string());
-    let forwarded_for = req
-        .headers()
-        .get("x-forwarded-for")
-        .and_then(|v| v.to_str().ok())
-        .map(|v| v.chars().take(MAX_REASON_CHARS).collect::<String>());
+    let forwarded_for = forwarded_for(req.headers());
     let path = req.uri().path().to_owned();
     let response = next.run(req).await;
     if !response.status().is_success() {
@@ -152,6 +170,20 @@ mod tests {
         assert!(!audited("/api/v1/sessions/{id}", &Method::GET));
         assert!(!audited("/api/v1/features", &Method::POST));
         assert!(!audited("/api/v1/models/{id}/predict", &Method::POST));
+    }
+
+    #[test]
+    fn forwarded_lines_are_one_list_ending_with_the_proxys() {
+        let mut h = HeaderMap::new();
+        assert_eq!(forwarded_for(&h), None);
+        h.append("x-forwarded-for", HeaderValue::from_static("10.9.9.9"));
+        h.append("x-forwarded-for", HeaderValue::from_static(" 192.0.2.7 "));
+        assert_eq!(forwarded_for(&h).as_deref(), Some("10.9.9.9, 192.0.2.7"));
+        let long = format!("{}, 192.0.2.7", "1".repeat(2 * MAX_FORWARDED_CHARS));
+        h.insert("x-forwarded-for", HeaderValue::from_str(&long).unwrap());
+        let kept = forwarded_for(&h).unwrap();
+        assert_eq!(kept.chars().count(), MAX_FORWARDED_CHARS);
+        assert!(kept.ends_with(", 192.0.2.7"));
     }
 
     #[test]

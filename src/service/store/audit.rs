@@ -21,8 +21,9 @@ pub struct AuditEntry {
     /// The connection's peer address (`ip:port`); null when the request did not come
     /// over a connection of this node (forwarded by another cluster node).
     pub client: Option<String>,
-    /// The `X-Forwarded-For` header as the request carried it (a load balancer's
-    /// `option forwardfor`), recorded as given: it is whatever the peer said.
+    /// The `X-Forwarded-For` lines as the request carried them, as one list (a load
+    /// balancer's `option forwardfor` appends the caller's address), recorded as given:
+    /// it is whatever the peer said.
     pub forwarded_for: Option<String>,
     /// The HTTP method.
     pub method: String,
