@@ -549,6 +549,14 @@ async fn the_dashboard_shows_a_faulty_replay_and_applies_a_threshold_change() {
     )
     .await;
     println!("preview: {preview}");
+    // The reason goes to the audit log (a browser sends `é` as ISO-8859-1).
+    client
+        .find(Locator::Css(r#"input[data-control="reason"]"#))
+        .await
+        .unwrap()
+        .send_keys("quay multipath, café test")
+        .await
+        .unwrap();
     client
         .find(Locator::Css(r#"button[data-control="apply"]"#))
         .await
@@ -621,6 +629,12 @@ async fn the_dashboard_shows_a_faulty_replay_and_applies_a_threshold_change() {
         &client,
         r#"[...document.querySelectorAll('#audit tr[data-audit-id]')].some(r => r.textContent.includes('/alarms/{alarm_id}/ack') && r.textContent.includes('ship'))"#,
         "the acknowledgement in the audit view",
+    )
+    .await;
+    wait_js(
+        &client,
+        r#"[...document.querySelectorAll('#audit tr[data-audit-id]')].some(r => r.textContent.includes('/threshold') && r.textContent.includes('quay multipath, café test'))"#,
+        "the threshold change with its reason in the audit view",
     )
     .await;
     save_screenshot(&client, "dashboard-audit.png").await;

@@ -53,15 +53,19 @@ pub fn audited(route: &str, method: &Method) -> bool {
             .any(|(r, m)| *r == route && *m == method.as_str())
 }
 
-/// The `X-Navguard-Reason` header: trimmed, `None` when absent or blank; 422 when it is
-/// not UTF-8 or longer than [`MAX_REASON_CHARS`].
+/// The `X-Navguard-Reason` header: trimmed, `None` when absent or blank; 422 when longer
+/// than [`MAX_REASON_CHARS`]. Its bytes are read as UTF-8, or, when they are not UTF-8,
+/// as ISO-8859-1 (RFC 9110 §5.5: what a browser's `fetch` sends for `é`).
 pub fn reason(headers: &HeaderMap) -> Result<Option<String>, ApiError> {
     let Some(value) = headers.get(REASON_HEADER) else {
         return Ok(None);
     };
-    let text = std::str::from_utf8(value.as_bytes())
-        .map_err(|_| ApiError::invalid("X-Navguard-Reason", "is not UTF-8 text"))?
-        .trim();
+    let bytes = value.as_bytes();
+    let text = match std::str::from_utf8(bytes) {
+        Ok(text) => text.to_owned(),
+        Err(_) => bytes.iter().map(|&b| char::from(b)).collect(),
+    };
+    let text = text.trim();
     if text.chars().count() > MAX_REASON_CHARS {
         return Err(ApiError::invalid(
             "X-Navguard-Reason",
@@ -203,7 +207,8 @@ mod tests {
         let long = "x".repeat(MAX_REASON_CHARS + 1);
         h.insert(REASON_HEADER, HeaderValue::from_str(&long).unwrap());
         assert!(reason(&h).is_err());
-        h.insert(REASON_HEADER, HeaderValue::from_bytes(b"\xff\xfe").unwrap());
-        assert!(reason(&h).is_err());
+        // Not UTF-8: ISO-8859-1, as a browser sends it.
+        h.insert(REASON_HEADER, HeaderValue::from_bytes(b"caf\xe9").unwrap());
+        assert_eq!(reason(&h).unwrap().as_deref(), Some("café"));
     }
 }
