@@ -114,15 +114,16 @@ pub async fn ack(
     let id: i64 = alarm_id.parse().map_err(|_| missing())?;
     refuse_nulls(&body)?;
     let AckBody { comment } = from_value(body)?;
-    let comment = comment.trim();
-    if comment.is_empty() {
-        return Err(ApiError::invalid("comment", "must not be blank"));
-    }
+    // The limit counts the comment as sent (the contract's maxLength); it is stored trimmed.
     if comment.chars().count() > MAX_COMMENT_CHARS {
         return Err(ApiError::invalid(
             "comment",
             format!("is longer than {MAX_COMMENT_CHARS} characters"),
         ));
+    }
+    let comment = comment.trim();
+    if comment.is_empty() {
+        return Err(ApiError::invalid("comment", "must not be blank"));
     }
     let ack = AlarmAck {
         acked_by: principal.map_or_else(|| Principal::anonymous().name, |Extension(p)| p.name),
