@@ -2,9 +2,14 @@
 // filtered by session, monitor, severity and raise time, a page at a time with the
 // server's `next_before` cursor. On the first page an alarm arriving live on
 // any events socket is inserted at the top when it passes the filters.
+// Unacknowledged entries are highlighted; a token with `operate` may acknowledge one
+// with a comment (POST …/alarms/{id}/ack), which the row then shows.
 
 import { el, badge, fmtNum, fmtRatio, fmtT, fmtClock, severityTag } from "./dom.js";
-import { get } from "./api.js";
+import { get, request } from "./api.js";
+
+/** Longest acknowledgement comment the server takes, characters. */
+const MAX_COMMENT = 500;
 
 const PAGE = 25;
 
@@ -98,8 +103,35 @@ export class AlarmsView {
       el("td", { class: "num" + (a.test_ratio > 1 ? " over" : "") }, fmtRatio(a.test_ratio)),
       el("td", { class: "num" }, fmtT(a.t)),
       el("td", { class: "num" }, fmtT(a.delay_s)),
-      el("td", null, cleared ? "at t = " + fmtT(a.cleared_t) : "active"));
+      el("td", null, cleared ? "at t = " + fmtT(a.cleared_t) : "active"),
+      el("td", { class: "wrap" }, this.ackCell(a)));
+    if (!a.acked_by) tr.classList.add("unacked");
     if (fresh) setTimeout(() => tr.classList.remove("fresh"), 4000);
     return tr;
+  }
+
+  /** Who acknowledged the entry, when and why; or the button that asks for a comment. */
+  ackCell(a) {
+    if (a.acked_by) {
+      return el("span", { "data-acked": "true", title: a.ack_comment || "" },
+        "by " + a.acked_by + " at " + fmtClock(a.acked_at_ms) + ": " + (a.ack_comment || ""));
+    }
+    if (!(a.id > 0)) return el("span", { class: "muted" }, "not stored");
+    const msg = el("span", { class: "muted", "aria-live": "polite" });
+    const btn = el("button", { type: "button", "data-control": "ack", "data-needs": "operate" }, "Acknowledge");
+    btn.addEventListener("click", async () => {
+      const comment = (window.prompt("Acknowledge alarm " + a.id + " of " + a.session + ": what was found or done?") || "").trim();
+      if (!comment) return;
+      if (comment.length > MAX_COMMENT) { msg.textContent = "At most " + MAX_COMMENT + " characters."; return; }
+      btn.disabled = true;
+      try {
+        const acked = await request("POST", "api/v1/sessions/" + encodeURIComponent(a.session) + "/alarms/" + a.id + "/ack", { comment });
+        btn.closest("tr").replaceWith(this.row(acked, false));
+      } catch (e) {
+        // 409: somebody acknowledged it meanwhile; the reload shows who.
+        if (e.status === 409) this.load(); else { msg.textContent = e.message; btn.disabled = false; }
+      }
+    });
+    return el("span", null, btn, " ", msg);
   }
 }

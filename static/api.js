@@ -39,10 +39,11 @@ export class HttpError extends Error {
 
 /**
  * `request("GET", "api/v1/sessions")` → parsed JSON (null for 204).
- * Paths are relative so the page also works behind a path prefix.
+ * Paths are relative so the page also works behind a path prefix. `extra` adds
+ * headers (the reason of a change, `X-Navguard-Reason`, for the audit log).
  */
-export async function request(method, path, body) {
-  const headers = { Accept: "application/json" };
+export async function request(method, path, body, extra) {
+  const headers = { Accept: "application/json", ...(extra || {}) };
   if (token) headers.Authorization = "Bearer " + token;
   if (body !== undefined) headers["Content-Type"] = "application/json";
   let res;

@@ -4,7 +4,8 @@
 // previewed from /api/v1/chi2/threshold for that test's dof (a test with a
 // threshold of its own keeps it). "Apply" sends the REST PUT, and the panel
 // shows what the server answered (the thresholds now in force), not what was
-// typed.
+// typed. An optional reason goes with the change to the audit log
+// (`X-Navguard-Reason`).
 
 import { el, fmtNum, policyLevelText, isNum } from "./dom.js";
 import { get, request } from "./api.js";
@@ -33,6 +34,8 @@ export class ThresholdControls {
       el("label", { for: id("n1") }, "N1"), this.n1, el("label", { for: id("n2") }, "N2"), this.n2);
     this.preview = el("ul", { class: "preview", "aria-live": "polite" });
     this.applied = el("p", { class: "applied", "aria-live": "polite", "data-control": "applied" });
+    this.reason = el("input", { id: id("reason"), name: "reason", type: "text", maxlength: "500", size: "40", "data-control": "reason",
+      placeholder: "optional: kept in the audit log" });
     this.apply = el("button", { type: "submit", "data-control": "apply" }, "Apply");
     this.form = el("form", { class: "controls" },
       el("div", { class: "row" },
@@ -41,6 +44,7 @@ export class ThresholdControls {
       el("div", { class: "row" },
         el("label", { for: id("policy") }, "Policy"), this.policy, this.counters,
         el("label", { for: id("level") }, "Alarm on"), this.level, this.apply),
+      el("div", { class: "row" }, el("label", { for: id("reason") }, "Reason"), this.reason),
       el("div", { class: "row" }, el("span", { class: "muted" }, "Preview:"), this.preview),
       el("details", null, el("summary", null, "Per-test thresholds (e.g. from navguard calibrate)"), this.own),
       this.applied);
@@ -133,10 +137,18 @@ export class ThresholdControls {
       else if (own) tests[name] = null;
     }
     if (Object.keys(tests).length) body.tests = tests;
+    const reason = this.reason.value.trim();
+    // A header carries ISO-8859-1 from a browser; fetch refuses anything beyond it.
+    if (/[^\u0000-\u00ff]/.test(reason)) {
+      this.applied.textContent = "The reason may hold Latin-1 characters only (letters like \u00e9 are fine).";
+      this.applied.dataset.state = "error";
+      return;
+    }
     this.apply.disabled = true;
     this.applied.textContent = "Applying\u2026";
     try {
-      const view = await request("PUT", this.path, body);
+      const view = await request("PUT", this.path, body, reason ? { "X-Navguard-Reason": reason } : undefined);
+      this.reason.value = "";
       this.show(view, true);
       if (this.onApplied) this.onApplied(view);
     } catch (e) {

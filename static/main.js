@@ -1,4 +1,4 @@
-// main.js — wires the page: hash routing between the four views, the status
+// main.js — wires the page: hash routing between the five views, the status
 // line, the token prompt, and one requestAnimationFrame loop that renders the
 // visible view at most once per frame however many messages arrived (20
 // stats messages a second from each session would otherwise each cost a
@@ -10,6 +10,7 @@ import { OverviewView } from "./overview.js";
 import { SessionView } from "./session.js";
 import { AlarmsView } from "./alarms.js";
 import { ModelsView } from "./models.js";
+import { AuditView } from "./audit.js";
 import { fmtClock } from "./dom.js";
 
 const $ = (id) => document.getElementById(id);
@@ -19,6 +20,7 @@ const views = {
   session: new SessionView(live, $("view-session")),
   alarms: new AlarmsView(live, $("view-alarms")),
   models: new ModelsView($("view-models")),
+  audit: new AuditView($("view-audit")),
 };
 let current = null;
 
@@ -37,6 +39,7 @@ function route() {
   if (next === "session") views.session.open(decodeURIComponent(rest.join("/")));
   else if (next === "alarms") views.alarms.open();
   else if (next === "models") views.models.open();
+  else if (next === "audit") views.audit.open();
   else views.overview.dirty = true;
 }
 window.addEventListener("hashchange", route);

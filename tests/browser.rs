@@ -549,6 +549,14 @@ async fn the_dashboard_shows_a_faulty_replay_and_applies_a_threshold_change() {
     )
     .await;
     println!("preview: {preview}");
+    // The reason goes to the audit log (a browser sends `é` as ISO-8859-1).
+    client
+        .find(Locator::Css(r#"input[data-control="reason"]"#))
+        .await
+        .unwrap()
+        .send_keys("quay multipath, café test")
+        .await
+        .unwrap();
     client
         .find(Locator::Css(r#"button[data-control="apply"]"#))
         .await
@@ -588,6 +596,48 @@ async fn the_dashboard_shows_a_faulty_replay_and_applies_a_threshold_change() {
     )
     .await;
     save_screenshot(&client, "dashboard-alarms.png").await;
+    // An unacknowledged alarm is highlighted with its button; acknowledging it (the
+    // prompt answered) shows who and why in its row, and the audit view lists it.
+    let acked = wait_js(
+        &client,
+        r#"(() => {
+             const r = document.querySelector('#alarms tr.unacked[data-session="ship"][data-severity="alarm"]');
+             const b = r && r.querySelector('button[data-control="ack"]');
+             if (!b) return null;
+             window.prompt = () => 'checked by the browser test';
+             b.click();
+             return r.dataset.alarmId;
+           })()"#,
+        "an unacknowledged alarm with its Acknowledge button",
+    )
+    .await;
+    let acked = acked.as_str().unwrap().to_owned();
+    wait_js(
+        &client,
+        &format!(
+            r#"(() => {{
+                 const r = document.querySelector('#alarms tr[data-alarm-id="{acked}"]');
+                 return r !== null && !r.classList.contains('unacked')
+                   && r.textContent.includes('by anonymous') && r.textContent.includes('checked by the browser test');
+               }})()"#
+        ),
+        "the acknowledgement in the alarm's row",
+    )
+    .await;
+    client.goto(&format!("{http}/#/audit")).await.unwrap();
+    wait_js(
+        &client,
+        r#"[...document.querySelectorAll('#audit tr[data-audit-id]')].some(r => r.textContent.includes('/alarms/{alarm_id}/ack') && r.textContent.includes('ship'))"#,
+        "the acknowledgement in the audit view",
+    )
+    .await;
+    wait_js(
+        &client,
+        r#"[...document.querySelectorAll('#audit tr[data-audit-id]')].some(r => r.textContent.includes('/threshold') && r.textContent.includes('quay multipath, café test'))"#,
+        "the threshold change with its reason in the audit view",
+    )
+    .await;
+    save_screenshot(&client, "dashboard-audit.png").await;
 
     // 6. Models page: a trained model is listed with its kind and can be
     // deleted, after which the page says "No models". Training must be accepted:
@@ -807,6 +857,16 @@ async fn the_dashboard_shows_a_faulty_replay_and_applies_a_threshold_change() {
                && document.getElementById('whoami').textContent.includes('wall-screen');
            })()"#,
         "the threshold controls hidden from a read-only token",
+    )
+    .await;
+    client.goto(&format!("{http}/#/alarms")).await.unwrap();
+    wait_js(
+        &client,
+        r#"(() => {
+             const b = document.querySelector('#alarms button[data-control="ack"]');
+             return b !== null && getComputedStyle(b).display === 'none';
+           })()"#,
+        "the Acknowledge buttons hidden from a read-only token",
     )
     .await;
 

@@ -577,8 +577,10 @@ async fn forbidden_answers_and_whoami_match_their_schemas() {
 #[tokio::test]
 async fn rest_answers_match_their_schemas() {
     let dir = tempfile::tempdir().unwrap();
+    let app_state = state(dir.path(), None).await;
+    let store = app_state.store.clone();
     let c = Contract {
-        router: app(state(dir.path(), None).await),
+        router: app(app_state),
         doc: spec(),
     };
     let sessions = "/api/v1/sessions";
@@ -725,6 +727,54 @@ async fn rest_answers_match_their_schemas() {
     c.call("GET", "/api/v1/alarms", "/api/v1/alarms?limit=0", None)
         .await;
     c.call("GET", "/api/v1/alarms", "/api/v1/alarms?since=soon", None)
+        .await;
+
+    // An acknowledgement, the log entry with it, the refusals; the audit log.
+    let alarm = navguard::service::wire::AlarmRecord {
+        id: 0,
+        severity: navguard::service::wire::Severity::Alarm,
+        session: "s1".into(),
+        monitor: "cv".into(),
+        test: "residual".into(),
+        state: navguard_core::detect::Health::Isolated,
+        t: 3.0,
+        statistic: 30.0,
+        threshold: 20.0,
+        dof: 1,
+        test_ratio: 1.5,
+        delay_s: 0.0,
+        raised_at_ms: 5,
+        cleared_t: None,
+    };
+    let id = store
+        .insert_alarm(alarm, navguard::service::store::AlarmKey::default(), None)
+        .await
+        .unwrap()
+        .id;
+    let ack = "/api/v1/sessions/{id}/alarms/{alarm_id}/ack";
+    let uri = format!("/api/v1/sessions/s1/alarms/{id}/ack");
+    let comment = json!({"comment": "checked"});
+    let acked = c.call("POST", ack, &uri, Some(&comment)).await;
+    assert_eq!(acked["acked_by"], "anonymous");
+    let again = c.call("POST", ack, &uri, Some(&comment)).await;
+    assert_eq!(again["error"]["code"], "conflict");
+    let blank = c
+        .call("POST", ack, &uri, Some(&json!({"comment": ""})))
+        .await;
+    assert_eq!(blank["error"]["field"], "comment");
+    let unknown = "/api/v1/sessions/s1/alarms/99999/ack";
+    c.call("POST", ack, unknown, Some(&comment)).await;
+    let log = c
+        .call("GET", "/api/v1/alarms", "/api/v1/alarms?session=s1", None)
+        .await;
+    assert_eq!(log["alarms"][0]["ack_comment"], "checked");
+    let audit = c
+        .call("GET", "/api/v1/audit", "/api/v1/audit?session=s1", None)
+        .await;
+    assert_eq!(audit["entries"].as_array().unwrap().len(), 3, "{audit}");
+    c.call("GET", "/api/v1/audit", "/api/v1/audit?limit=0", None)
+        .await;
+    c.call("GET", "/api/v1/audit", "/api/v1/audit?before=x", None)
         .await;
 
     c.call("DELETE", session, "/api/v1/sessions/s1", None).await;

@@ -9,8 +9,8 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use navguard::service::store::{
-    Acquire, AlarmKey, AlarmQuery, Checkpoint, Fence, RecordedFrame, Retention, Store, StoreError,
-    StoredModel, StoredSession,
+    AckOutcome, Acquire, AlarmAck, AlarmKey, AlarmQuery, AuditEntry, AuditQuery, Checkpoint, Fence,
+    RecordedFrame, Retention, SessionPattern, Store, StoreError, StoredModel, StoredSession,
 };
 use navguard::service::wire::{AlarmRecord, Severity};
 use navguard_core::detect::Health;
@@ -854,4 +854,243 @@ async fn sqlite_copies_its_wal_into_the_file_from_a_task_of_its_own() {
         .await
         .unwrap();
     assert_eq!(page.len(), 200);
+}
+
+fn audit_entry(actor: &str, session: Option<&str>, at_ms: i64) -> AuditEntry {
+    AuditEntry {
+        id: 0,
+        at_ms,
+        actor: actor.into(),
+        client: Some("127.0.0.1:40000".into()),
+        forwarded_for: None,
+        method: "PUT".into(),
+        route: "/api/v1/sessions/{id}/monitors/{name}/threshold".into(),
+        path: format!(
+            "/api/v1/sessions/{}/monitors/m/threshold",
+            session.unwrap_or("-")
+        ),
+        session: session.map(str::to_owned),
+        reason: Some("é and \"quotes\"".into()),
+        previous: serde_json::json!({"p_fa": 0.001, "tests": {}}),
+        new: serde_json::json!({"p_fa": 1e-5, "awkward": AWKWARD}),
+    }
+}
+
+/// The audit log and acknowledgements on each backend: entries come back as written,
+/// newest first, filtered by session, actor, time and the sessions a token may see (a
+/// prefix holding `_`, a LIKE wildcard, matches only itself); an entry is acknowledged
+/// once, and only in its own session.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn audit_entries_and_acknowledgements_round_trip() {
+    let dir = tempfile::tempdir().unwrap();
+    for (backend, db) in backends(&dir, "audit").await {
+        let store = Store::open(&db).await.unwrap();
+        let written = [
+            audit_entry("ops", Some("veh_1"), 10),
+            audit_entry("analyst", Some("vehx1"), 20),
+            audit_entry("ops", None, 30),
+            audit_entry("analyst", Some("car-1"), 40),
+        ];
+        let mut ids = Vec::new();
+        for e in &written {
+            ids.push(store.insert_audit(e).await.unwrap());
+        }
+        assert!(ids.windows(2).all(|w| w[0] < w[1]), "{backend}");
+        let q = |f: fn(&mut AuditQuery)| {
+            let mut q = AuditQuery {
+                limit: 10,
+                ..Default::default()
+            };
+            f(&mut q);
+            q
+        };
+        let everything = store.audit(&q(|_| {})).await.unwrap();
+        let expected: Vec<AuditEntry> = written
+            .iter()
+            .zip(&ids)
+            .rev()
+            .map(|(e, id)| AuditEntry {
+                id: *id,
+                ..e.clone()
+            })
+            .collect();
+        assert_eq!(everything, expected, "{backend}");
+        let sessions = |entries: Vec<AuditEntry>| -> Vec<Option<String>> {
+            entries.into_iter().map(|e| e.session).collect()
+        };
+        let by_actor = store
+            .audit(&q(|q| q.actor = Some("ops".into())))
+            .await
+            .unwrap();
+        assert_eq!(
+            sessions(by_actor),
+            [None, Some("veh_1".into())],
+            "{backend}"
+        );
+        let by_session = store
+            .audit(&q(|q| q.session = Some("car-1".into())))
+            .await
+            .unwrap();
+        assert_eq!(by_session.len(), 1, "{backend}");
+        let since = store.audit(&q(|q| q.since_ms = Some(20))).await.unwrap();
+        assert_eq!(since.len(), 3, "{backend}");
+        let page = store
+            .audit(&q(|q| {
+                q.before_id = Some(i64::MAX);
+                q.limit = 1;
+            }))
+            .await
+            .unwrap();
+        let older = store
+            .audit(&AuditQuery {
+                before_id: Some(page[0].id),
+                limit: 10,
+                ..Default::default()
+            })
+            .await
+            .unwrap();
+        assert_eq!(older.len(), 3, "{backend}");
+        let visible = store
+            .audit(&q(|q| {
+                q.visible = Some(vec![
+                    SessionPattern::Prefix("veh_".into()),
+                    SessionPattern::Exact("car-1".into()),
+                ])
+            }))
+            .await
+            .unwrap();
+        assert_eq!(
+            sessions(visible),
+            [Some("car-1".into()), Some("veh_1".into())],
+            "{backend}"
+        );
+        let none = store.audit(&q(|q| q.visible = Some(vec![]))).await.unwrap();
+        assert!(none.is_empty(), "{backend}");
+
+        let raised = store
+            .insert_alarm(alarm("car-1", 1.0, 30.0), AlarmKey::default(), None)
+            .await
+            .unwrap();
+        let ack = AlarmAck {
+            acked_by: "analyst".into(),
+            acked_at_ms: 50,
+            ack_comment: "multipath near the quay".into(),
+        };
+        assert_eq!(
+            store.ack_alarm("veh_1", raised.id, &ack).await.unwrap(),
+            AckOutcome::Missing,
+            "{backend}"
+        );
+        let AckOutcome::Acked(entry) = store.ack_alarm("car-1", raised.id, &ack).await.unwrap()
+        else {
+            panic!("{backend}: the first acknowledgement takes");
+        };
+        assert_eq!(entry.record, raised, "{backend}");
+        assert_eq!(
+            (
+                entry.acked_by.as_deref(),
+                entry.acked_at_ms,
+                entry.ack_comment.as_deref()
+            ),
+            (Some("analyst"), Some(50), Some("multipath near the quay")),
+            "{backend}"
+        );
+        let again = AlarmAck {
+            acked_by: "ops".into(),
+            ..ack
+        };
+        assert_eq!(
+            store.ack_alarm("car-1", raised.id, &again).await.unwrap(),
+            AckOutcome::Already(entry.clone()),
+            "{backend}"
+        );
+        let log = store.alarm_log(&all(10)).await.unwrap();
+        assert_eq!(log, vec![entry], "{backend}");
+        store.close().await;
+    }
+}
+
+/// A store at the schema before the audit log (version 2: the migrations as the previous
+/// server applied them, with an alarm and a session in it) opens on each backend at the
+/// current version with its data: the alarm reads unacknowledged and can be
+/// acknowledged, the session loads, and the audit log takes entries.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_store_at_the_previous_schema_opens_migrated_with_its_data() {
+    const ALARM: &str = "INSERT INTO alarms (session, monitor, test, state, t, statistic, threshold, dof, delay_s, raised_at_ms, severity) VALUES ('old', 'm', 'residual', 'isolated', 1.0, 30.0, 20.0, 1, 0.0, 5, 'alarm')";
+    const SESSION: &str = r#"INSERT INTO sessions (id, spec, created_at_ms) VALUES ('old', '{"format":1,"id":"old","echo":false,"monitors":[],"created_at_ms":7}', 7)"#;
+    const VERSIONS: &str = "INSERT INTO schema_version (version, name, applied_at_ms) VALUES (1, 'initial', 0), (2, 'cluster', 0)";
+    const VERSION_TABLE: &str = "CREATE TABLE schema_version (version BIGINT PRIMARY KEY, name TEXT NOT NULL, applied_at_ms BIGINT NOT NULL)";
+    let dir = tempfile::tempdir().unwrap();
+    for (backend, db) in backends(&dir, "v2").await {
+        let url = db.to_str().unwrap().to_owned();
+        if backend == "sqlite" {
+            let pool = sqlx::SqlitePool::connect(&format!("sqlite://{url}?mode=rwc"))
+                .await
+                .unwrap();
+            let sql = [
+                include_str!("../src/service/store/migrations/sqlite/0001_initial.sql"),
+                "ALTER TABLE alarms ADD COLUMN severity TEXT NOT NULL DEFAULT 'alarm';",
+                include_str!("../src/service/store/migrations/sqlite/0002_cluster.sql"),
+                &format!("{VERSION_TABLE}; {VERSIONS}; {ALARM}; {SESSION};"),
+            ];
+            for s in sql {
+                sqlx::raw_sql(s).execute(&pool).await.unwrap();
+            }
+            pool.close().await;
+        } else {
+            let pool = sqlx::PgPool::connect(&url).await.unwrap();
+            let sql = [
+                include_str!("../src/service/store/migrations/postgres/0001_initial.sql"),
+                include_str!("../src/service/store/migrations/postgres/0002_cluster.sql"),
+                &format!("{VERSION_TABLE}; {VERSIONS}; {ALARM}; {SESSION};"),
+            ];
+            for s in sql {
+                sqlx::raw_sql(s).execute(&pool).await.unwrap();
+            }
+            pool.close().await;
+        }
+        let store = Store::open(&db).await.unwrap();
+        let sessions = store.sessions().await.unwrap();
+        assert_eq!(sessions.len(), 1, "{backend}");
+        let log = store.alarm_log(&all(10)).await.unwrap();
+        assert_eq!(log.len(), 1, "{backend}");
+        assert_eq!(log[0].acked_by, None, "{backend}");
+        let ack = AlarmAck {
+            acked_by: "ops".into(),
+            acked_at_ms: 9,
+            ack_comment: "seen".into(),
+        };
+        let outcome = store
+            .ack_alarm("old", log[0].record.id, &ack)
+            .await
+            .unwrap();
+        assert!(matches!(outcome, AckOutcome::Acked(_)), "{backend}");
+        store
+            .insert_audit(&audit_entry("ops", Some("old"), 10))
+            .await
+            .unwrap();
+        assert_eq!(
+            store
+                .audit(&AuditQuery {
+                    limit: 10,
+                    ..Default::default()
+                })
+                .await
+                .unwrap()
+                .len(),
+            1,
+            "{backend}"
+        );
+        store.close().await;
+        // Opened again, nothing is applied twice.
+        let store = Store::open(&db).await.unwrap();
+        assert_eq!(
+            store.alarm_log(&all(10)).await.unwrap()[0]
+                .acked_by
+                .as_deref(),
+            Some("ops"),
+            "{backend}"
+        );
+        store.close().await;
+    }
 }

@@ -115,6 +115,13 @@ pub const ROUTE_ACCESS: &[(&str, &str, Access, SessionRef)] = &[
         SessionRef::None,
     ),
     ("/api/v1/alarms", "GET", S(Read), SessionRef::Query),
+    (
+        "/api/v1/sessions/{id}/alarms/{alarm_id}/ack",
+        "POST",
+        S(Operate),
+        SessionRef::Path,
+    ),
+    ("/api/v1/audit", "GET", S(Read), SessionRef::Listed),
     ("/api/v1/models", "GET", S(Read), SessionRef::None),
     ("/api/v1/models", "POST", S(Admin), SessionRef::None),
     ("/api/v1/models/{id}", "GET", S(Read), SessionRef::None),

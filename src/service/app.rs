@@ -9,7 +9,9 @@ use axum::middleware;
 use axum::routing::{MethodRouter, get, post};
 use tokio::sync::watch;
 
-use super::api::{alarms, chi2, features, health, models, recording, sessions, thresholds, whoami};
+use super::api::{
+    alarms, audit, chi2, features, health, models, recording, sessions, thresholds, whoami,
+};
 use super::cluster::Cluster;
 use super::compute::ComputePool;
 use super::config::ServiceConfig;
@@ -85,6 +87,8 @@ pub const ROUTES: &[(&str, &[&str])] = &[
     ("/api/v1/chi2/threshold", &["GET"]),
     ("/api/v1/chi2/missed-detection", &["GET"]),
     ("/api/v1/alarms", &["GET"]),
+    ("/api/v1/sessions/{id}/alarms/{alarm_id}/ack", &["POST"]),
+    ("/api/v1/audit", &["GET"]),
     ("/api/v1/models", &["GET", "POST"]),
     ("/api/v1/models/{id}", &["GET", "DELETE"]),
     ("/api/v1/models/{id}/predict", &["POST"]),
@@ -112,6 +116,8 @@ fn handlers(path: &str) -> MethodRouter<AppState> {
         "/api/v1/chi2/threshold" => get(chi2::threshold),
         "/api/v1/chi2/missed-detection" => get(chi2::missed_detection),
         "/api/v1/alarms" => get(alarms::list),
+        "/api/v1/sessions/{id}/alarms/{alarm_id}/ack" => post(alarms::ack),
+        "/api/v1/audit" => get(audit::list),
         "/api/v1/models" => get(models::list).post(models::create),
         "/api/v1/models/{id}" => get(models::get).delete(models::delete),
         "/api/v1/models/{id}/predict" => post(models::predict),
@@ -145,8 +151,13 @@ pub fn app(state: AppState) -> Router {
         }
     }
     // Auth and scopes run first (the outer layer), then a cluster node finds the
-    // session's owner.
+    // session's owner, then the node that runs the handler records a change in the
+    // audit log.
     let api = api
+        .route_layer(middleware::from_fn_with_state(
+            state.clone(),
+            super::audit::record,
+        ))
         .route_layer(middleware::from_fn_with_state(
             state.clone(),
             super::cluster::own::route,

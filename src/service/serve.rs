@@ -6,6 +6,7 @@
 //! headers could hold a connection, and a file descriptor, for ever.
 
 use std::io;
+use std::net::SocketAddr;
 use std::pin::Pin;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicI64, Ordering};
@@ -14,6 +15,7 @@ use std::time::Duration;
 
 use axum::Router;
 use axum::body::Body;
+use axum::extract::ConnectInfo;
 use hyper::body::Incoming;
 use hyper_util::rt::{TokioIo, TokioTimer};
 use hyper_util::service::TowerToHyperService;
@@ -79,8 +81,8 @@ pub(crate) async fn serve(
             accepted = listener.accept() => accepted,
             _ = stopped(&mut shutdown) => break,
         };
-        let stream = match accepted {
-            Ok((stream, _peer)) => {
+        let (stream, peer) = match accepted {
+            Ok((stream, peer)) => {
                 // Results and alarms are small writes that must go out at once:
                 // with Nagle's algorithm, a write made while an earlier one awaits
                 // its ACK waits for it, and a client's delayed ACK holds that up
@@ -88,7 +90,7 @@ pub(crate) async fn serve(
                 if let Err(e) = stream.set_nodelay(true) {
                     tracing::debug!(error = %e, "TCP_NODELAY not set on an accepted socket");
                 }
-                stream
+                (stream, peer)
             }
             Err(e) => {
                 accept_error(&e);
@@ -104,6 +106,7 @@ pub(crate) async fn serve(
                 });
                 let connection = serve_connection(
                     io,
+                    peer,
                     &builder,
                     router.clone(),
                     limits.idle_timeout,
@@ -133,15 +136,20 @@ async fn stopped(shutdown: &mut watch::Receiver<bool>) {
 /// an upgrade hands the socket to a WebSocket task (which keeps the permit).
 fn serve_connection(
     io: TokioIo<Counted>,
+    peer: SocketAddr,
     builder: &hyper::server::conn::http1::Builder,
     router: Router,
     idle_timeout: Duration,
     mut shutdown: watch::Receiver<bool>,
 ) -> impl Future<Output = ()> + Send + 'static {
     // A stalled request body fails after `idle_timeout` without data (the
-    // handler's extractor answers 400 and hyper closes the connection).
+    // handler's extractor answers 400 and hyper closes the connection). The peer's
+    // address goes with every request, as `into_make_service_with_connect_info` would
+    // give it (the audit log records it).
     let service = router.map_request(move |req: axum::http::Request<Incoming>| {
-        req.map(|body| Body::new(TimeoutBody::new(idle_timeout, body)))
+        let mut req = req.map(|body| Body::new(TimeoutBody::new(idle_timeout, body)));
+        req.extensions_mut().insert(ConnectInfo(peer));
+        req
     });
     let connection = builder
         .serve_connection(io, TowerToHyperService::new(service))

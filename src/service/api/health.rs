@@ -85,6 +85,7 @@ const ASSETS: &[(&str, &str, &str)] = &[
         include_str!("../../../static/gnss-charts.js"),
     ),
     ("models.js", JS, include_str!("../../../static/models.js")),
+    ("audit.js", JS, include_str!("../../../static/audit.js")),
 ];
 
 const JS: &str = "text/javascript; charset=utf-8";

@@ -2,6 +2,7 @@
 //! session handle or the store, and shape the response; no algorithm lives here.
 
 pub mod alarms;
+pub mod audit;
 pub mod chi2;
 pub mod features;
 pub mod health;

@@ -3,16 +3,17 @@
 //! before the 202, so a bad training set or parameter is a 422 naming its field
 //! (`kind`, `params.<f>`, `cv.<f>`, `data.x[3]`, `data.y`) and never a failed job.
 
-use axum::Json;
 use axum::body::Bytes;
 use axum::extract::rejection::BytesRejection;
 use axum::extract::{Path, State};
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::IntoResponse;
+use axum::{Extension, Json};
 use serde::Serialize;
 use serde_json::{Map, Value};
 
 use crate::service::app::AppState;
+use crate::service::audit::Change;
 use crate::service::config::Limits;
 use crate::service::error::ApiError;
 use crate::service::extract::{integral_numbers, refuse_nulls_at};
@@ -33,9 +34,15 @@ pub async fn create(
     let job = parse_train(body, &state.config.limits)?;
     let record = state.models.start(job).await?;
     let location = format!("/api/v1/models/{}", record.id);
+    let change = Change {
+        session: None,
+        previous: Value::Null,
+        new: serde_json::json!(record),
+    };
     Ok((
         StatusCode::ACCEPTED,
         [(header::LOCATION, location)],
+        Extension(change),
         Json(record),
     ))
 }
@@ -66,9 +73,15 @@ pub async fn get(
 pub async fn delete(
     State(state): State<AppState>,
     Path(id): Path<String>,
-) -> Result<StatusCode, ApiError> {
+) -> Result<(StatusCode, Extension<Change>), ApiError> {
+    let previous = serde_json::json!(state.models.record(&id)?);
     state.models.delete(&id).await?;
-    Ok(StatusCode::NO_CONTENT)
+    let change = Change {
+        session: None,
+        previous,
+        new: Value::Null,
+    };
+    Ok((StatusCode::NO_CONTENT, Extension(change)))
 }
 
 /// `POST /api/v1/models/{id}/predict {"x": [[...]]}` → `{"y"}` or `{"decision", "label"}`;

@@ -4,10 +4,11 @@ use axum::extract::{Path, State};
 use axum::http::StatusCode;
 use axum::{Extension, Json};
 use serde::Serialize;
-use serde_json::Value;
+use serde_json::{Value, json};
 
 use crate::service::api::thresholds::check_policy_keys;
 use crate::service::app::AppState;
+use crate::service::audit::Change;
 use crate::service::error::ApiError;
 use crate::service::extract::{JsonBody, from_value, integral_numbers, refuse_nulls};
 use crate::service::now_ms;
@@ -162,7 +163,7 @@ fn parse_create(mut body: Value) -> Result<CreateSession, ApiError> {
 pub async fn create(
     State(state): State<AppState>,
     JsonBody(body): JsonBody,
-) -> Result<(StatusCode, Json<SessionView>), ApiError> {
+) -> Result<(StatusCode, Extension<Change>, Json<SessionView>), ApiError> {
     let req = parse_create(body)?;
     validate_session(&req, &state.config.limits)?;
     let mut monitors = req.monitors;
@@ -181,9 +182,15 @@ pub async fn create(
         alarm_level: req.alarm_level,
     };
     let limit = state.config.limits.max_sessions;
+    let change = Change {
+        session: Some(stored.id.clone()),
+        previous: Value::Null,
+        new: json!(stored),
+    };
     let handle = lifecycle::create(state.actor_deps(), &state.registry, limit, stored).await?;
     Ok((
         StatusCode::CREATED,
+        Extension(change),
         Json(view(&handle, state.config.record_default)),
     ))
 }
@@ -263,13 +270,18 @@ pub async fn get(
 pub async fn delete(
     State(state): State<AppState>,
     Path(id): Path<String>,
-) -> Result<StatusCode, ApiError> {
+) -> Result<(StatusCode, Extension<Change>), ApiError> {
     let handle = lookup(&state, &id)?;
+    let change = Change {
+        session: Some(id.clone()),
+        previous: json!(handle.stored()),
+        new: Value::Null,
+    };
     // The actor deletes the row after every change it acknowledged before, then stops:
     // a 204 is final (docs/architecture.md §A4).
     handle.delete().await?;
     state.registry.remove(&id);
-    Ok(StatusCode::NO_CONTENT)
+    Ok((StatusCode::NO_CONTENT, Extension(change)))
 }
 
 /// `GET /api/v1/sessions/{id}/stats`

@@ -1,11 +1,12 @@
 //! `/api/v1/sessions/{id}/monitors/{name}/threshold`: read and change a
 //! monitor's threshold and policy, applied to the live session at once and persisted.
 
-use axum::Json;
 use axum::extract::{Path, State};
-use serde_json::Value;
+use axum::{Extension, Json};
+use serde_json::{Value, json};
 
 use crate::service::app::AppState;
+use crate::service::audit::Change;
 use crate::service::error::ApiError;
 use crate::service::extract::{
     JsonBody, from_value, integral_numbers, refuse_nulls, refuse_nulls_at,
@@ -53,12 +54,13 @@ pub(crate) fn check_policy_keys(policy: Option<&Value>, field: &str) -> Result<(
     }
 }
 
-/// `PUT …/threshold` with `p_fa` or `threshold`, and/or `policy`.
+/// `PUT …/threshold` with `p_fa` or `threshold`, and/or `policy`; the audit entry
+/// holds the monitor's view before and after.
 pub async fn put(
     State(state): State<AppState>,
     Path((id, name)): Path<(String, String)>,
     JsonBody(mut body): JsonBody,
-) -> Result<Json<ThresholdView>, ApiError> {
+) -> Result<(Extension<Change>, Json<ThresholdView>), ApiError> {
     // One `null` has a meaning here: `tests: {NAME: null}` returns a test to the
     // monitor's threshold. Anywhere else it is refused.
     match body.get("tests") {
@@ -84,13 +86,18 @@ pub async fn put(
         .get(&id)
         .ok_or_else(|| ApiError::NotFound(format!("no session '{id}'")))?;
     // The actor stores the change before it answers, in the order changes are applied.
-    Ok(Json(handle.set_threshold(&name, update).await?))
+    let (previous, now) = handle.set_threshold(&name, update).await?;
+    let change = Change {
+        session: Some(id),
+        previous: json!(previous),
+        new: json!(now),
+    };
+    Ok((Extension(change), Json(now)))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use serde_json::json;
 
     #[test]
     fn every_policy_kind_refuses_keys_it_does_not_have() {

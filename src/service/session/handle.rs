@@ -82,11 +82,12 @@ pub enum ControlCommand {
     Detach(u64),
     /// Read a monitor's thresholds.
     GetThreshold(String, oneshot::Sender<Result<ThresholdView, SessionError>>),
-    /// Change a monitor's threshold and/or policy; answered once the change is stored.
+    /// Change a monitor's threshold and/or policy; answered once the change is stored,
+    /// with the view before and after it.
     SetThreshold(
         String,
         ThresholdUpdate,
-        oneshot::Sender<Result<ThresholdView, SessionError>>,
+        oneshot::Sender<Result<(ThresholdView, ThresholdView), SessionError>>,
     ),
     /// Store the session's spec as it is now (a new session).
     Persist(oneshot::Sender<Result<(), SessionError>>),
@@ -230,12 +231,13 @@ impl SessionHandle {
     }
 
     /// Applies a threshold/policy change; the actor stores it before answering, so
-    /// changes are stored in the order they were applied (and acknowledged).
+    /// changes are stored in the order they were applied (and acknowledged). Answers the
+    /// monitor's view just before the change and after it (for the audit log).
     pub async fn set_threshold(
         &self,
         monitor: &str,
         update: ThresholdUpdate,
-    ) -> Result<ThresholdView, SessionError> {
+    ) -> Result<(ThresholdView, ThresholdView), SessionError> {
         self.ask(|tx| ControlCommand::SetThreshold(monitor.to_owned(), update, tx))
             .await?
     }

@@ -28,6 +28,11 @@ const SQLITE: &[Migration] = &[
         name: "cluster",
         sql: include_str!("migrations/sqlite/0002_cluster.sql"),
     },
+    Migration {
+        version: 3,
+        name: "audit",
+        sql: include_str!("migrations/sqlite/0003_audit.sql"),
+    },
 ];
 
 const POSTGRES: &[Migration] = &[
@@ -40,6 +45,11 @@ const POSTGRES: &[Migration] = &[
         version: 2,
         name: "cluster",
         sql: include_str!("migrations/postgres/0002_cluster.sql"),
+    },
+    Migration {
+        version: 3,
+        name: "audit",
+        sql: include_str!("migrations/postgres/0003_audit.sql"),
     },
 ];
 

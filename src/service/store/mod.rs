@@ -16,6 +16,7 @@ macro_rules! with_pool {
 }
 
 mod alarm_writer;
+pub mod audit;
 pub mod cluster;
 mod migrate;
 pub mod models;
@@ -35,6 +36,7 @@ use crate::service::wire::{AlarmLevel, AlarmRecord, MonitorSpecWire, Severity};
 use navguard_core::detect::Health;
 
 pub use alarm_writer::AlarmKey;
+pub use audit::{AckOutcome, AlarmAck, AuditEntry, AuditQuery, LoggedAlarm, SessionPattern};
 pub use cluster::{Acquire, Checkpoint, Fence, Lease};
 pub use models::StoredModel;
 pub use recordings::{RecordedFrame, Retention, StreamSummary};
@@ -523,8 +525,38 @@ impl Store {
 
     /// The alarm log, newest first.
     pub async fn alarms(&self, q: &AlarmQuery) -> Result<Vec<AlarmRecord>, StoreError> {
+        Ok(self
+            .alarm_log(q)
+            .await?
+            .into_iter()
+            .map(|a| a.record)
+            .collect())
+    }
+
+    /// Appends an entry to the audit log; returns its id.
+    pub async fn insert_audit(&self, entry: &AuditEntry) -> Result<i64, StoreError> {
+        audit::insert(&self.pool, entry).await
+    }
+
+    /// The audit log, newest first.
+    pub async fn audit(&self, q: &AuditQuery) -> Result<Vec<AuditEntry>, StoreError> {
+        audit::query(&self.pool, q).await
+    }
+
+    /// Acknowledges alarm-log entry `id` of `session`, unless it already is.
+    pub async fn ack_alarm(
+        &self,
+        session: &str,
+        id: i64,
+        ack: &AlarmAck,
+    ) -> Result<AckOutcome, StoreError> {
+        audit::ack(self, session, id, ack).await
+    }
+
+    /// The alarm log with each entry's acknowledgement, newest first.
+    pub async fn alarm_log(&self, q: &AlarmQuery) -> Result<Vec<LoggedAlarm>, StoreError> {
         let mut sql = String::from(
-            "SELECT id, session, monitor, test, state, t, statistic, threshold, dof, delay_s, raised_at_ms, cleared_t, severity FROM alarms WHERE 1 = 1",
+            "SELECT id, session, monitor, test, state, t, statistic, threshold, dof, delay_s, raised_at_ms, cleared_t, severity, acked_by, acked_at_ms, ack_comment FROM alarms WHERE 1 = 1",
         );
         let mut n = 0;
         let mut filter = |sql: &mut String, condition: &str| {
@@ -638,7 +670,7 @@ async fn add_columns(pool: &SqlitePool) -> Result<(), StoreError> {
     Ok(())
 }
 
-/// An `alarms` row in the order [`Store::alarms`] selects it.
+/// An `alarms` row in the order [`Store::alarm_log`] selects it.
 type AlarmRow = (
     i64,
     String,
@@ -653,9 +685,12 @@ type AlarmRow = (
     i64,
     Option<f64>,
     String,
+    Option<String>,
+    Option<i64>,
+    Option<String>,
 );
 
-fn alarm_from_row(row: AlarmRow) -> Result<AlarmRecord, StoreError> {
+fn alarm_from_row(row: AlarmRow) -> Result<LoggedAlarm, StoreError> {
     let (
         id,
         session,
@@ -670,8 +705,11 @@ fn alarm_from_row(row: AlarmRow) -> Result<AlarmRecord, StoreError> {
         raised_at_ms,
         cleared_t,
         severity,
+        acked_by,
+        acked_at_ms,
+        ack_comment,
     ) = row;
-    Ok(AlarmRecord {
+    let record = AlarmRecord {
         id,
         severity: Severity::parse(&severity)
             .ok_or_else(|| StoreError::Corrupt(format!("alarm severity '{severity}'")))?,
@@ -688,6 +726,12 @@ fn alarm_from_row(row: AlarmRow) -> Result<AlarmRecord, StoreError> {
         delay_s,
         raised_at_ms,
         cleared_t,
+    };
+    Ok(LoggedAlarm {
+        record,
+        acked_by,
+        acked_at_ms,
+        ack_comment,
     })
 }
 
@@ -1013,7 +1057,7 @@ mod tests {
             .fetch_all(p)
             .await
             .unwrap());
-        assert_eq!(versions, [1, 2]);
+        assert_eq!(versions, [1, 2, 3]);
         with_pool!(&store.pool, p => sqlx::query("INSERT INTO schema_version (version, name, applied_at_ms) VALUES (99, 'future', 0)")
             .execute(p)
             .await
@@ -1022,6 +1066,91 @@ mod tests {
         store.close().await;
         let err = Store::open(&path).await.unwrap_err().to_string();
         assert!(err.contains("schema version 99 is newer"), "{err}");
+    }
+
+    /// A file at the schema before the audit log (version 2), with an alarm in its log,
+    /// opens at the current version: the entry reads unacknowledged, can be acknowledged
+    /// once, and the audit log starts empty and takes entries.
+    #[tokio::test]
+    async fn a_store_from_before_the_audit_log_migrates_and_keeps_its_alarms() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("v2.db");
+        {
+            // As the previous server opened a new file: migration 1, the added columns, 2.
+            let sqlite = open_sqlite(&path).await.unwrap();
+            let pool = Pool::Sqlite(sqlite.clone());
+            migrate::apply(&pool, 1).await.unwrap();
+            add_columns(&sqlite).await.unwrap();
+            migrate::apply(&pool, 2).await.unwrap();
+            with_pool!(&pool, p => sqlx::query("INSERT INTO alarms (session, monitor, test, state, t, statistic, threshold, dof, delay_s, raised_at_ms, severity) VALUES ('s', 'm', 'r', 'isolated', 1.0, 30.0, 20.0, 1, 0.0, 5, 'alarm')")
+                .execute(p)
+                .await
+                .unwrap()
+                .rows_affected());
+            with_pool!(&pool, p => p.close().await);
+        }
+        let store = Store::open(&path).await.unwrap();
+        let versions: Vec<i64> = with_pool!(&store.pool, p => sqlx::query_scalar("SELECT version FROM schema_version ORDER BY version")
+            .fetch_all(p)
+            .await
+            .unwrap());
+        assert_eq!(versions, [1, 2, 3]);
+        let q = AlarmQuery {
+            limit: 10,
+            ..Default::default()
+        };
+        let log = store.alarm_log(&q).await.unwrap();
+        assert_eq!(log.len(), 1);
+        assert_eq!(
+            (&log[0].acked_by, log[0].acked_at_ms, &log[0].ack_comment),
+            (&None, None, &None)
+        );
+        let ack = AlarmAck {
+            acked_by: "ops".into(),
+            acked_at_ms: 9,
+            ack_comment: "checked the antenna".into(),
+        };
+        let id = log[0].record.id;
+        assert_eq!(
+            store.ack_alarm("other", id, &ack).await.unwrap(),
+            AckOutcome::Missing
+        );
+        let AckOutcome::Acked(acked) = store.ack_alarm("s", id, &ack).await.unwrap() else {
+            panic!("the first acknowledgement takes");
+        };
+        assert_eq!(acked.acked_by.as_deref(), Some("ops"));
+        let second = AlarmAck {
+            acked_by: "someone".into(),
+            ..ack.clone()
+        };
+        assert_eq!(
+            store.ack_alarm("s", id, &second).await.unwrap(),
+            AckOutcome::Already(acked)
+        );
+        let audit = AuditQuery {
+            limit: 10,
+            ..Default::default()
+        };
+        assert!(store.audit(&audit).await.unwrap().is_empty());
+        let entry = AuditEntry {
+            id: 0,
+            at_ms: 10,
+            actor: "ops".into(),
+            client: Some("127.0.0.1:5000".into()),
+            forwarded_for: None,
+            method: "DELETE".into(),
+            route: "/api/v1/sessions/{id}".into(),
+            path: "/api/v1/sessions/s".into(),
+            session: Some("s".into()),
+            reason: None,
+            previous: serde_json::json!({"id": "s"}),
+            new: serde_json::Value::Null,
+        };
+        let id = store.insert_audit(&entry).await.unwrap();
+        assert_eq!(
+            store.audit(&audit).await.unwrap(),
+            vec![AuditEntry { id, ..entry }]
+        );
     }
 
     #[tokio::test]

@@ -130,8 +130,9 @@ impl Actor {
         &mut self,
         name: &str,
         update: ThresholdUpdate,
-    ) -> Result<ThresholdView, SessionError> {
+    ) -> Result<(ThresholdView, ThresholdView), SessionError> {
         let index = self.find(name)?;
+        let previous = self.core.threshold_view(index);
         let before = self.stored();
         let undo = self.core.apply_threshold(index, &update)?;
         let stored = self.store_threshold(index, &update);
@@ -145,7 +146,7 @@ impl Actor {
             return Err(error);
         }
         self.changed();
-        Ok(self.core.threshold_view(index))
+        Ok((previous, self.core.threshold_view(index)))
     }
 
     /// Writes monitor `index`'s thresholds, policy and alarm level as now in force into
