@@ -13,7 +13,8 @@
 //!
 //! The cluster runs secured as `deploy/cluster.sh` sets it up: NATS with TLS and a
 //! password, a cluster key, Postgres with TLS (`sslmode=verify-full`) and scram-sha-256,
-//! HAProxy's TLS frontend. A client holding the nodes' NATS login but not the cluster key
+//! HAProxy's TLS frontend. NATS refuses a client without a login, Postgres one without TLS
+//! or without the password. A client holding the nodes' NATS login but not the cluster key
 //! publishes forged alarms and a forged end of session on the events subjects: no events
 //! socket delivers them (nor closes on them), while every genuine alarm still arrives, and
 //! the node counts them in `navguard_bus_rejected_total`.
@@ -480,6 +481,12 @@ const FORGED_ID: i64 = 987_654_321;
 /// key) could: for each session, an `alarm` with epoch 1 and seq 1 and 2 and no MAC, the
 /// same with a made-up MAC, and an end-of-session message; the number of messages sent.
 async fn forge_events(cluster: &Cluster, sessions: &[String]) -> u64 {
+    let anonymous = async_nats::ConnectOptions::new()
+        .add_root_certificates(PathBuf::from(cluster.url("TLS_CA")))
+        .require_tls(true)
+        .connect(cluster.url("NATS_URL"))
+        .await;
+    assert!(anonymous.is_err(), "NATS refuses a client without a login");
     let password =
         std::fs::read_to_string(cluster.url("NATS_PASSWORD_FILE")).expect("the NATS password");
     let nats = async_nats::ConnectOptions::new()
@@ -516,6 +523,34 @@ async fn forge_events(cluster: &Cluster, sessions: &[String]) -> u64 {
     }
     nats.flush().await.unwrap();
     sent
+}
+
+/// The cluster's Postgres takes the nodes' URL (TLS, verify-full, a password), and
+/// refuses the same login without TLS, and the same user without the password.
+async fn postgres_needs_tls_and_the_password(url: &str) {
+    use sqlx::Connection;
+    assert!(
+        url.contains("sslmode=verify-full") && url.contains("sslrootcert="),
+        "the nodes' store URL asks for verified TLS"
+    );
+    sqlx::PgConnection::connect(url)
+        .await
+        .expect("the nodes' URL logs in")
+        .close()
+        .await
+        .unwrap();
+    let plain = url.replace("sslmode=verify-full", "sslmode=disable");
+    assert!(
+        sqlx::PgConnection::connect(&plain).await.is_err(),
+        "a login without TLS is refused"
+    );
+    let (user, rest) = url.split_once(':').unwrap().1.split_once('@').unwrap();
+    let user = user.split_once(':').map_or(user, |(u, _)| u);
+    let no_password = format!("postgres:{user}@{rest}");
+    assert!(
+        sqlx::PgConnection::connect(&no_password).await.is_err(),
+        "a login without the password is refused"
+    );
 }
 
 /// A counter's value in a node's `/metrics`.
@@ -568,6 +603,7 @@ async fn a_cluster_survives_a_killed_node_and_a_drain_without_losing_or_repeatin
         return;
     }
     let cluster = start_cluster();
+    postgres_needs_tls_and_the_password(&cluster.url("PG_URL")).await;
     let lb = cluster.url("LB_URL");
     let lb_ws = lb.replace("http://", "ws://");
     let http = reqwest::Client::new();
