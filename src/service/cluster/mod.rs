@@ -469,3 +469,42 @@ impl Cluster {
         out
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nats_urls_are_logged_without_their_credentials() {
+        assert_eq!(
+            redacted_url("nats://user:s3cret@nats.example:4222"),
+            "nats://***@nats.example:4222"
+        );
+        assert_eq!(
+            redacted_url("tls://tok@10.0.0.1:4222"),
+            "tls://***@10.0.0.1:4222"
+        );
+        assert_eq!(
+            redacted_url("nats://127.0.0.1:4222"),
+            "nats://127.0.0.1:4222"
+        );
+        assert_eq!(redacted_url("no scheme@at all"), "no scheme@at all");
+    }
+
+    #[test]
+    fn the_settings_print_without_the_password_token_or_key() {
+        let mut config = ClusterConfig::new("n1", "http://a", "nats://h:1");
+        config.nats_security.login = NatsLogin::UserPassword {
+            user: "navguard-node".into(),
+            password: "pw-0123456789".into(),
+        };
+        let key = "k".repeat(40);
+        config.keyring = Some(Arc::new(mac::Keyring::parse(&key).unwrap()));
+        let printed = format!("{config:?}");
+        assert!(printed.contains("navguard-node"), "{printed}");
+        assert!(!printed.contains("pw-0123456789"), "{printed}");
+        assert!(!printed.contains(&key), "{printed}");
+        let token = format!("{:?}", NatsLogin::Token("tok-0123456789".into()));
+        assert!(!token.contains("tok-0123456789"), "{token}");
+    }
+}
