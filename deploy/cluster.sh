@@ -7,6 +7,9 @@ set -euo pipefail
 SCRIPT_DIR=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 REPO_ROOT=$(cd "$SCRIPT_DIR/.." && pwd)
 HAPROXY_TEMPLATE="$SCRIPT_DIR/haproxy.cfg"
+NATS_TEMPLATE="$SCRIPT_DIR/nats.conf"
+# The NATS user every node logs in as (deploy/nats.conf).
+NATS_USER=navguard-node
 
 # Seconds a component has to come up, and a node to finish draining.
 START_TIMEOUT_S=${NG_START_TIMEOUT_S:-30}
@@ -21,8 +24,14 @@ usage() {
 Usage: deploy/cluster.sh COMMAND [OPTIONS]
 
 A local navguard cluster: Postgres, NATS, N navguard nodes, HAProxy in front.
-Ports, from the base P: HAProxy P, nodes P+1..P+N, NATS P+10 (monitoring P+11),
-HAProxy stats P+12, Postgres P+20. All on 127.0.0.1.
+Ports, from the base P: HAProxy P (HTTP) and P+13 (TLS), nodes P+1..P+N, NATS
+P+10 (monitoring P+11), HAProxy stats P+12, Postgres P+20. All on 127.0.0.1.
+
+Secured like a production cluster (docs/deployment.md, Securing a cluster): a
+test CA and a certificate for 127.0.0.1 in DIR/tls (openssl), used by NATS
+(TLS required), Postgres (TLS, scram-sha-256 passwords; the nodes connect with
+sslmode=verify-full) and HAProxy's TLS frontend; a NATS password, a Postgres
+password and a cluster key (every bus message signed) in DIR/secrets, mode 0600.
 
 Commands:
   start [--dir DIR] [--port-base P] [--nodes N] [--bin PATH] [--pg-url URL]
@@ -62,10 +71,13 @@ Environment:
                        --lease-ms … --checkpoint-ms 1000 --drain-wait-ms 1500;
                        @NATS_URL@ @NODE_ID@ @NODE_URL@ @LEASE_MS@ are replaced)
   NAVGUARD_PG_URL      like --pg-url
+  NG_PG_TRUST          1: the Postgres this script starts trusts every connection
+                       from 127.0.0.1 (no password, no TLS): throw-away clusters
+                       only
   NG_START_TIMEOUT_S   seconds a component has to come up (30)
   NG_DRAIN_TIMEOUT_S   seconds `drain` and `stop` wait for a node (60)
 
-Needs bash, curl, and the Debian packages postgresql (unless --pg-url; then
+Needs bash, curl, openssl, and the Debian packages postgresql (unless --pg-url; then
 postgresql-client for pg_isready), nats-server and haproxy. As root, Postgres
 runs as the user nobody.
 EOF
@@ -143,8 +155,12 @@ derive() {
   NATS_MON_PORT=$((PORT_BASE + 11))
   STATS_PORT=$((PORT_BASE + 12))
   PG_PORT=$((PORT_BASE + 20))
+  LB_TLS_PORT=$((PORT_BASE + 13))
   LB_URL="http://127.0.0.1:$LB_PORT"
-  NATS_URL="nats://127.0.0.1:$NATS_PORT"
+  LB_TLS_URL="https://127.0.0.1:$LB_TLS_PORT"
+  NATS_URL="tls://127.0.0.1:$NATS_PORT"
+  TLS_DIR="$DIR/tls"
+  SECRETS="$DIR/secrets"
   NATS_MONITOR_URL="http://127.0.0.1:$NATS_MON_PORT"
   HAPROXY_STATS_URL="http://127.0.0.1:$STATS_PORT/"
 }
@@ -168,6 +184,8 @@ write_env() {
     {
       echo "# Written by deploy/cluster.sh; source it: . $(shq "$DIR/cluster.env")"
       echo "LB_URL=$(shq "$LB_URL")"
+      echo "LB_TLS_URL=$(shq "$LB_TLS_URL")"
+      echo "TLS_CA=$(shq "$TLS_DIR/ca.pem")"
       echo "NODES=$NODES"
       for k in $(seq 1 "$NODES"); do
         pid=$(pid_of "node$k")
@@ -177,6 +195,10 @@ write_env() {
       done
       echo "PG_URL=$(shq "$PG_URL")"
       echo "NATS_URL=$(shq "$NATS_URL")"
+      echo "NATS_CONF=$(shq "$DIR/nats.conf")"
+      echo "NATS_USER=$(shq "$NATS_USER")"
+      echo "NATS_PASSWORD_FILE=$(shq "$SECRETS/nats-password")"
+      echo "CLUSTER_KEY_FILE=$(shq "$SECRETS/cluster.key")"
       echo "NATS_MONITOR_URL=$(shq "$NATS_MONITOR_URL")"
       echo "HAPROXY_STATS_URL=$(shq "$HAPROXY_STATS_URL")"
       echo "NG_DIR=$(shq "$DIR")"
@@ -286,6 +308,49 @@ signal_wait() {
   wait_gone "$pid" "$s"
 }
 
+# ---------------------------------------------------------------- secrets
+
+# 32 random bytes as 64 hex digits.
+random_hex() { od -An -N32 -tx1 /dev/urandom | tr -d ' \n'; }
+
+# DIR/secrets (0700): the NATS and Postgres passwords and the cluster key, each made
+# once and kept with the cluster's data.
+make_secrets() {
+  local f
+  (
+    umask 077
+    mkdir -p "$SECRETS"
+    for f in nats-password pg-password cluster.key; do
+      [ -s "$SECRETS/$f" ] || random_hex >"$SECRETS/$f"
+    done
+  )
+}
+
+# DIR/tls: a test CA (30 days) and a certificate it signs for 127.0.0.1 and localhost
+# (server.pem, server.key; haproxy.pem holds both), made once.
+make_tls() {
+  [ -s "$TLS_DIR/haproxy.pem" ] && return 0
+  need openssl openssl
+  mkdir -p "$TLS_DIR"
+  local ext="$TLS_DIR/server.ext"
+  printf '%s\n' 'basicConstraints=critical,CA:FALSE' 'keyUsage=critical,digitalSignature,keyEncipherment' \
+    'extendedKeyUsage=serverAuth' 'subjectAltName=IP:127.0.0.1,DNS:localhost' >"$ext"
+  if ! {
+    (umask 077 && openssl req -x509 -newkey ec -pkeyopt ec_paramgen_curve:P-256 -nodes -days 30 \
+      -subj "/CN=navguard test CA" -addext 'basicConstraints=critical,CA:TRUE' \
+      -addext 'keyUsage=critical,keyCertSign,cRLSign' -keyout "$TLS_DIR/ca.key" -out "$TLS_DIR/ca.pem") &&
+      (umask 077 && openssl req -newkey ec -pkeyopt ec_paramgen_curve:P-256 -nodes -subj "/CN=127.0.0.1" \
+        -keyout "$TLS_DIR/server.key" -out "$TLS_DIR/server.csr") &&
+      openssl x509 -req -in "$TLS_DIR/server.csr" -CA "$TLS_DIR/ca.pem" -CAkey "$TLS_DIR/ca.key" \
+        -set_serial "0x$(random_hex | cut -c1-16)" -days 30 -extfile "$ext" -out "$TLS_DIR/server.pem"
+  } >"$TLS_DIR/openssl.log" 2>&1; then
+    tail_log "$TLS_DIR/openssl.log"
+    die "openssl could not make the test certificates in $TLS_DIR"
+  fi
+  (umask 077 && cat "$TLS_DIR/server.pem" "$TLS_DIR/server.key" >"$TLS_DIR/haproxy.pem")
+  chmod 644 "$TLS_DIR/ca.pem" "$TLS_DIR/server.pem"
+}
+
 # ---------------------------------------------------------------- postgres
 
 find_pg_bin() {
@@ -333,18 +398,29 @@ start_postgres() {
     runuser -u nobody -- test -w "$DIR/pg" ||
       die "user nobody cannot write $DIR/pg (Postgres refuses to run as root, so it runs as nobody): use a --dir whose parents everybody may enter, e.g. under /tmp"
   fi
+  # The server's copy of the certificate and key: Postgres wants its key readable by its
+  # own user only.
+  (umask 077 && cp "$TLS_DIR/server.pem" "$TLS_DIR/server.key" "$DIR/pg/")
+  (umask 077 && cp "$SECRETS/pg-password" "$DIR/pg/pwfile")
+  if [ "$(id -u)" -eq 0 ]; then chown nobody "$DIR/pg/server.pem" "$DIR/pg/server.key" "$DIR/pg/pwfile"; fi
   if [ ! -f "$data/PG_VERSION" ]; then
-    "${PG_AS[@]}" "$PG_BIN/initdb" -D "$data" -U postgres --auth=trust --no-sync \
-      >"$DIR/pg/initdb.log" 2>&1 || {
+    "${PG_AS[@]}" "$PG_BIN/initdb" -D "$data" -U postgres --auth=scram-sha-256 \
+      --pwfile="$DIR/pg/pwfile" --no-sync >"$DIR/pg/initdb.log" 2>&1 || {
       echo "failed"
       tail_log "$DIR/pg/initdb.log"
       exit 1
     }
-    # Trust, over TCP on 127.0.0.1 only: no Unix socket, no other address.
+  fi
+  rm -f "$DIR/pg/pwfile"
+  # Over TCP on 127.0.0.1 only (no Unix socket, no other address): TLS and a scram-sha-256
+  # password, or, with NG_PG_TRUST=1, anything (throw-away clusters only).
+  if [ "${NG_PG_TRUST:-0}" = 1 ]; then
     echo "host all all 127.0.0.1/32 trust" >"$data/pg_hba.conf"
+  else
+    echo "hostssl all all 127.0.0.1/32 scram-sha-256" >"$data/pg_hba.conf"
   fi
   if ! "${PG_AS[@]}" "$PG_BIN/pg_ctl" -D "$data" -l "$log" -w -t "$START_TIMEOUT_S" \
-    -o "-p $PG_PORT -c listen_addresses=127.0.0.1 -c unix_socket_directories= -c max_connections=200" \
+    -o "-p $PG_PORT -c listen_addresses=127.0.0.1 -c unix_socket_directories= -c max_connections=200 -c ssl=on -c ssl_cert_file='$DIR/pg/server.pem' -c ssl_key_file='$DIR/pg/server.key'" \
     start >/dev/null 2>&1; then
     echo "failed"
     echo "cluster.sh: postgres did not come up within $START_TIMEOUT_S s" >&2
@@ -399,12 +475,28 @@ nats_pid() {
   if alive "$pid"; then echo "$pid"; fi
 }
 
+# DIR/nats.conf (0600): the variables deploy/nats.conf uses, then deploy/nats.conf.
+write_nats_conf() {
+  (
+    umask 077
+    {
+      echo "# Written by deploy/cluster.sh: the variables, then $NATS_TEMPLATE."
+      echo "NG_NATS_PASSWORD: \"$(cat "$SECRETS/nats-password")\""
+      echo "NG_TLS_CERT: \"$TLS_DIR/server.pem\""
+      echo "NG_TLS_KEY: \"$TLS_DIR/server.key\""
+      cat "$NATS_TEMPLATE"
+    } >"$DIR/nats.conf"
+  )
+}
+
 start_nats() {
   local t0
   t0=$(now_ms)
   printf 'nats       127.0.0.1:%s (monitoring %s) ... ' "$NATS_PORT" "$NATS_MON_PORT"
+  write_nats_conf
   # Core NATS only: the nodes use no JetStream.
-  launch nats "$DIR/nats.log" nats-server -a 127.0.0.1 -p "$NATS_PORT" -m "$NATS_MON_PORT" -n navguard-nats
+  launch nats "$DIR/nats.log" nats-server -c "$DIR/nats.conf" -a 127.0.0.1 -p "$NATS_PORT" \
+    -m "$NATS_MON_PORT" -n navguard-nats
   wait_up nats "$(pid_of nats)" "$DIR/nats.log" nats_ready
   echo "up in $(since_s "$t0") s (pid $(pid_of nats))"
 }
@@ -433,16 +525,19 @@ start_node() {
     w=${w//@LEASE_MS@/$LEASE_MS}
     args+=("$w")
   done
-  # The command line, a Postgres password masked.
-  echo "=== $(date -u +%FT%TZ) cluster.sh: $BIN --bind 127.0.0.1:$port --db $(mask_url "$PG_URL") ${args[*]}" \
-    >>"$DIR/node$k.log"
-  if [ -n "$TOKEN" ]; then
-    launch "node$k" "$DIR/node$k.log" env NAVGUARD_TOKEN="$TOKEN" \
-      "$BIN" --bind "127.0.0.1:$port" --db "$PG_URL" "${args[@]}"
-  else
-    launch "node$k" "$DIR/node$k.log" env -u NAVGUARD_TOKEN \
-      "$BIN" --bind "127.0.0.1:$port" --db "$PG_URL" "${args[@]}"
+  # Secrets go in the environment, not on the command line (which `ps` shows); the
+  # NATS login, TLS and cluster key only to a node that joins the cluster.
+  local -a envs=(env -u NAVGUARD_TOKEN NAVGUARD_DB="$PG_URL")
+  if [ -n "$TOKEN" ]; then envs+=(NAVGUARD_TOKEN="$TOKEN"); fi
+  if [[ " ${args[*]} " == *" --nats "* ]]; then
+    envs+=(NAVGUARD_NATS_USER="$NATS_USER" NAVGUARD_NATS_PASSWORD="$(cat "$SECRETS/nats-password")"
+      NAVGUARD_NATS_TLS_CA="$TLS_DIR/ca.pem" NAVGUARD_NATS_TLS=true
+      NAVGUARD_CLUSTER_KEY_FILE="$SECRETS/cluster.key")
   fi
+  # The command line and the store, a Postgres password masked.
+  echo "=== $(date -u +%FT%TZ) cluster.sh: NAVGUARD_DB=$(mask_url "$PG_URL") $BIN --bind 127.0.0.1:$port ${args[*]}" \
+    >>"$DIR/node$k.log"
+  launch "node$k" "$DIR/node$k.log" "${envs[@]}" "$BIN" --bind "127.0.0.1:$port" "${args[@]}"
   wait_up "node$k" "$(pid_of "node$k")" "$DIR/node$k.log" node_ready "$k"
   echo "up in $(since_s "$t0") s (pid $(pid_of "node$k"))"
 }
@@ -474,7 +569,8 @@ write_haproxy_cfg() {
 
 export_haproxy_env() {
   local k
-  export NG_LB_PORT="$LB_PORT" NG_STATS_PORT="$STATS_PORT"
+  export NG_LB_PORT="$LB_PORT" NG_STATS_PORT="$STATS_PORT" NG_LB_TLS_PORT="$LB_TLS_PORT"
+  export NG_TLS_PEM="$TLS_DIR/haproxy.pem"
   for k in $(seq 1 "$1"); do
     export "NG_NODE${k}_PORT=$(node_port "$k")"
   done
@@ -538,6 +634,7 @@ cmd_start() {
   [[ "$LEASE_MS" =~ ^[0-9]+$ ]] || die "--lease-ms must be a number of milliseconds, not '$LEASE_MS'"
   derive
   need curl curl
+  need openssl openssl
   need nats-server nats-server
   need haproxy haproxy
   if [ -n "$PG_URL_OPT" ]; then
@@ -546,7 +643,11 @@ cmd_start() {
     PG_BIN=$(find_pg_bin)
   else
     PG_OWNED=1
-    PG_URL="postgres://postgres@127.0.0.1:$PG_PORT/postgres"
+    if [ "${NG_PG_TRUST:-0}" = 1 ]; then
+      PG_URL="postgres://postgres@127.0.0.1:$PG_PORT/postgres"
+    else
+      PG_URL="postgres://postgres:@PG_PASSWORD@@127.0.0.1:$PG_PORT/postgres?sslmode=verify-full&sslrootcert=$TLS_DIR/ca.pem"
+    fi
     PG_BIN=$(find_pg_bin)
     [ -n "$PG_BIN" ] || die "Postgres server binaries (initdb, pg_ctl) not found: install the Debian package postgresql (apt-get install postgresql), or pass --pg-url"
     if [ "$(id -u)" -eq 0 ]; then need runuser util-linux; fi
@@ -563,6 +664,7 @@ cmd_start() {
   fi
   local k
   port_must_be_free "$LB_PORT" "HAProxy frontend"
+  port_must_be_free "$LB_TLS_PORT" "HAProxy TLS frontend"
   for k in $(seq 1 "$NODES"); do port_must_be_free "$(node_port "$k")" "node$k"; done
   port_must_be_free "$NATS_PORT" "NATS"
   port_must_be_free "$NATS_MON_PORT" "NATS monitoring"
@@ -573,6 +675,9 @@ cmd_start() {
 
   mkdir -p "$DIR" "$DIR/run"
   rm -f "$DIR"/run/*.pid "$DIR"/run/*.rc
+  make_secrets
+  make_tls
+  PG_URL=${PG_URL//@PG_PASSWORD@/$(cat "$SECRETS/pg-password")}
   write_env
   trap start_failed EXIT
   echo "starting a navguard cluster of $NODES nodes in $DIR ($BIN)"
@@ -586,13 +691,14 @@ cmd_start() {
   echo
   echo "cluster up:"
   echo "  load balancer   $LB_URL   (dashboard: $LB_URL/)"
+  echo "  load balancer   $LB_TLS_URL   (TLS; CA $TLS_DIR/ca.pem)"
   for k in $(seq 1 "$NODES"); do
     printf '  node%-11s %s   pid %s   log %s\n' "$k" "$(node_url "$k")" "$(pid_of "node$k")" "$DIR/node$k.log"
   done
   if [ "$PG_OWNED" = 1 ]; then
-    echo "  postgres        $PG_URL   log $DIR/pg/postgres.log"
+    echo "  postgres        $(mask_url "$PG_URL")   log $DIR/pg/postgres.log"
   else
-    echo "  postgres        $PG_URL   (external)"
+    echo "  postgres        $(mask_url "$PG_URL")   (external)"
   fi
   echo "  nats            $NATS_URL   monitoring $NATS_MONITOR_URL/varz   log $DIR/nats.log"
   echo "  haproxy stats   $HAPROXY_STATS_URL   log $DIR/haproxy.log"
@@ -656,13 +762,13 @@ cmd_status() {
   # Postgres
   if [ "$PG_OWNED" = 1 ]; then
     pid=$(pg_pid)
-    if alive "$pid" && pg_ready; then line postgres up "pid $pid" "$PG_URL"; else
-      line postgres down - "$PG_URL"
+    if alive "$pid" && pg_ready; then line postgres up "pid $pid" "$(mask_url "$PG_URL")"; else
+      line postgres down - "$(mask_url "$PG_URL")"
       all_up=3
     fi
   else
-    if [ -n "$(pg_isready_cmd)" ] && pg_ready; then line postgres up external "$PG_URL"; else
-      line postgres down external "$PG_URL"
+    if [ -n "$(pg_isready_cmd)" ] && pg_ready; then line postgres up external "$(mask_url "$PG_URL")"; else
+      line postgres down external "$(mask_url "$PG_URL")"
       all_up=3
     fi
   fi

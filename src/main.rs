@@ -6,10 +6,13 @@ mod cli;
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::Context;
 use clap::{Args, Parser, Subcommand};
+use navguard::service::cluster::mac::Keyring;
+use navguard::service::cluster::{NatsLogin, NatsSecurity};
 use navguard::service::{self, Limits, ServiceConfig};
 
 /// navguard: navigation integrity monitoring over WebSocket and REST.
@@ -25,7 +28,7 @@ struct Cli {
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Serve the API, sockets and dashboard (the default).
-    Serve(ServeArgs),
+    Serve(Box<ServeArgs>),
     /// Write a simulated scenario as ingest frames, one epoch per JSON line.
     Simulate(cli::simulate::SimulateArgs),
     /// Convert real receiver files (RINEX, GnssLogger, GSDC) into ingest frames with raw pseudoranges.
@@ -130,6 +133,60 @@ struct ServeArgs {
     /// (docs/deployment.md). Unset: a single node.
     #[arg(long, env = "NAVGUARD_NATS")]
     nats: Option<String>,
+    /// NATS user (with --nats-password; the server's `authorization { users }`).
+    #[arg(long, env = "NAVGUARD_NATS_USER", requires_all = ["nats", "nats_password"])]
+    nats_user: Option<String>,
+    /// NATS password of --nats-user (prefer the environment: a flag shows in `ps`).
+    #[arg(
+        long,
+        env = "NAVGUARD_NATS_PASSWORD",
+        hide_env_values = true,
+        requires = "nats_user"
+    )]
+    nats_password: Option<String>,
+    /// NATS token (the server's `authorization { token }`).
+    #[arg(long, env = "NAVGUARD_NATS_TOKEN", hide_env_values = true, requires = "nats",
+          conflicts_with_all = ["nats_user", "nats_creds", "nats_nkey"])]
+    nats_token: Option<String>,
+    /// NATS credentials file (`.creds`: a user JWT and its NKey seed, from `nsc`).
+    #[arg(long, env = "NAVGUARD_NATS_CREDS", requires = "nats",
+          conflicts_with_all = ["nats_user", "nats_nkey"])]
+    nats_creds: Option<PathBuf>,
+    /// File holding the node's NKey seed (`SU…`; the server lists its public key).
+    #[arg(
+        long,
+        env = "NAVGUARD_NATS_NKEY",
+        requires = "nats",
+        conflicts_with = "nats_user"
+    )]
+    nats_nkey: Option<PathBuf>,
+    /// CA certificates (PEM) the NATS server's certificate must chain to (with the system's).
+    #[arg(long, env = "NAVGUARD_NATS_TLS_CA", requires = "nats")]
+    nats_tls_ca: Option<PathBuf>,
+    /// Client certificate (PEM) for a NATS server that verifies clients (with --nats-tls-key).
+    #[arg(long, env = "NAVGUARD_NATS_TLS_CERT", requires_all = ["nats", "nats_tls_key"])]
+    nats_tls_cert: Option<PathBuf>,
+    /// The client certificate's private key (PEM).
+    #[arg(long, env = "NAVGUARD_NATS_TLS_KEY", requires = "nats_tls_cert")]
+    nats_tls_key: Option<PathBuf>,
+    /// Refuse a NATS server that does not offer TLS (implied by a `tls://` URL).
+    #[arg(long, env = "NAVGUARD_NATS_TLS", requires = "nats")]
+    nats_tls: bool,
+    /// The cluster key: every bus message is signed with it (HMAC-SHA256) and one without
+    /// a valid signature is dropped. At least 32 characters; several, separated by
+    /// whitespace, during a rotation (the first signs, each verifies). Unset: messages are
+    /// neither signed nor checked (throw-away clusters only).
+    #[arg(
+        long,
+        env = "NAVGUARD_CLUSTER_KEY",
+        hide_env_values = true,
+        requires = "nats",
+        conflicts_with = "cluster_key_file"
+    )]
+    cluster_key: Option<String>,
+    /// File holding the cluster key(s), one per line (like --cluster-key).
+    #[arg(long, env = "NAVGUARD_CLUSTER_KEY_FILE", requires = "nats")]
+    cluster_key_file: Option<PathBuf>,
     /// This node's id in the cluster (default: node-PORT).
     #[arg(long, env = "NAVGUARD_NODE_ID", requires = "nats")]
     node_id: Option<String>,
@@ -151,7 +208,45 @@ struct ServeArgs {
 }
 
 impl ServeArgs {
-    fn into_config(self) -> ServiceConfig {
+    /// The NATS login and TLS settings of the flags.
+    fn nats_security(&self) -> NatsSecurity {
+        let login = if let (Some(user), Some(password)) = (&self.nats_user, &self.nats_password) {
+            NatsLogin::UserPassword {
+                user: user.clone(),
+                password: password.clone(),
+            }
+        } else if let Some(token) = &self.nats_token {
+            NatsLogin::Token(token.clone())
+        } else if let Some(path) = &self.nats_creds {
+            NatsLogin::CredsFile(path.clone())
+        } else if let Some(path) = &self.nats_nkey {
+            NatsLogin::NkeyFile(path.clone())
+        } else {
+            NatsLogin::None
+        };
+        NatsSecurity {
+            login,
+            tls_ca: self.nats_tls_ca.clone(),
+            tls_client: self.nats_tls_cert.clone().zip(self.nats_tls_key.clone()),
+            require_tls: self.nats_tls,
+        }
+    }
+
+    /// The cluster keys of --cluster-key or --cluster-key-file, if either is given.
+    fn keyring(&self) -> anyhow::Result<Option<Arc<Keyring>>> {
+        let text = match (&self.cluster_key, &self.cluster_key_file) {
+            (Some(key), _) => key.clone(),
+            (None, Some(path)) => std::fs::read_to_string(path)
+                .with_context(|| format!("reading --cluster-key-file {}", path.display()))?,
+            (None, None) => return Ok(None),
+        };
+        let ring = Keyring::parse(&text).context("--cluster-key")?;
+        Ok(Some(Arc::new(ring)))
+    }
+
+    fn into_config(self) -> anyhow::Result<ServiceConfig> {
+        let keyring = self.keyring()?;
+        let nats_security = self.nats_security();
         let cluster = self.nats.as_ref().map(|nats| {
             let mut c = navguard::service::cluster::ClusterConfig::new(
                 self.node_id
@@ -165,9 +260,11 @@ impl ServeArgs {
             c.lease = Duration::from_millis(self.lease_ms);
             c.checkpoint_interval = Duration::from_millis(self.checkpoint_ms);
             c.drain_wait = Duration::from_millis(self.drain_wait_ms);
+            c.nats_security = nats_security;
+            c.keyring = keyring;
             c
         });
-        ServiceConfig {
+        Ok(ServiceConfig {
             cluster,
             bind: self.bind,
             db_path: self.db,
@@ -199,7 +296,7 @@ impl ServeArgs {
                 max_age_ms: (self.recording_max_age_h * 3600 * 1000) as i64,
             },
             history_s: self.history_s,
-        }
+        })
     }
 }
 
@@ -244,7 +341,7 @@ fn reload_tokens_on_sighup(server: &service::Server) {
 }
 
 async fn serve(args: ServeArgs) -> anyhow::Result<()> {
-    let config = args.into_config();
+    let config = args.into_config()?;
     let db = navguard::service::store::display_db(&config.db_path);
     let server = service::start(config).await.context("starting navguard")?;
     println!(
@@ -290,7 +387,7 @@ async fn run() -> anyhow::Result<()> {
         .init();
     let cli = Cli::parse();
     match cli.command {
-        Some(Command::Serve(args)) => serve(args).await,
+        Some(Command::Serve(args)) => serve(*args).await,
         Some(Command::Simulate(args)) => cli::simulate::run(args),
         Some(Command::Convert(args)) => cli::convert::run(args),
         Some(Command::Replay(args)) => cli::replay::run(args).await,

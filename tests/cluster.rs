@@ -11,7 +11,15 @@
 //! answered through the load balancer on both sockets; after NATS is restarted by hand,
 //! `deploy/cluster.sh status` reports it and `stop` stops it.
 //!
-//! Needs Debian's `postgresql`, `nats-server` and `haproxy`: without them the test says
+//! The cluster runs secured as `deploy/cluster.sh` sets it up: NATS with TLS and a
+//! password, a cluster key, Postgres with TLS (`sslmode=verify-full`) and scram-sha-256,
+//! HAProxy's TLS frontend. NATS refuses a client without a login, Postgres one without TLS
+//! or without the password. A client holding the nodes' NATS login but not the cluster key
+//! publishes forged alarms and a forged end of session on the events subjects: no events
+//! socket delivers them (nor closes on them), while every genuine alarm still arrives, and
+//! the node counts them in `navguard_bus_rejected_total`.
+//!
+//! Needs Debian's `postgresql`, `nats-server`, `haproxy` and `openssl`: without them the test says
 //! how to run it and passes, unless `NAVGUARD_CLUSTER_TEST=1` (set by `.ci/run`), which
 //! makes a missing engine a failure.
 
@@ -50,6 +58,9 @@ fn engines_missing() -> Vec<&'static str> {
     };
     if !on_path("nats-server") {
         missing.push("nats-server");
+    }
+    if !on_path("openssl") {
+        missing.push("openssl");
     }
     if !on_path("haproxy") && !Path::new("/usr/sbin/haproxy").exists() {
         missing.push("haproxy");
@@ -463,6 +474,98 @@ async fn open_events(lb_ws: &str, id: &str) -> (Socket, String) {
     (socket, node)
 }
 
+/// An id no genuine alarm has (the log's ids count up from 1).
+const FORGED_ID: i64 = 987_654_321;
+
+/// Publishes on NATS what an outsider with the nodes' NATS login (but without the cluster
+/// key) could: for each session, an `alarm` with epoch 1 and seq 1 and 2 and no MAC, the
+/// same with a made-up MAC, and an end-of-session message; the number of messages sent.
+async fn forge_events(cluster: &Cluster, sessions: &[String]) -> u64 {
+    let anonymous = async_nats::ConnectOptions::new()
+        .add_root_certificates(PathBuf::from(cluster.url("TLS_CA")))
+        .require_tls(true)
+        .connect(cluster.url("NATS_URL"))
+        .await;
+    assert!(anonymous.is_err(), "NATS refuses a client without a login");
+    let password =
+        std::fs::read_to_string(cluster.url("NATS_PASSWORD_FILE")).expect("the NATS password");
+    let nats = async_nats::ConnectOptions::new()
+        .user_and_password(cluster.url("NATS_USER"), password.trim().to_owned())
+        .add_root_certificates(PathBuf::from(cluster.url("TLS_CA")))
+        .require_tls(true)
+        .connect(cluster.url("NATS_URL"))
+        .await
+        .expect("the outsider reaches NATS with the nodes' login");
+    let mut sent = 0;
+    for id in sessions {
+        let subject = format!("navguard.events.{id}");
+        for (seq, mac) in [(1, None), (2, None), (3, Some("00".repeat(32)))] {
+            let mut headers = async_nats::HeaderMap::new();
+            headers.insert("Navguard-Epoch", "1");
+            headers.insert("Navguard-Seq", seq.to_string().as_str());
+            if let Some(mac) = &mac {
+                headers.insert("Navguard-Sender", "node1");
+                headers.insert("Navguard-Mac", mac.as_str());
+            }
+            let alarm = json!({"type": "alarm", "id": FORGED_ID, "session": id,
+                "severity": "alarm", "state": "isolated", "t": 1.0});
+            nats.publish_with_headers(subject.clone(), headers, alarm.to_string().into())
+                .await
+                .unwrap();
+            sent += 1;
+        }
+        let mut end = async_nats::HeaderMap::new();
+        end.insert("Navguard-End", "deleted");
+        nats.publish_with_headers(subject, end, "{}".into())
+            .await
+            .unwrap();
+        sent += 1;
+    }
+    nats.flush().await.unwrap();
+    sent
+}
+
+/// The cluster's Postgres takes the nodes' URL (TLS, verify-full, a password), and
+/// refuses the same login without TLS, and the same user without the password.
+async fn postgres_needs_tls_and_the_password(url: &str) {
+    use sqlx::Connection;
+    assert!(
+        url.contains("sslmode=verify-full") && url.contains("sslrootcert="),
+        "the nodes' store URL asks for verified TLS"
+    );
+    sqlx::PgConnection::connect(url)
+        .await
+        .expect("the nodes' URL logs in")
+        .close()
+        .await
+        .unwrap();
+    let plain = url.replace("sslmode=verify-full", "sslmode=disable");
+    assert!(
+        sqlx::PgConnection::connect(&plain).await.is_err(),
+        "a login without TLS is refused"
+    );
+    let (user, rest) = url.split_once(':').unwrap().1.split_once('@').unwrap();
+    let user = user.split_once(':').map_or(user, |(u, _)| u);
+    let no_password = format!("postgres:{user}@{rest}");
+    assert!(
+        sqlx::PgConnection::connect(&no_password).await.is_err(),
+        "a login without the password is refused"
+    );
+}
+
+/// A counter's value in a node's `/metrics`.
+async fn metric(node_url: &str, name: &str) -> u64 {
+    let text = reqwest::get(format!("{node_url}/metrics"))
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    text.lines()
+        .find_map(|l| l.strip_prefix(name)?.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no {name} in {node_url}/metrics"))
+}
+
 /// A nats-server this test started; killed (by its pid) on drop if still running.
 struct HandStarted(std::process::Child);
 
@@ -492,7 +595,7 @@ async fn a_cluster_survives_a_killed_node_and_a_drain_without_losing_or_repeatin
     if !missing.is_empty() {
         let required = std::env::var("NAVGUARD_CLUSTER_TEST").is_ok_and(|v| v == "1");
         let message = format!(
-            "cluster test skipped: {} not installed (Debian: apt-get install postgresql nats-server haproxy; .ci/run installs them and sets NAVGUARD_CLUSTER_TEST=1)",
+            "cluster test skipped: {} not installed (Debian: apt-get install postgresql nats-server haproxy openssl; .ci/run installs them and sets NAVGUARD_CLUSTER_TEST=1)",
             missing.join(", ")
         );
         assert!(!required, "{message}");
@@ -500,6 +603,7 @@ async fn a_cluster_survives_a_killed_node_and_a_drain_without_losing_or_repeatin
         return;
     }
     let cluster = start_cluster();
+    postgres_needs_tls_and_the_password(&cluster.url("PG_URL")).await;
     let lb = cluster.url("LB_URL");
     let lb_ws = lb.replace("http://", "ws://");
     let http = reqwest::Client::new();
@@ -573,6 +677,23 @@ async fn a_cluster_survives_a_killed_node_and_a_drain_without_losing_or_repeatin
                 .await
                 .unwrap();
         observers.push(socket);
+    }
+    // Forged events on every watched session's subject, once node1 subscribed (its first
+    // `stats` follows the subscription): dropped.
+    for (socket, id) in observers.iter_mut().zip(&watched) {
+        match tokio::time::timeout(Duration::from_secs(10), socket.next()).await {
+            Ok(Some(Ok(Message::Text(t)))) => assert!(t.contains("\"stats\""), "{id}: {t}"),
+            other => panic!("{id}: no first stats on node1's events socket: {other:?}"),
+        }
+    }
+    let forged = forge_events(&cluster, &watched).await;
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while metric(&cluster.node_url("node1"), "navguard_bus_rejected_total").await < forged {
+        assert!(
+            Instant::now() < deadline,
+            "node1 did not count the {forged} forged messages within 5 s"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
     }
 
     // Phase 1, then kill -9 the node with the most sessions at once.
@@ -797,8 +918,13 @@ async fn a_cluster_survives_a_killed_node_and_a_drain_without_losing_or_repeatin
         );
     }
 
-    // node1's observers saw the alarms of the sessions the other nodes owned.
+    // node1's observers saw the alarms of the sessions the other nodes owned, and none of
+    // the forged ones (nor closed on the forged end).
     let seen = alarms_seen(&mut observers, Duration::from_millis(500)).await;
+    assert!(
+        !seen.contains(&FORGED_ID),
+        "a forged alarm reached an events socket"
+    );
     for id in &watched {
         let log: Value = get_json(&format!(
             "{lb}/api/v1/alarms?session={id}&severity=alarm&limit=1000"
@@ -858,6 +984,20 @@ async fn a_cluster_survives_a_killed_node_and_a_drain_without_losing_or_repeatin
         .unwrap()
         .trim()
         .to_owned();
+    // HAProxy's TLS frontend answers with the test CA's certificate for 127.0.0.1.
+    let tls_health = Command::new("curl")
+        .args(["-sS", "-o", "/dev/null", "-w", "%{http_code}", "--cacert"])
+        .arg(cluster.url("TLS_CA"))
+        .arg(format!("{}/healthz", cluster.url("LB_TLS_URL")))
+        .output()
+        .unwrap();
+    assert_eq!(
+        String::from_utf8_lossy(&tls_health.stdout),
+        "200",
+        "GET /healthz over TLS through HAProxy: {}",
+        String::from_utf8_lossy(&tls_health.stderr)
+    );
+
     let killed = Command::new("kill").arg(&old_pid).status().unwrap();
     assert!(killed.success(), "kill {old_pid}");
     let nats_port = port_of(&cluster.url("NATS_URL"));
@@ -876,6 +1016,7 @@ async fn a_cluster_survives_a_killed_node_and_a_drain_without_losing_or_repeatin
     let log = std::fs::File::create(cluster.dir.path().join("nats-by-hand.log")).unwrap();
     let mut nats = HandStarted(
         Command::new("nats-server")
+            .args(["-c", &cluster.url("NATS_CONF")])
             .args(["-a", "127.0.0.1", "-p", &nats_port.to_string()])
             .args(["-m", &port_of(&monitor).to_string(), "-n", "navguard-nats"])
             .stdout(log.try_clone().unwrap())

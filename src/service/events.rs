@@ -100,7 +100,8 @@ async fn first_stats(state: &AppState, cluster: &Cluster, id: &str) -> Option<St
 }
 
 /// Relays one event from the bus to the socket; false when the socket is done (the bus
-/// closed, the session ended, an event was missed, or the client went away).
+/// closed, the session ended, an event was missed, or the client went away). A message
+/// without a valid MAC (with a cluster key) is dropped before anything else is read.
 async fn relay(
     socket: &mut WebSocket,
     event: Option<async_nats::Message>,
@@ -111,6 +112,9 @@ async fn relay(
         close_socket(socket, 1011, "the event bus closed; reconnect").await;
         return false;
     };
+    if !cluster.accept(&message) {
+        return true;
+    }
     if bus::is_end(message.headers.as_ref()) {
         let reason = "subscriber too slow or session gone; reconnect and re-read /api/v1/alarms";
         close_socket(socket, 1008, reason).await;
@@ -189,7 +193,9 @@ async fn run_cluster(mut socket: WebSocket, state: AppState, cluster: Arc<Cluste
                 }
             }
             snapshot = stats.next() => {
-                if let Some(message) = snapshot {
+                if let Some(message) = snapshot
+                    && cluster.accept(&message)
+                {
                     latest_stats = Some(message.payload);
                 }
             }

@@ -12,6 +12,10 @@
 //! socket closes with 1008 so the client re-reads `GET /api/v1/alarms?after=ID`, exactly as
 //! a local subscriber too slow for its queue does. Alarms are in the shared log before
 //! they are published.
+//!
+//! With a cluster key every message also carries `Navguard-Sender`, `Navguard-Time` and
+//! `Navguard-Mac` ([`super::mac`]), added as it leaves the publisher; a subscriber drops a
+//! message without a valid MAC before reading anything else of it.
 
 use std::time::Duration;
 
@@ -136,10 +140,23 @@ impl SeqCheck {
 }
 
 /// Publishes queued messages in order (one task per node, so one session's messages keep
-/// the order the actor queued them in).
-pub(super) async fn publisher(nats: async_nats::Client, mut rx: mpsc::Receiver<Outgoing>) {
+/// the order the actor queued them in), each sealed with the cluster key if there is one.
+/// It holds no reference to the [`super::Cluster`], so it ends when the cluster is dropped.
+pub(super) async fn publisher(
+    nats: async_nats::Client,
+    keyring: Option<std::sync::Arc<super::mac::Keyring>>,
+    node_id: String,
+    mut rx: mpsc::Receiver<Outgoing>,
+) {
     while let Some(m) = rx.recv().await {
-        let sent = match m.headers {
+        let headers = super::mac::seal(
+            keyring.as_deref(),
+            &node_id,
+            m.subject.as_str(),
+            m.headers,
+            &m.payload,
+        );
+        let sent = match headers {
             Some(h) => nats.publish_with_headers(m.subject, h, m.payload).await,
             None => nats.publish(m.subject, m.payload).await,
         };

@@ -8,6 +8,10 @@
 //!   ingest stream there. Granted unless a stream is attached here: the actor writes a
 //!   final checkpoint and releases the lease, and the asker takes it at once.
 //!
+//! With a cluster key, calls and answers are signed like events ([`super::mac`]): a node
+//! ignores a call without a valid MAC (its caller times out), and a caller refuses such
+//! an answer.
+//!
 //! A request to a node with no subscription (NATS answers "no responders" at once) means
 //! the node's process is gone: the caller takes the session over without waiting for its
 //! lease to expire (fencing keeps that safe even if the node were only cut off).
@@ -105,18 +109,27 @@ pub async fn call<T: for<'de> Deserialize<'de>>(
 ) -> Result<T, CallError> {
     let payload =
         serde_json::to_vec(call).map_err(|e| CallError::Failed(node.into(), e.to_string()))?;
-    let request = async_nats::Request::new()
-        .payload(Bytes::from(payload))
-        .timeout(Some(RPC_TIMEOUT));
+    let to = subject(node);
+    let mut request = async_nats::Request::new().timeout(Some(RPC_TIMEOUT));
+    if let Some(headers) = cluster.seal(&to, None, &payload) {
+        request = request.headers(headers);
+    }
+    let request = request.payload(Bytes::from(payload));
     let answer = cluster
         .nats()
-        .send_request(subject(node), request)
+        .send_request(to, request)
         .await
         .map_err(|e| match e.kind() {
             async_nats::RequestErrorKind::NoResponders => CallError::Gone(node.into()),
             async_nats::RequestErrorKind::TimedOut => CallError::Timeout(node.into(), RPC_TIMEOUT),
             _ => CallError::Failed(node.into(), e.to_string()),
         })?;
+    if !cluster.accept(&answer) {
+        return Err(CallError::Failed(
+            node.into(),
+            "the answer is not signed with the cluster key".into(),
+        ));
+    }
     serde_json::from_slice(&answer.payload)
         .map_err(|e| CallError::Failed(node.into(), e.to_string()))
 }
@@ -176,6 +189,9 @@ pub async fn serve(cluster: Arc<Cluster>, router: Router, registry: Arc<Registry
         let Some(reply) = message.reply.clone() else {
             continue;
         };
+        if !cluster.accept(&message) {
+            continue;
+        }
         let (cluster, router, registry) = (cluster.clone(), router.clone(), registry.clone());
         tokio::spawn(async move {
             let answer = match serde_json::from_slice::<Call>(&message.payload) {
@@ -210,7 +226,18 @@ pub async fn serve(cluster: Arc<Cluster>, router: Router, registry: Arc<Registry
                 }),
             };
             if let Ok(bytes) = answer {
-                let _ = cluster.nats().publish(reply, Bytes::from(bytes)).await;
+                let sent = match cluster.seal(reply.as_str(), None, &bytes) {
+                    Some(h) => {
+                        cluster
+                            .nats()
+                            .publish_with_headers(reply, h, Bytes::from(bytes))
+                            .await
+                    }
+                    None => cluster.nats().publish(reply, Bytes::from(bytes)).await,
+                };
+                if let Err(e) = sent {
+                    tracing::warn!(error = %e, "nats: answering a node call failed");
+                }
             }
         });
     }

@@ -936,6 +936,34 @@ mod tests {
     }
 
     #[tokio::test]
+    async fn a_checkpoint_that_cannot_reach_the_database_is_a_write_failure_not_a_corrupt_row() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = Store::open(&dir.path().join("k.db")).await.unwrap();
+        // The database gone, as when the engines are down: the group commit fails.
+        store.close().await;
+        let fence = Fence {
+            session: "s".into(),
+            owner: "n1".into(),
+            epoch: 1,
+        };
+        let checkpoint = Checkpoint {
+            session: "s".into(),
+            lease_epoch: 1,
+            version: 1,
+            epochs: 10,
+            t: Some(9.0),
+            taken_at_ms: 1,
+            state: vec![1, 2, 3],
+        };
+        let err = store.put_checkpoint(&fence, &checkpoint).await.unwrap_err();
+        assert!(
+            matches!(err, StoreError::Write(_) | StoreError::Db(_)),
+            "{err:?}"
+        );
+        assert!(!err.to_string().contains("corrupt"), "{err}");
+    }
+
+    #[tokio::test]
     async fn alarms_round_trip_newest_first_with_filters_and_clearing() {
         let dir = tempfile::tempdir().unwrap();
         let store = Store::open(&dir.path().join("t.db")).await.unwrap();
