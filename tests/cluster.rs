@@ -740,11 +740,37 @@ async fn a_cluster_survives_a_killed_node_and_a_drain_without_losing_or_repeatin
             "{}/api/v1/sessions/{target_id}/monitors/cv/threshold",
             cluster.node_url("node1")
         ))
+        .header("x-navguard-reason", "raised after a false alarm — café")
         .json(&json!({"p_fa": 0.0005}))
         .send()
         .await
         .unwrap();
     assert_eq!(resp.status(), 200, "{}", resp.text().await.unwrap());
+    // The owner wrote the audit entry once, with the reason and the caller's address that
+    // travelled with the forwarded request.
+    let audit: Value = get_json(&format!(
+        "{}/api/v1/audit?session={target_id}",
+        cluster.node_url(&target_node)
+    ))
+    .await
+    .1;
+    let puts: Vec<&Value> = audit["entries"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|e| e["method"] == "PUT")
+        .collect();
+    assert_eq!(puts.len(), 1, "{audit}");
+    assert_eq!(
+        puts[0]["reason"], "raised after a false alarm — café",
+        "{audit}"
+    );
+    assert!(
+        puts[0]["forwarded_for"]
+            .as_str()
+            .is_some_and(|f| f.ends_with("127.0.0.1")),
+        "{audit}"
+    );
     let owner_view: Value = get_json(&format!(
         "{}/api/v1/sessions/{target_id}/monitors/cv/threshold",
         cluster.node_url(&target_node)

@@ -97,6 +97,21 @@ fn forwarded_for(headers: &HeaderMap) -> Option<String> {
     Some(list.chars().skip(skip).collect())
 }
 
+/// The request's `X-Forwarded-For` list with its peer address appended, as a proxy
+/// would: what a cluster node forwards with a request it hands to the session's owner.
+pub fn forwarded_for_with_peer(
+    headers: &HeaderMap,
+    extensions: &axum::http::Extensions,
+) -> Option<String> {
+    let peer = extensions
+        .get::<ConnectInfo<SocketAddr>>()
+        .map(|c| c.0.ip().to_string());
+    match (forwarded_for(headers), peer) {
+        (Some(list), Some(peer)) => Some(format!("{list}, {peer}")),
+        (list, peer) => list.or(peer),
+    }
+}
+
 /// The `{id}` segment of a session route's path, as sent (the handler's [`Change`] names
 /// the session otherwise).
 fn session_in_path(path: &str) -> Option<String> {

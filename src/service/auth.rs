@@ -143,11 +143,11 @@ fn decode(s: &str, plus_is_space: bool) -> String {
 
 /// The caller of `req`: the first presented token that is known and in date; 401
 /// when there is none.
-fn authenticate(tokens: &Tokens, req: &Request) -> Result<Principal, ApiError> {
+fn authenticate(tokens: &Tokens, req: &Request) -> Result<(Principal, Credential), ApiError> {
     let now = super::now_ms();
     for secret in presented_tokens(req) {
         match tokens.lookup(&secret, now) {
-            Lookup::Valid(p) => return Ok(p),
+            Lookup::Valid(p) => return Ok((p, Credential(secret))),
             // The name only: never the secret.
             Lookup::Expired(name) => tracing::info!(token = %name, "expired token refused"),
             Lookup::Unknown => {}
@@ -181,6 +181,25 @@ fn named_sessions(req: &Request, session_ref: SessionRef) -> Option<Vec<String>>
     }
 }
 
+/// The secret a request authenticated with, for a call this node makes on the caller's
+/// behalf to another node (an events socket's first statistics from the session's
+/// owner). Never logged: its `Debug` prints no secret.
+#[derive(Clone)]
+pub struct Credential(String);
+
+impl Credential {
+    /// The `Authorization` header value that presents it.
+    pub fn bearer(&self) -> String {
+        format!("Bearer {}", self.0)
+    }
+}
+
+impl std::fmt::Debug for Credential {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Credential(REDACTED)")
+    }
+}
+
 /// Middleware: finds what the matched route needs (`access::access`), the caller
 /// (401 without a valid token when the server has tokens), and refuses with 403 a
 /// token without the scope, or limited to sessions the request does not name,
@@ -201,7 +220,9 @@ pub async fn authorize(
         return Ok(next.run(req).await);
     }
     let principal = if state.tokens.required() {
-        authenticate(&state.tokens, &req)?
+        let (principal, credential) = authenticate(&state.tokens, &req)?;
+        req.extensions_mut().insert(credential);
+        principal
     } else {
         Principal::anonymous()
     };

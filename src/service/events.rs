@@ -15,6 +15,7 @@ use std::sync::Arc;
 use futures_util::StreamExt;
 
 use super::app::AppState;
+use super::auth::Credential;
 use super::cluster::{Cluster, bus, rpc};
 use super::error::ApiError;
 use super::ingest::{SUBPROTOCOL, answer_close, close_if_too_big, close_socket, upgrade_rejection};
@@ -32,6 +33,7 @@ const MAX_OBSERVER_MESSAGE_BYTES: usize = 64 << 10;
 pub async fn events(
     State(state): State<AppState>,
     Path(id): Path<String>,
+    credential: Option<axum::Extension<Credential>>,
     ws: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
 ) -> Result<Response, ApiError> {
     if let Some(cluster) = state.cluster.clone() {
@@ -49,7 +51,8 @@ pub async fn events(
         let ws = ws.map_err(upgrade_rejection)?;
         return Ok(configure(ws).on_upgrade(move |socket| async move {
             state.metrics.event_sockets.fetch_add(1, Ordering::Relaxed);
-            run_cluster(socket, state.clone(), cluster, id).await;
+            let authorization = credential.map(|c| c.bearer());
+            run_cluster(socket, state.clone(), cluster, id, authorization).await;
             state.metrics.event_sockets.fetch_sub(1, Ordering::Relaxed);
         }));
     }
@@ -76,8 +79,14 @@ fn configure(ws: WebSocketUpgrade) -> WebSocketUpgrade {
 }
 
 /// The session's latest statistics for a new observer: from its actor here, or asked of
-/// its owner (none when nobody runs it).
-async fn first_stats(state: &AppState, cluster: &Cluster, id: &str) -> Option<String> {
+/// its owner with the observer's own credential (`authorization`; none when nobody runs
+/// it).
+async fn first_stats(
+    state: &AppState,
+    cluster: &Cluster,
+    id: &str,
+    authorization: Option<String>,
+) -> Option<String> {
     if let Some(handle) = state.registry.get(id) {
         let snapshot = handle.stats_watch().borrow().clone();
         return Some(wire::tagged("stats", &*snapshot));
@@ -89,8 +98,10 @@ async fn first_stats(state: &AppState, cluster: &Cluster, id: &str) -> Option<St
     let call = rpc::Call::Http {
         method: "GET".into(),
         uri: format!("/api/v1/sessions/{id}/stats"),
-        authorization: state.config.token.as_ref().map(|t| format!("Bearer {t}")),
+        authorization,
         content_type: None,
+        reason: None,
+        forwarded_for: None,
         body: String::new(),
         from: cluster.node_id().to_owned(),
     };
@@ -142,7 +153,13 @@ async fn relay(
 /// its queue is closed: the client re-reads `/api/v1/alarms?after=ID`. When the node starts
 /// draining the socket closes with 1001 while the load balancer still relays it (see
 /// `own::drain`); the client reconnects to another node.
-async fn run_cluster(mut socket: WebSocket, state: AppState, cluster: Arc<Cluster>, id: String) {
+async fn run_cluster(
+    mut socket: WebSocket,
+    state: AppState,
+    cluster: Arc<Cluster>,
+    id: String,
+    authorization: Option<String>,
+) {
     let nats = cluster.nats();
     let (Ok(mut events), Ok(mut stats)) = (
         nats.subscribe(bus::events_subject(&id)).await,
@@ -156,7 +173,7 @@ async fn run_cluster(mut socket: WebSocket, state: AppState, cluster: Arc<Cluste
         .await;
         return;
     };
-    if let Some(text) = first_stats(&state, &cluster, &id).await
+    if let Some(text) = first_stats(&state, &cluster, &id, authorization).await
         && socket.send(Message::Text(text.into())).await.is_err()
     {
         return;

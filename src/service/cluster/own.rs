@@ -14,6 +14,7 @@ use axum::response::{IntoResponse, Response};
 use super::Cluster;
 use super::rpc::{self, Call, CallError, ReleaseAnswer};
 use crate::service::app::AppState;
+use crate::service::audit;
 use crate::service::error::ApiError;
 use crate::service::now_ms;
 use crate::service::session::{SessionHandle, lifecycle};
@@ -267,13 +268,22 @@ pub async fn route(State(state): State<AppState>, request: Request, next: Next) 
         .path_and_query()
         .map_or_else(|| parts.uri.path().to_owned(), |pq| pq.as_str().to_owned());
     let text = String::from_utf8_lossy(&bytes).into_owned();
+    let reason = match audit::reason(&parts.headers) {
+        Ok(r) => r,
+        Err(e) => return e.into_response(),
+    };
+    let headers = rpc::Forwarded {
+        authorization: header("authorization"),
+        content_type: header("content-type"),
+        reason,
+        forwarded_for: audit::forwarded_for_with_peer(&parts.headers, &parts.extensions),
+    };
     match rpc::forward(
         &cluster,
         &lease.owner,
         parts.method.as_str(),
         &uri,
-        header("authorization"),
-        header("content-type"),
+        headers,
         text,
     )
     .await

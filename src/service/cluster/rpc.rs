@@ -55,6 +55,14 @@ pub enum Call {
         authorization: Option<String>,
         /// The caller's `Content-Type` header.
         content_type: Option<String>,
+        /// The caller's reason for a change (`X-Navguard-Reason`, decoded), for the audit
+        /// log.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        reason: Option<String>,
+        /// Where the request came from: its `X-Forwarded-For` list and the forwarding
+        /// node's peer address, for the audit log.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        forwarded_for: Option<String>,
         /// The body (REST bodies are JSON text).
         body: String,
         /// The node forwarding it.
@@ -134,14 +142,26 @@ pub async fn call<T: for<'de> Deserialize<'de>>(
         .map_err(|e| CallError::Failed(node.into(), e.to_string()))
 }
 
+/// The headers of a forwarded REST request that travel with it.
+#[derive(Debug, Default)]
+pub struct Forwarded {
+    /// `Authorization`.
+    pub authorization: Option<String>,
+    /// `Content-Type`.
+    pub content_type: Option<String>,
+    /// `X-Navguard-Reason`, decoded.
+    pub reason: Option<String>,
+    /// `X-Forwarded-For` with the caller's peer address appended.
+    pub forwarded_for: Option<String>,
+}
+
 /// Forwards a REST request to `node`; its answer as a response.
 pub async fn forward(
     cluster: &Cluster,
     node: &str,
     method: &str,
     uri: &str,
-    authorization: Option<String>,
-    content_type: Option<String>,
+    headers: Forwarded,
     body: String,
 ) -> Result<Response<Body>, CallError> {
     let answer: HttpAnswer = call(
@@ -150,8 +170,10 @@ pub async fn forward(
         &Call::Http {
             method: method.to_owned(),
             uri: uri.to_owned(),
-            authorization,
-            content_type,
+            authorization: headers.authorization,
+            content_type: headers.content_type,
+            reason: headers.reason,
+            forwarded_for: headers.forwarded_for,
             body,
             from: cluster.node_id().to_owned(),
         },
@@ -200,19 +222,18 @@ pub async fn serve(cluster: Arc<Cluster>, router: Router, registry: Arc<Registry
                     uri,
                     authorization,
                     content_type,
+                    reason,
+                    forwarded_for,
                     body,
                     from,
                 }) => {
-                    let a = run_http(
-                        router,
-                        &method,
-                        &uri,
+                    let headers = Forwarded {
                         authorization,
                         content_type,
-                        body,
-                        &from,
-                    )
-                    .await;
+                        reason,
+                        forwarded_for,
+                    };
+                    let a = run_http(router, &method, &uri, headers, body, &from).await;
                     serde_json::to_vec(&a)
                 }
                 Ok(Call::Release { session }) => {
@@ -247,8 +268,7 @@ async fn run_http(
     router: Router,
     method: &str,
     uri: &str,
-    authorization: Option<String>,
-    content_type: Option<String>,
+    headers: Forwarded,
     body: String,
     from: &str,
 ) -> HttpAnswer {
@@ -256,11 +276,22 @@ async fn run_http(
         .method(method)
         .uri(uri)
         .header(FORWARDED_HEADER, from);
-    if let Some(a) = authorization {
+    if let Some(a) = headers.authorization {
         builder = builder.header("authorization", a);
     }
-    if let Some(c) = content_type {
+    if let Some(c) = headers.content_type {
         builder = builder.header("content-type", c);
+    }
+    // A reason is UTF-8 text; its bytes make a valid header value (obs-text), read back as
+    // UTF-8 by the audit log.
+    if let Some(r) = headers
+        .reason
+        .and_then(|r| HeaderValue::from_bytes(r.as_bytes()).ok())
+    {
+        builder = builder.header(crate::service::audit::REASON_HEADER, r);
+    }
+    if let Some(f) = headers.forwarded_for {
+        builder = builder.header("x-forwarded-for", f);
     }
     let request = match builder.body(Body::from(body)) {
         Ok(r) => r,
