@@ -81,7 +81,7 @@ fn batch(scale: ResidualScale, train: usize) -> (ChannelConfigWire, Models) {
         ..GridParams::default()
     };
     let c = cell(GridPredictor::Batch, scale);
-    let config = coloured_grid::cell_config(&grid.base, &c).expect("config");
+    let config = coloured_grid::cell_config(&grid.base, &c, false).expect("config");
     (
         config,
         coloured_grid::cell_models(&grid, &c, 1).expect("model"),

@@ -59,6 +59,9 @@ pub(crate) struct ColouredArgs {
     /// Worker threads over the grid's cells.
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
+    /// With `--grid`: run the channel's drift test too and score the channel's health.
+    #[arg(long)]
+    pub drift: bool,
 }
 
 /// What `experiment coloured` measured: the cases or the grid.
@@ -87,6 +90,7 @@ impl Experiment for ColouredArgs {
         let params = coloured_grid::GridParams {
             base,
             threads: self.threads,
+            drift: self.drift,
             ..coloured_grid::GridParams::default()
         };
         Ok(ColouredOutput::Grid(coloured_grid::run(params)?))

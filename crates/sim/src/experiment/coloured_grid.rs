@@ -102,6 +102,9 @@ pub struct GridParams {
     pub train_epochs: usize,
     /// Worker threads over the cells.
     pub threads: usize,
+    /// Run the channel's drift test (§M14, windows 30 and 60) beside T_a and score the
+    /// channel's health (the worst of its tests) instead of the main test's.
+    pub drift: bool,
 }
 
 impl Default for GridParams {
@@ -116,6 +119,7 @@ impl Default for GridParams {
             ramps: 10,
             train_epochs: 500,
             threads: 2,
+            drift: false,
         }
     }
 }
@@ -225,8 +229,13 @@ pub fn first_flags(health: &[(f64, Health)], onsets: &[usize], len: usize) -> Ve
         .collect()
 }
 
-/// The channel of `cell`: the default cases' settings with the cell's predictor and scale.
-pub fn cell_config(p: &ColouredParams, cell: &GridCell) -> Result<ChannelConfigWire, LearnError> {
+/// The channel of `cell`: the default cases' settings with the cell's predictor and scale,
+/// and with `drift` the drift test on.
+pub fn cell_config(
+    p: &ColouredParams,
+    cell: &GridCell,
+    drift: bool,
+) -> Result<ChannelConfigWire, LearnError> {
     let predictor = match cell.predictor {
         GridPredictor::Online => PredictorWire::Online(
             serde_json::from_value::<OnlineParams>(
@@ -239,6 +248,9 @@ pub fn cell_config(p: &ColouredParams, cell: &GridCell) -> Result<ChannelConfigW
     let mut channel = scalar_channel(CHANNEL, 5, p.n, predictor);
     channel.residual_scale = Some(cell.scale);
     channel.stuck = Some(Toggle::On(true));
+    if drift {
+        channel.drift = Some(Toggle::On(true));
+    }
     Ok(ChannelConfigWire {
         channels: vec![channel],
     })
@@ -277,9 +289,19 @@ struct Draw {
     sigma: f64,
 }
 
+/// The health a run is scored on: the main test's, or with the drift test on the
+/// channel's.
+fn scored(p: &GridParams, trace: &ChannelTrace) -> Vec<(f64, Health)> {
+    if p.drift {
+        trace.channel.clone()
+    } else {
+        trace.main_health()
+    }
+}
+
 fn run_draw(p: &GridParams, cell: &GridCell, seed: u64) -> Result<Draw, ExperimentError> {
     let b = &p.base;
-    let config = cell_config(b, cell)?;
+    let config = cell_config(b, cell, p.drift)?;
     let models = cell_models(p, cell, seed)?;
     let run = |fault: &dyn Fn(usize) -> f64| {
         let series = coloured::signal_with(b, cell.phi, cell.form.1, seed, fault);
@@ -309,8 +331,8 @@ fn run_draw(p: &GridParams, cell: &GridCell, seed: u64) -> Result<Draw, Experime
             .map_or(0.0, |&a| slope * (k - a + 1) as f64)
     })?;
     Ok(Draw {
-        steps: first_flags(&stepped.main_health(), &steps, STEP_LEN),
-        ramps: first_flags(&ramped.main_health(), &ramps, RAMP_LEN),
+        steps: first_flags(&scored(p, &stepped), &steps, STEP_LEN),
+        ramps: first_flags(&scored(p, &ramped), &ramps, RAMP_LEN),
         clear,
         sigma,
     })
@@ -326,7 +348,7 @@ pub fn run_cell(p: &GridParams, cell: &GridCell) -> Result<GridRow, ExperimentEr
         let d = run_draw(p, cell, b.seed + draw as u64)?;
         // Draws laid end to end, as the default cases pool them.
         let off = draw as f64 * span;
-        pooled.extend(d.clear.main_health().into_iter().map(|(t, h)| (t + off, h)));
+        pooled.extend(scored(p, &d.clear).into_iter().map(|(t, h)| (t + off, h)));
         busy += d.clear.busy_s;
         stepped += d.clear.epochs;
         step_delays.extend(d.steps);
@@ -545,7 +567,7 @@ mod tests {
                     .map_or(0.0, |&a| 0.05 * sigma * (k - a + 1) as f64)
             });
             let trace = run_channel_with(
-                cell_config(&p.base, c).unwrap(),
+                cell_config(&p.base, c, false).unwrap(),
                 &cell_models(p, c, seed).unwrap(),
                 PolicyConfig::Classic,
                 p.base.p_fa,
