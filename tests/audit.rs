@@ -9,7 +9,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{CvModel, client, epochs, http, recv_until, send, store_for};
+use common::{CvModel, cart, client, epochs, http, recv_until, send, store_for};
 use navguard::service::access::{Access, ROUTE_ACCESS};
 use navguard::service::app::ROUTES;
 use navguard::service::audit::{UNAUDITED, audited};
@@ -74,15 +74,6 @@ async fn audit(server: &Server, query: &str) -> Vec<Value> {
     let (status, page) = call("GET", &url, Some(OPS), None, None).await;
     assert_eq!(status, 200, "{page}");
     page["entries"].as_array().unwrap().clone()
-}
-
-/// The README's cart, with `p_fa` 1e-5.
-fn cart(id: &str) -> Value {
-    json!({"id": id, "monitors": [{
-        "name": "position", "type": "linear",
-        "config": {"f": [[1, 1], [0, 1]], "h": [[1, 0]], "q": [[0.0033, 0.005], [0.005, 0.01]],
-                   "r": [[1]], "x0": [0, 1], "p0": [[10, 0], [0, 10]]},
-        "policy": {"kind": "classic"}, "p_fa": 0.00001}]})
 }
 
 /// Commits an alarm-log entry for `session` straight to the store (what an actor does).

@@ -56,15 +56,6 @@ async fn call(method: &str, url: &str, secret: Option<&str>, body: Option<&Value
     (status, resp.json().await.unwrap_or(Value::Null))
 }
 
-/// The 1-D cart of the README.
-fn cart(id: &str) -> Value {
-    json!({"id": id, "monitors": [{
-        "name": "position", "type": "linear",
-        "config": {"f": [[1, 1], [0, 1]], "h": [[1, 0]], "q": [[0.0033, 0.005], [0.005, 0.01]],
-                   "r": [[1]], "x0": [0, 1], "p0": [[10, 0], [0, 10]]},
-        "policy": {"kind": "classic"}, "p_fa": 0.00001}]})
-}
-
 fn assert_forbidden(answer: &(u16, Value), scope: &str, what: &str) {
     assert_eq!(answer.0, 403, "{what}: {}", answer.1);
     assert_eq!(

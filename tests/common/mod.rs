@@ -333,3 +333,12 @@ pub(crate) fn concrete(template: &str, value: &str) -> String {
     }
     out
 }
+
+/// The README's cart, with `p_fa` 1e-5.
+pub(crate) fn cart(id: &str) -> Value {
+    json!({"id": id, "monitors": [{
+        "name": "position", "type": "linear",
+        "config": {"f": [[1, 1], [0, 1]], "h": [[1, 0]], "q": [[0.0033, 0.005], [0.005, 0.01]],
+                   "r": [[1]], "x0": [0, 1], "p0": [[10, 0], [0, 10]]},
+        "policy": {"kind": "classic"}, "p_fa": 0.00001}]})
+}

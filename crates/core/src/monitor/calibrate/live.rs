@@ -99,10 +99,10 @@ impl LiveOptions {
 /// One test's tails in one replay, before and after the split, and its Σ statistic and
 /// Σ dof over all epochs (the noise scale is a property of the whole recording).
 #[derive(Debug, Default)]
-struct Tails {
-    before: Vec<f64>,
-    after: Vec<f64>,
-    sums: (f64, f64),
+pub(super) struct Tails {
+    pub(super) before: Vec<f64>,
+    pub(super) after: Vec<f64>,
+    pub(super) sums: (f64, f64),
 }
 
 /// Calibrates the selected tests of `monitor` on `epochs` under the live feedback (module
@@ -320,7 +320,7 @@ fn sample_of(
 
 /// Replays `epochs` through `monitor` (reset first) with test `i`'s spec `specs[i]`
 /// (`None`: the monitor's), returning every test's tails before and after epoch `split`.
-fn replay(
+pub(super) fn replay(
     monitor: &mut dyn Monitor,
     epochs: &[Epoch],
     specs: &[Option<ThresholdSpec>],

@@ -298,46 +298,31 @@ pub fn sample(
     monitor: &mut dyn Monitor,
     epochs: &[Epoch],
 ) -> Result<Vec<TestSample>, CalibrateError> {
-    monitor.reset();
     let bank = monitor.tests_mut();
     // Each test's own spec is read before the run puts every threshold out of reach.
-    let samples: Vec<TestSample> = bank
+    let slots: Vec<(String, u32, Option<ThresholdSpec>, bool)> = bank
         .slots()
         .iter()
-        .map(|s| TestSample {
-            test: s.name.to_string(),
-            dof: s.dof,
-            tails: Vec::new(),
-            sums: (0.0, 0.0),
-            own_spec: s.own_spec,
-        })
+        .map(|s| (s.name.to_string(), s.dof, s.own_spec, s.own_policy))
         .collect();
     let out_of_reach = ThresholdSpec::Threshold(OUT_OF_REACH);
-    // A raw threshold is valid for every dof, so these cannot fail.
+    // A raw threshold is valid for every dof, so this cannot fail.
     let _ = bank.set_spec(out_of_reach);
-    for i in 0..bank.slots().len() {
-        let _ = bank.set_test_spec(i, Some(out_of_reach));
-    }
+    let specs = vec![Some(out_of_reach); slots.len()];
+    let tails = live::replay(monitor, epochs, &specs, epochs.len())?;
     // A test with its own policy and threshold (a protection level against its alert
     // limit) is not a χ² test: nothing to calibrate.
-    let calibrated: Vec<bool> = bank.slots().iter().map(|s| !s.own_policy).collect();
-    let mut samples = samples;
-    for (index, epoch) in epochs.iter().enumerate() {
-        let report = monitor
-            .step(epoch)
-            .map_err(|source| CalibrateError::Step { index, source })?;
-        for o in report.tests {
-            let (v, tail) = (o.statistic.value, tail(&o.statistic));
-            let sample = &mut samples[o.index];
-            sample.tails.push(tail);
-            sample.sums.0 += v;
-            sample.sums.1 += f64::from(o.statistic.dof);
-        }
-    }
-    Ok(samples
+    Ok(slots
         .into_iter()
-        .zip(calibrated)
-        .filter_map(|(s, keep)| keep.then_some(s))
+        .zip(tails)
+        .filter(|((.., own_policy), _)| !own_policy)
+        .map(|((test, dof, own_spec, _), t)| TestSample {
+            test,
+            dof,
+            tails: t.before,
+            sums: t.sums,
+            own_spec,
+        })
         .collect())
 }
 
